@@ -1,0 +1,3 @@
+from spikeview.cli.main import main
+
+raise SystemExit(main())

@@ -1,0 +1,148 @@
+"""Settings are data: typed configs that save to TOML and load back unchanged.
+
+Derive a ``@dataclass`` from :class:`Config`; fields must be TOML-representable (bool, int, float,
+str, lists/tuples of those, nested :class:`Config` dataclasses, or ``None``, which is stored by
+omission). ``Config.from_dict`` rejects unknown keys and wrong types with a sentence naming the key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tomllib
+import types
+import typing
+from pathlib import Path
+from typing import Any, TypeVar
+
+from spikeview.errors import InputFileError, ParameterError
+
+C = TypeVar("C", bound="Config")
+
+
+def _strip_none(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _strip_none(v) for k, v in value.items() if v is not None}
+    if isinstance(value, (list, tuple)):
+        return [_strip_none(v) for v in value]
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def _coerce(name: str, tp: Any, value: Any, where: str) -> Any:
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if value is None:
+            return None
+        errors = []
+        for a in args:
+            try:
+                return _coerce(name, a, value, where)
+            except ParameterError as e:  # try the next member of the union
+                errors.append(e)
+        raise errors[-1]
+    if isinstance(tp, type) and issubclass(tp, Config):
+        if not isinstance(value, dict):
+            raise ParameterError(f"{where}: '{name}' must be a table, got {value!r}; fix the settings file.")
+        return tp.from_dict(value, where=f"{where} [{name}]")
+    if origin in (list, tuple):
+        if not isinstance(value, (list, tuple)):
+            raise ParameterError(f"{where}: '{name}' must be a list, got {value!r}; fix the settings file.")
+        (inner, *_rest) = typing.get_args(tp) or (Any,)
+        items = [_coerce(name, inner, v, where) for v in value]
+        return tuple(items) if origin is tuple else items
+    if tp is Any:
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ParameterError(f"{where}: '{name}' must be a number, got {value!r}; fix the settings file.")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ParameterError(f"{where}: '{name}' must be an integer, got {value!r}; fix the settings file.")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ParameterError(f"{where}: '{name}' must be true or false, got {value!r}; fix the settings file.")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ParameterError(f"{where}: '{name}' must be a string, got {value!r}; fix the settings file.")
+        return value
+    if origin is dict or tp is dict:
+        if not isinstance(value, dict):
+            raise ParameterError(f"{where}: '{name}' must be a table, got {value!r}; fix the settings file.")
+        return dict(value)
+    return value
+
+
+@dataclasses.dataclass
+class Config:
+    """Base class of every settings dataclass (see module docstring)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """A plain dict (TOML-ready: ``None`` values omitted, tuples as lists)."""
+        return _strip_none(dataclasses.asdict(self))
+
+    @classmethod
+    def from_dict(cls: type[C], data: dict[str, Any], where: str | None = None) -> C:
+        """Build from a dict, rejecting unknown keys and wrong types with a clear sentence."""
+        where = where or cls.__name__
+        hints = typing.get_type_hints(cls)
+        names = {f.name for f in dataclasses.fields(cls) if f.init}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ParameterError(
+                f"{where}: unknown setting(s) {', '.join(unknown)}; valid ones are {', '.join(sorted(names))}."
+            )
+        kwargs = {k: _coerce(k, hints[k], v, where) for k, v in data.items()}
+        try:
+            obj = cls(**kwargs)
+        except ParameterError:
+            raise
+        except (TypeError, ValueError) as e:
+            raise ParameterError(f"{where}: {e}") from None
+        return obj
+
+    def replace(self: C, **changes: Any) -> C:
+        return dataclasses.replace(self, **changes)
+
+    def to_toml(self) -> str:
+        import tomli_w
+
+        return tomli_w.dumps(self.to_dict())
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write as TOML atomically (temporary name, then rename)."""
+        path = Path(path)
+        text = self.to_toml()
+        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+        return path
+
+    @classmethod
+    def load(cls: type[C], path: str | os.PathLike[str], table: str | None = None) -> C:
+        """Read a TOML file (optionally one ``[table]`` of it) written by :meth:`save`."""
+        data = load_toml(path)
+        if table is not None:
+            if table not in data:
+                raise ParameterError(f"{path}: no [{table}] table; it holds {', '.join(data) or 'nothing'}.")
+            data = data[table]
+        return cls.from_dict(data, where=str(path))
+
+
+def load_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Read a TOML file with errors that name the file."""
+    path = Path(path)
+    if not path.exists():
+        raise InputFileError(f"{path}: settings file not found; check the path.")
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except tomllib.TOMLDecodeError as e:
+        raise InputFileError(f"{path}: not valid TOML ({e}); fix or delete the file.") from None
+    except UnicodeDecodeError:
+        raise InputFileError(f"{path}: not a text TOML file; point to a settings file written by spikeview.") from None
