@@ -33,3 +33,7 @@ class GeometryError(InputFileError):
 
 class Cancelled(Exception):
     """Raised inside long jobs when their cancel flag is set (not an error for the user)."""
+
+
+class OutputFileError(SpikeviewError):
+    """An output file or folder that cannot be written (missing folder, no permission, disk full)."""

@@ -1,5 +1,55 @@
-"""Readers and writers of spike files, sidecars and the :class:`SpikeSource` interface (numpy only)."""
+"""Readers and writers of spike files, sidecars and the :class:`SpikeSource` interface (numpy only).
 
+Open anything with :func:`open_source`; write plain ``.dat`` files with :func:`write_plain` or,
+streaming, :class:`PlainDatWriter`. numba (the fast packed counting) is imported only on first use.
+"""
+
+from spikeview.io.arrays import NpySource, write_array
+from spikeview.io.open import UNSET, open_source, plain_geometry_candidates
+from spikeview.io.plain import PlainDatSource, PlainDatWriter, pack_frames, write_plain
+from spikeview.io.raw import (
+    Raw1MDecoder,
+    Raw1MSource,
+    Raw400Source,
+    SyncStats,
+    decode_raw1m_frames,
+    encode_raw1m,
+    encode_raw400,
+    raw1m_tag_sequence,
+    write_raw1m,
+    write_raw400,
+)
+from spikeview.io.sidecar import Sidecar, StreamSettings, read_sidecar, sidecar_path, write_sidecar
 from spikeview.io.source import DEFAULT_TICK_RATE, FORMATS, ArraySource, SpikeSource, StreamInfo
 
-__all__ = ["DEFAULT_TICK_RATE", "FORMATS", "ArraySource", "SpikeSource", "StreamInfo"]
+__all__ = [
+    "DEFAULT_TICK_RATE",
+    "FORMATS",
+    "UNSET",
+    "ArraySource",
+    "NpySource",
+    "PlainDatSource",
+    "PlainDatWriter",
+    "Raw1MDecoder",
+    "Raw1MSource",
+    "Raw400Source",
+    "Sidecar",
+    "SpikeSource",
+    "StreamInfo",
+    "StreamSettings",
+    "SyncStats",
+    "decode_raw1m_frames",
+    "encode_raw1m",
+    "encode_raw400",
+    "open_source",
+    "pack_frames",
+    "plain_geometry_candidates",
+    "raw1m_tag_sequence",
+    "read_sidecar",
+    "sidecar_path",
+    "write_array",
+    "write_plain",
+    "write_raw1m",
+    "write_raw400",
+    "write_sidecar",
+]

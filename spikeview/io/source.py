@@ -141,6 +141,34 @@ class SpikeSource(ABC):
             return np.zeros((self.height, self.width), dtype=np.uint16)
         return self._read(a, b).sum(axis=0, dtype=np.uint16)
 
+    def count_windows(self, a: int, b: int, window: int, *, out: np.ndarray | None = None) -> np.ndarray:
+        """Spike counts of consecutive non-overlapping windows ``[a + i·window, a + (i+1)·window)``.
+
+        Only windows that lie entirely inside ``[a, b)`` are counted (``(b - a) // window`` of
+        them); trailing ticks that do not fill a window are left out.
+
+        Args:
+            a, b: tick range.
+            window: ticks per window (≥ 1).
+            out: optional C-contiguous ``(n_windows, H, W)`` uint16 array to fill (file readers
+                reuse it to avoid allocating fresh memory on every call).
+
+        Returns:
+            ``(n_windows, H, W)`` uint16 counts, flips applied.
+        """
+        a, b = self.check_range(a, b)
+        window = int(window)
+        if window < 1:
+            raise ParameterError(f"window must be at least 1 tick, got {window}; pass a positive window length.")
+        n = (b - a) // window
+        if out is None:
+            out = np.empty((n, self.height, self.width), dtype=np.uint16)
+        elif out.shape != (n, self.height, self.width):
+            raise ParameterError(f"out has shape {out.shape}, expected {(n, self.height, self.width)}; allocate it to match.")
+        for i in range(n):
+            out[i] = self.count(a + i * window, a + (i + 1) * window)
+        return out
+
     def close(self) -> None:
         """Release files/devices. Safe to call twice."""
 

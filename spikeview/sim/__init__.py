@@ -1,0 +1,61 @@
+"""Simulated chromatic spike captures with ground truth: scenes, the sensor model, file output.
+
+Quick start::
+
+    from spikeview.sim import SimConfig, VideoScene, simulate, simulate_to_file, demo_capture
+
+    cap = demo_capture()                                   # 256×256, 1000 ticks, no input file
+    cap = simulate(VideoScene("clip.mp4"), SimConfig(n_ticks=4000, width=512, height=512))
+    simulate_to_file("clip.mp4", SimConfig(n_ticks=20000), "out/clip.dat")
+
+Names are imported lazily, so ``import spikeview.sim`` does not load numba, PyAV or OpenImageIO
+(the CLI's ``--help`` must stay quick). The sensor model and its units are documented in
+:mod:`spikeview.sim.config`.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "SimConfig": "spikeview.sim.config",
+    "NOISE_SWITCHES": "spikeview.sim.config",
+    "Scene": "spikeview.sim.scenes",
+    "ArrayScene": "spikeview.sim.scenes",
+    "StaticScene": "spikeview.sim.scenes",
+    "ImageSequenceScene": "spikeview.sim.scenes",
+    "VideoScene": "spikeview.sim.scenes",
+    "MotionScene": "spikeview.sim.scenes",
+    "Fan": "spikeview.sim.scenes",
+    "ResizedScene": "spikeview.sim.scenes",
+    "open_scene": "spikeview.sim.scenes",
+    "read_image": "spikeview.sim.scenes",
+    "srgb_to_linear": "spikeview.sim.scenes",
+    "linear_to_srgb": "spikeview.sim.scenes",
+    "SensorPattern": "spikeview.sim.simulator",
+    "SpikeSimulator": "spikeview.sim.simulator",
+    "SimulatedCapture": "spikeview.sim.simulator",
+    "simulate": "spikeview.sim.simulator",
+    "simulate_to_file": "spikeview.sim.write",
+    "load_ground_truth": "spikeview.sim.write",
+    "GroundTruth": "spikeview.sim.write",
+    "SimulationFiles": "spikeview.sim.write",
+    "demo_scene": "spikeview.sim.demo",
+    "demo_capture": "spikeview.sim.demo",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'spikeview.sim' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

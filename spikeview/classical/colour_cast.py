@@ -1,0 +1,309 @@
+"""Colour cast: gray-world per-channel gains, and per-site rate statistics.
+
+The sensor's per-channel response is far from neutral (real captures look green). SpikeDiff's
+forward model scales the clean image ``X`` per channel before it is observed,
+
+    ``Y_c = (η / α_c) · X_c``,   so the correction is   ``X_c = Y_c · α_c / η``,
+
+with the gray-world estimate ``α_c = 1 / mean(Y_c)`` (mean SFR over the photosites of channel ``c``
+and **over the whole sequence**, so one α per sequence keeps colours stable from frame to frame).
+After correction every channel's sequence mean is ``1/η``: η is the range parameter that sets the
+overall brightness (η = 2 maps each channel's mean to 0.5).
+
+Zero means: a channel with no spikes at all (dark scene, a colour the scene lacks, a monochrome
+scene read as Bayer) has no gray-world gain. Instead of dividing by zero, :func:`alpha_from_means`
+warns with :class:`ColourCastWarning` and uses ``1 / mean`` of the valid channels' means (the
+channel is treated as if it were as bright as the others); if no channel is valid it uses α = 1.
+Either way the result is finite and positive.
+
+Monochrome streams have a single channel: α has shape ``(1,)`` and the "correction" is a plain
+brightness gain.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from spikeview.cfa import CHANNEL_INDEX, CHANNEL_NAMES, SITE_NAMES, parse_cfa
+from spikeview.classical.tfp import window_counts
+from spikeview.errors import ParameterError
+from spikeview.io.source import SpikeSource
+
+#: default range parameter η: each channel's sequence mean maps to 1/η = 0.5
+DEFAULT_ETA = 2.0
+#: default number of windows :func:`estimate_alpha` samples from a long stream
+DEFAULT_ALPHA_WINDOWS = 64
+
+
+class ColourCastWarning(UserWarning):
+    """A gray-world gain could not be estimated for a channel (zero mean) and a fallback was used."""
+
+
+# --- per-site / per-channel statistics -------------------------------------------------------
+def _site_slices(cfa: str) -> dict[str, tuple[int, int]]:
+    """Offsets ``(row, col)`` in the 2×2 quad of each site name R, Gr, Gb, B."""
+    red_row = 0 if "R" in (cfa[0], cfa[1]) else 1
+    out = {}
+    for (py, px), ch in zip(((0, 0), (0, 1), (1, 0), (1, 1)), cfa):
+        out[ch if ch != "G" else ("Gr" if py == red_row else "Gb")] = (py, px)
+    return {k: out[k] for k in SITE_NAMES}
+
+
+def _as_frames(frame: np.ndarray, name: str) -> np.ndarray:
+    arr = np.asarray(frame)
+    if arr.ndim not in (2, 3) or min(arr.shape[-2:]) < 2:
+        raise ParameterError(f"{name} must be an (H, W) or (T, H, W) array with H, W >= 2, got shape {arr.shape}; pass a mosaicked frame.")
+    return arr
+
+
+def _site_sums(frame: np.ndarray, cfa: str | None) -> dict[str, tuple[float, int]]:
+    """(sum, number of values) per site name (``"Y"`` for monochrome); float64 sums."""
+    if cfa is None:
+        return {"Y": (float(frame.sum(dtype=np.float64)), frame.size)}
+    out = {}
+    for name, (py, px) in _site_slices(cfa).items():
+        sub = frame[..., py::2, px::2]
+        out[name] = (float(sub.sum(dtype=np.float64)), sub.size)
+    return out
+
+
+def site_rates(frame: np.ndarray, cfa: str | None) -> dict[str, float]:
+    """Mean value per Bayer photosite class.
+
+    Args:
+        frame: mosaicked ``(H, W)`` frame or ``(T, H, W)`` stack, e.g. TFP SFR in [0, 1] (then the
+            result is the mean firing rate in spikes per tick), flips applied so ``cfa`` names
+            its top-left 2×2.
+        cfa: ``"RGGB"``, ``"BGGR"``, ``"GRBG"``, ``"GBRG"`` or ``None`` for monochrome.
+
+    Returns:
+        ``{"R": …, "Gr": …, "Gb": …, "B": …}`` (Gr shares rows with R, Gb with B) as Python
+        floats, or ``{"Y": …}`` for monochrome. A clear Gr/Gb mismatch or a wildly dominant
+        channel usually means a wrong CFA, flip or width setting.
+    """
+    arr = _as_frames(frame, "frame")
+    return {k: s / n for k, (s, n) in _site_sums(arr, parse_cfa(cfa)).items()}
+
+
+def _channel_means_from_sums(sums: dict[str, tuple[float, int]], cfa: str | None) -> np.ndarray:
+    if cfa is None:
+        s, n = sums["Y"]
+        return np.array([s / n])
+    tot = np.zeros(3)
+    cnt = np.zeros(3)
+    for name, (s, n) in sums.items():
+        c = CHANNEL_INDEX[name[0]]
+        tot[c] += s
+        cnt[c] += n
+    return tot / cnt
+
+
+def channel_means(frame: np.ndarray, cfa: str | None) -> np.ndarray:
+    """Mean of a mosaicked ``(H, W)`` / ``(T, H, W)`` array over the sites of each channel.
+
+    Returns:
+        float64 array ``(3,)`` in R, G, B order for a Bayer CFA, ``(1,)`` for monochrome.
+    """
+    arr = _as_frames(frame, "frame")
+    cfa = parse_cfa(cfa)
+    return _channel_means_from_sums(_site_sums(arr, cfa), cfa)
+
+
+# --- gray-world α ------------------------------------------------------------------------------
+def alpha_with_note(means: np.ndarray) -> tuple[np.ndarray, str | None]:
+    """Gray-world gains and, when the zero-mean fallback was used, the sentence saying so.
+
+    The same rule as :func:`alpha_from_means` without a warning, for callers that show the
+    sentence themselves (the GUI's status bar; warnings are process-global and unreliable from
+    worker threads).
+
+    Returns:
+        ``(alpha, note)``: float32 gains of the shape of ``means``, and ``None`` or one sentence.
+    """
+    m = np.asarray(means, dtype=np.float64).reshape(-1)
+    valid = np.isfinite(m) & (m > 0)
+    alpha = np.ones_like(m)
+    alpha[valid] = 1.0 / m[valid]
+    note = None
+    if not valid.all():
+        names = CHANNEL_NAMES if m.size == 3 else ("Y",) * m.size
+        bad = ", ".join(names[i] for i in np.flatnonzero(~valid))
+        if valid.any():
+            fill = 1.0 / float(m[valid].mean())
+            how = f"using the other channels' mean instead (alpha = {fill:.4g})"
+        else:
+            fill = 1.0
+            how = "using alpha = 1 (no colour correction)"
+        alpha[~valid] = fill
+        note = f"Colour cast: channel {bad} has no spikes in the sampled ticks, so its gray-world gain is undefined; {how}."
+    return alpha.astype(np.float32), note
+
+
+def alpha_from_means(means: np.ndarray) -> np.ndarray:
+    """Gray-world gains ``α_c = 1 / mean_c`` with the zero-mean fallback of the module docstring.
+
+    Args:
+        means: per-channel mean SFR, shape ``(3,)`` (R, G, B) or ``(1,)`` (monochrome).
+
+    Returns:
+        float32 array of the same shape, finite and positive.
+
+    Warns:
+        ColourCastWarning: when a channel's mean is zero (or not finite) and a fallback is used.
+    """
+    alpha, note = alpha_with_note(means)
+    if note is not None:
+        warnings.warn(note, ColourCastWarning, stacklevel=3)
+    return alpha
+
+
+def alpha_from_sfr(sfr: np.ndarray, cfa: str | None) -> np.ndarray:
+    """Gray-world α from mosaicked SFR held in memory.
+
+    Args:
+        sfr: ``(H, W)`` frame or ``(T, H, W)`` stack of mosaicked SFR (e.g. TFP), flips applied.
+            Pass the whole sequence (or a sample of it) to get the per-sequence α.
+        cfa: the CFA of ``sfr`` or ``None`` for monochrome.
+
+    Returns:
+        float32 ``(3,)`` (R, G, B) or ``(1,)`` (monochrome); see :func:`alpha_from_means`.
+    """
+    return alpha_from_means(channel_means(sfr, cfa))
+
+
+def sample_starts(n_frames: int, window: int, max_windows: int) -> list[int]:
+    """First ticks of ``max_windows`` windows of ``window`` ticks spread evenly over the stream.
+
+    Includes the first and the last possible window. Returns ``[0, window, 2·window, …]``
+    covering the whole stream instead when that needs no more than ``max_windows`` windows.
+    """
+    if window < 1 or max_windows < 1:
+        raise ParameterError(f"window and max_windows must be at least 1, got {window} and {max_windows}; pass positive values.")
+    if window > n_frames:
+        raise ParameterError(f"window of {window} ticks is longer than the stream's {n_frames} ticks; choose a window of at most {n_frames}.")
+    if -(-n_frames // window) <= max_windows:
+        return list(range(0, n_frames, window))
+    return sorted({round(float(s)) for s in np.linspace(0, n_frames - window, max_windows)})
+
+
+def sequence_channel_means(source: SpikeSource, window: int = 10, max_windows: int = DEFAULT_ALPHA_WINDOWS) -> np.ndarray:
+    """Mean SFR per channel over the whole sequence, from spike counts (see :func:`estimate_alpha`).
+
+    Returns:
+        float64 ``(3,)`` (R, G, B) or ``(1,)`` (monochrome), in spikes per tick.
+    """
+    starts = sample_starts(source.n_frames, window, max_windows)
+    total = np.zeros((source.height, source.width), dtype=np.uint64)
+    ticks = 0
+    for s in starts:
+        e = min(s + window, source.n_frames)
+        total += window_counts(source, s, e)
+        ticks += e - s
+    cfa = source.cfa
+    sums = {k: (v / ticks, n) for k, (v, n) in _site_sums(total, cfa).items()}
+    return _channel_means_from_sums(sums, cfa)
+
+
+def estimate_alpha(source: SpikeSource, window: int = 10, max_windows: int = DEFAULT_ALPHA_WINDOWS) -> np.ndarray:
+    """Gray-world α of a whole sequence, from spike counts.
+
+    The mean TFP of a channel over a set of windows is its total spike count divided by
+    (ticks × photosites), whatever the window length, so α is computed from counts:
+
+    * streams of at most ``window · max_windows`` ticks are counted completely (exact α);
+    * longer streams are sampled with ``max_windows`` windows of ``window`` ticks spread evenly
+      from the first to the last tick (640 ticks by default, a few ms from a file, whatever its
+      length).
+
+    Args:
+        source: the sequence (flips applied; ``source.cfa`` names the CFA).
+        window: ticks per sampled window (at most the stream length).
+        max_windows: how many windows to sample from a long stream.
+
+    Returns:
+        float32 ``(3,)`` (R, G, B) or ``(1,)`` (monochrome); see :func:`alpha_from_means`.
+
+    Warns:
+        ColourCastWarning: a channel had no spikes in the sampled ticks. (Use
+        ``alpha_with_note(sequence_channel_means(source))`` to get the sentence instead.)
+    """
+    alpha, note = alpha_with_note(sequence_channel_means(source, window, max_windows))
+    if note is not None:
+        warnings.warn(note, ColourCastWarning, stacklevel=2)
+    return alpha
+
+
+# --- applying the correction -------------------------------------------------------------------
+def _check_alpha(alpha: np.ndarray | list[float], n: int) -> np.ndarray:
+    a = np.asarray(alpha, dtype=np.float64).reshape(-1)
+    if a.size == 1 and n == 3:
+        a = np.repeat(a, 3)
+    if a.size != n or not (np.isfinite(a).all() and (a > 0).all()):
+        raise ParameterError(f"alpha must hold {n} finite positive gain(s), got {np.asarray(alpha).tolist()}; use estimate_alpha to get one.")
+    return a
+
+
+def _check_eta(eta: float) -> float:
+    if not (np.isfinite(eta) and eta > 0):
+        raise ParameterError(f"eta must be a finite positive number, got {eta!r}; use e.g. {DEFAULT_ETA}.")
+    return float(eta)
+
+
+def colour_gains(alpha: np.ndarray | list[float], eta: float = DEFAULT_ETA, n_channels: int = 3) -> np.ndarray:
+    """The correction gains ``α_c / η`` as float32 ``(n_channels,)``."""
+    return (_check_alpha(alpha, n_channels) / _check_eta(eta)).astype(np.float32)
+
+
+def apply_colour_cast(rgb: np.ndarray, alpha: np.ndarray | list[float], eta: float = DEFAULT_ETA, clip: bool = False) -> np.ndarray:
+    """Undo the colour cast of a demosaicked image: ``X_c = Y_c · α_c / η``.
+
+    Args:
+        rgb: ``(..., 3)`` RGB (e.g. ``(H, W, 3)``), or ``(H, W)`` monochrome with a 1-element α.
+        alpha: gray-world gains, ``(3,)`` R, G, B (a single value is used for every channel).
+        eta: range parameter η (each channel's sequence mean maps to ``1/η``).
+        clip: clip the result to ``[0, 1]`` (for display); off by default so that the values
+            the forward model needs are kept.
+
+    Returns:
+        float32 array of the shape of ``rgb``.
+    """
+    arr = np.asarray(rgb, dtype=np.float32)
+    n = 3 if (arr.ndim >= 3 and arr.shape[-1] == 3) else 1
+    if n == 1 and arr.ndim != 2:
+        raise ParameterError(f"rgb must be (..., 3) colour or (H, W) monochrome, got shape {arr.shape}; pass an image.")
+    out = arr * colour_gains(alpha, eta, n)
+    return np.clip(out, 0.0, 1.0, out=out) if clip else out
+
+
+def apply_colour_cast_mosaic(mosaic: np.ndarray, cfa: str | None, alpha: np.ndarray | list[float], eta: float = DEFAULT_ETA,
+                             clip: bool = False) -> np.ndarray:
+    """Undo the colour cast on a mosaicked image, site by site (before demosaicking).
+
+    Bilinear demosaicking commutes with this per-channel gain; Malvar and Menon use the
+    correlation between channels and need white-balanced input, so the pipeline corrects the
+    mosaic first (the usual raw-processing order).
+
+    Args:
+        mosaic: ``(H, W)`` mosaicked values whose top-left 2×2 is ``cfa`` (``None``: monochrome,
+            one gain).
+        alpha: ``(3,)`` R, G, B gains, or ``(1,)`` for monochrome.
+        eta: range parameter η.
+        clip: clip to ``[0, 1]``.
+
+    Returns:
+        ``(H, W)`` float32.
+    """
+    arr = _as_frames(mosaic, "mosaic")
+    if arr.ndim != 2:
+        raise ParameterError(f"mosaic must be one (H, W) frame, got shape {arr.shape}; pass a single frame.")
+    cfa = parse_cfa(cfa)
+    if cfa is None:
+        out = arr.astype(np.float32) * colour_gains(alpha, eta, 1)[0]
+    else:
+        g = colour_gains(alpha, eta, 3)
+        out = np.array(arr, dtype=np.float32, copy=True)
+        for (py, px), ch in zip(((0, 0), (0, 1), (1, 0), (1, 1)), cfa):
+            out[py::2, px::2] *= g[CHANNEL_INDEX[ch]]
+    return np.clip(out, 0.0, 1.0, out=out) if clip else out

@@ -1,0 +1,53 @@
+"""Shared pieces of the demosaicking kernels: input checks, CFA codes, mirror padding."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from spikeview.cfa import CHANNEL_INDEX, parse_cfa
+from spikeview.errors import ParameterError
+
+
+def quad_codes(cfa: str | None) -> np.ndarray:
+    """``(2, 2)`` int64 channel index (0 R, 1 G, 2 B) of the CFA's top-left quad."""
+    name = parse_cfa(cfa)
+    if name is None:
+        raise ParameterError("Demosaicking needs a Bayer CFA (RGGB, BGGR, GRBG or GBRG), got monochrome; skip demosaicking for mono streams.")
+    return np.array([[CHANNEL_INDEX[name[0]], CHANNEL_INDEX[name[1]]], [CHANNEL_INDEX[name[2]], CHANNEL_INDEX[name[3]]]], dtype=np.int64)
+
+
+def check_cfa_image(image: np.ndarray, min_size: int, method: str, dtype: type = np.float32) -> np.ndarray:
+    """Validate a mosaicked ``(H, W)`` image and return it C-contiguous in ``dtype``."""
+    arr = np.asarray(image)
+    if arr.ndim != 2:
+        raise ParameterError(f"cfa_image must be a mosaicked (H, W) array, got shape {arr.shape}; pass one frame.")
+    if min(arr.shape) < min_size:
+        raise ParameterError(f"cfa_image of shape {arr.shape} is too small for {method!r} demosaicking; it needs at least {min_size}x{min_size} pixels.")
+    return np.ascontiguousarray(arr, dtype=dtype)
+
+
+@numba.njit(cache=True, nogil=True)
+def pad_mirror(img: np.ndarray, p: int) -> np.ndarray:  # pragma: no cover - compiled
+    """Pad ``(H, W)`` by ``p`` pixels with whole-sample symmetry (``c b | a b c``).
+
+    This is scipy.ndimage's ``"mirror"`` and numpy.pad's ``"reflect"`` mode. Mirroring about the
+    edge pixel keeps the Bayer phase (pixel -1 copies pixel 1, same colour), unlike half-sample
+    symmetry (``b a | a b``), which puts the wrong colour outside the border. Needs ``p < H, W``.
+    """
+    h, w = img.shape
+    out = np.empty((h + 2 * p, w + 2 * p), dtype=img.dtype)
+    for yy in range(h + 2 * p):
+        y = yy - p
+        if y < 0:
+            y = -y
+        elif y >= h:
+            y = 2 * (h - 1) - y
+        for xx in range(w + 2 * p):
+            x = xx - p
+            if x < 0:
+                x = -x
+            elif x >= w:
+                x = 2 * (w - 1) - x
+            out[yy, xx] = img[y, x]
+    return out

@@ -1,0 +1,119 @@
+"""TFI (texture from interval): intensity from the inter-spike interval containing a tick.
+
+A photosite that fires every ``k`` ticks sees an intensity proportional to ``1/k``. TFI estimates
+it at tick ``t`` from the interval between the last spike at or before ``t`` and the first spike
+after ``t`` (the SpikeCV convention):
+
+* ``prev`` = last tick in ``[t - half_window, t]`` with a spike,
+* ``next`` = first tick in ``[t + 1, t + half_window]`` with a spike,
+* ``interval = next - prev`` (``1 <= interval <= 2·half_window``), output ``1 / interval``.
+
+If either spike is missing within ``half_window`` ticks (a dark photosite, or the stream starts or
+ends), the interval is **capped at** ``2·half_window``, the longest interval the search could have
+found, as SpikeCV does. So the output is always finite, lies in ``[1/(2·half_window), 1]`` and a
+photosite with no spike at all reads ``1/(2·half_window)`` rather than 0. Near the ends of the
+stream the search range is cut at the stream boundary (not shifted: ``t`` is the instant being
+imaged), so more photosites take the capped value there.
+
+Like TFP, TFI works per photosite and never mixes neighbours (mosaicked output on a Bayer sensor).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from spikeview.errors import ParameterError
+from spikeview.io.source import SpikeSource
+
+#: default search half-window in ticks (1.6 ms at 20 kHz): the window read is ``[t-32, t+32]``
+DEFAULT_HALF_WINDOW = 32
+
+
+@numba.njit(cache=True, nogil=True)
+def _tfi_kernel(spikes: np.ndarray, ti: int, cap: int) -> np.ndarray:  # pragma: no cover - compiled
+    # Frame-major passes with "last write wins": scanning from the far end towards ti, every
+    # spike overwrites the distance, so the nearest spike's distance remains. Branch-free and
+    # contiguous, which vectorises (about 10x faster than scanning each pixel's time line).
+    t_len, h, w = spikes.shape
+    n = h * w
+    flat = spikes.reshape(t_len, n)
+    none = np.int32(1 << 30)
+    dprev = np.full(n, none, dtype=np.int32)  # ti - (last spike tick <= ti)
+    dnext = np.full(n, none, dtype=np.int32)  # (first spike tick > ti) - ti
+    for k in range(0, ti + 1):
+        frame = flat[k]
+        d = np.int32(ti - k)
+        for i in range(n):
+            dprev[i] = d if frame[i] != 0 else dprev[i]
+    for k in range(t_len - 1, ti, -1):
+        frame = flat[k]
+        d = np.int32(k - ti)
+        for i in range(n):
+            dnext[i] = d if frame[i] != 0 else dnext[i]
+    out = np.empty(n, dtype=np.float32)
+    capped = np.float32(1.0) / np.float32(cap)
+    for i in range(n):
+        interval = np.int64(dprev[i]) + np.int64(dnext[i])  # >= 1; >= 2**30 when a spike is missing
+        out[i] = capped if interval >= none else np.float32(1.0) / np.float32(interval)
+    return out.reshape(h, w)
+
+
+def _check_half_window(half_window: int) -> int:
+    if isinstance(half_window, bool) or not isinstance(half_window, (int, np.integer)) or half_window < 1:
+        raise ParameterError(f"half_window must be a whole number of ticks >= 1, got {half_window!r}; pass e.g. {DEFAULT_HALF_WINDOW}.")
+    return int(half_window)
+
+
+def tfi_array(spikes: np.ndarray, t: int, half_window: int = DEFAULT_HALF_WINDOW) -> np.ndarray:
+    """TFI at index ``t`` of an in-memory spike block.
+
+    Args:
+        spikes: ``(T, H, W)`` array of 0/1 (uint8 or bool), in ticks.
+        t: tick index into ``spikes`` (``0 <= t < T``) at which to estimate the intensity.
+        half_window: search at most this many ticks before and after ``t``; ticks outside
+            ``spikes`` count as "no spike" (see the module docstring for the cap).
+
+    Returns:
+        ``(H, W)`` float32 in ``[1/(2·half_window), 1]``: ``1 / interval`` in spikes per tick.
+    """
+    spikes = np.asarray(spikes)
+    if spikes.ndim != 3:
+        raise ParameterError(f"spikes must have shape (T, H, W), got shape {spikes.shape}; pass a spike block.")
+    hw = _check_half_window(half_window)
+    t_len = spikes.shape[0]
+    if not 0 <= int(t) < t_len:
+        raise ParameterError(f"t={t} is outside the spike block, which holds ticks [0, {t_len}); choose a tick inside it.")
+    t = int(t)
+    lo, hi = max(0, t - hw), min(t_len, t + hw + 1)
+    block = spikes[lo:hi]
+    if block.dtype != np.uint8:
+        block = block.astype(np.uint8)
+    return _tfi_kernel(np.ascontiguousarray(block), t - lo, 2 * hw)
+
+
+def tfi(source: SpikeSource, center: int, half_window: int = DEFAULT_HALF_WINDOW) -> np.ndarray:
+    """TFI of ``source`` at tick ``center``.
+
+    Reads ticks ``[center - half_window, center + half_window]`` (cut at the stream's ends) and
+    applies the rule of the module docstring.
+
+    Args:
+        source: any spike source (flips applied; mosaicked output for a Bayer CFA).
+        center: the tick to image, ``0 <= center < n_frames``.
+        half_window: search half-window in ticks (default 32); the cap is ``2·half_window``.
+
+    Returns:
+        ``(H, W)`` float32 in ``[1/(2·half_window), 1]`` (an SFR-like rate in spikes per tick).
+
+    Raises:
+        ParameterError: ``center`` outside the stream or ``half_window < 1``.
+    """
+    hw = _check_half_window(half_window)
+    n = source.n_frames
+    if isinstance(center, bool) or not isinstance(center, (int, np.integer)) or not 0 <= center < n:
+        raise ParameterError(f"center tick {center!r} is outside the stream, which holds ticks [0, {n}); choose a tick inside it.")
+    center = int(center)
+    lo, hi = max(0, center - hw), min(n, center + hw + 1)
+    block = source.read(lo, hi)
+    return _tfi_kernel(np.ascontiguousarray(block, dtype=np.uint8), center - lo, 2 * hw)

@@ -1,0 +1,131 @@
+"""Sub-commands of the ``spikeview`` CLI. Each has ``add_args(parser)`` and ``run(args) -> int``.
+
+Heavy modules are imported inside ``run`` only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from spikeview.errors import ParameterError
+
+
+def geometry(fn):
+    """Mark an ``add_args`` function whose command reads a spike file (adds the geometry flags)."""
+    fn.geometry = True
+    return fn
+
+
+def parse_range(text: str, default_step: int) -> tuple[int, int, int]:
+    """Parse ``A:B[:STEP]`` (ticks) into ``(a, b, step)``; ``B`` is exclusive."""
+    parts = text.split(":")
+    try:
+        if len(parts) not in (2, 3):
+            raise ValueError
+        a, b = int(parts[0]), int(parts[1])
+        step = int(parts[2]) if len(parts) == 3 and parts[2] else default_step
+    except ValueError:
+        raise ParameterError(f"--range {text!r} is not A:B or A:B:STEP in ticks (e.g. 0:2000:20).") from None
+    if step < 1 or b <= a:
+        raise ParameterError(f"--range {text!r} needs B > A and STEP >= 1 (e.g. 0:2000:20).")
+    return a, b, step
+
+
+def progress(total: int, desc: str, unit: str = "frame"):
+    """A tqdm progress bar on stderr (hidden for a single item)."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, disable=total <= 1, dynamic_ncols=True)
+
+
+# ----------------------------------------------------------------------------------- info
+@geometry
+def add_info_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", metavar="FILE", help="spike file (.dat, raw camera stream, .npy/.npz)")
+    p.add_argument("--sample-windows", type=int, default=64,
+                   help="number of windows spread over the file used for firing-rate statistics (default 64)")
+
+
+def run_info(args: argparse.Namespace) -> int:
+    from spikeview.cli.info import describe
+
+    from spikeview.cli.main import _open_from_args
+
+    with _open_from_args(args) as src:
+        print(describe(src, sample_windows=args.sample_windows))
+    return 0
+
+
+# ------------------------------------------------------------------------------ reconstruct
+@geometry
+def add_reconstruct_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", metavar="INPUT", help="spike file (.dat, raw camera stream, .npy/.npz)")
+    p.add_argument("--method", choices=["tfp", "tfi", "guided"], default="tfp", help="reconstruction method (default tfp)")
+    p.add_argument("--window", type=int, default=None, metavar="N",
+                   help="window length in ticks (TFP window / TFI search span; default 10 for tfp and guided, 64 for tfi)")
+    when = p.add_mutually_exclusive_group()
+    when.add_argument("--at", type=int, metavar="T", help="reconstruct the one window centred on tick T")
+    when.add_argument("--range", metavar="A:B[:STEP]",
+                      help="windows centred on A, A+STEP, ... below B (STEP defaults to the window length)")
+    p.add_argument("--out", required=True, metavar="OUT",
+                   help="output: .npy, .mp4, or an .exr/.png pattern with a frame number such as frame_%%04d.exr")
+    p.add_argument("--demosaic", default="malvar2004", choices=["bilinear", "malvar2004"], help="demosaicking method for Bayer streams")
+    p.add_argument("--colour-cast", action=argparse.BooleanOptionalAction, default=True,
+                   help="correct the sensor's colour cast with a gray-world estimate over the whole sequence")
+    p.add_argument("--eta", type=float, default=None, help="range parameter of the colour-cast correction (X = Y*alpha/eta)")
+    p.add_argument("--fps", type=float, default=30.0, help="output frame rate of .mp4 files (default 30)")
+    p.add_argument("--compression", default="zip", choices=["zip", "piz", "none"], help="EXR compression (default zip)")
+    p.add_argument("--preset", metavar="FILE", help="a TOML parameter file (written beside earlier outputs) to re-run")
+
+
+def run_reconstruct(args: argparse.Namespace) -> int:
+    from spikeview.cli.reconstruct import run
+
+    return run(args)
+
+
+# ------------------------------------------------------------------------------- simulate
+def add_simulate_args(p: argparse.ArgumentParser) -> None:
+    from spikeview.cli.simulate import add_args
+
+    add_args(p)
+
+
+def run_simulate(args: argparse.Namespace) -> int:
+    from spikeview.cli.simulate import run
+
+    return run(args)
+
+
+# ------------------------------------------------------------------------------------ app
+def add_app_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", nargs="?", metavar="FILE", help="capture to open (default: the built-in demo capture)")
+
+
+def run_app(args: argparse.Namespace) -> int:
+    try:
+        from spikeview.gui.app import run_app as _run
+    except ImportError as e:
+        raise ParameterError(f"the desktop app is not available in this installation ({e}); use the sub-commands (spikeview --help).") from None
+    return _run(args.input)
+
+
+COMMANDS = {
+    "app": ("open the desktop app (the default when no command is given)", add_app_args, run_app),
+    "info": ("describe a spike file: format, geometry, duration, per-channel firing rates", add_info_args, run_info),
+    "simulate": ("simulate a chromatic spike capture (with ground truth) from a video, images or the demo scene",
+                 add_simulate_args, run_simulate),
+    "reconstruct": ("reconstruct frames from spikes and export them (.npy, .exr, .png, .mp4)", add_reconstruct_args, run_reconstruct),
+}
+
+EPILOGS = {
+    "info": "example:\n  spikeview info capture.dat --width 1000 --height 1000 --cfa BGGR\n",
+    "reconstruct": (
+        "examples:\n"
+        "  spikeview reconstruct demo.dat --method tfp --at 1000 --out frame.png\n"
+        "  spikeview reconstruct demo.dat --method tfi --range 0:2000:20 --out frames/f_%04d.exr\n"
+        "  spikeview reconstruct demo.dat --range 0:4000:10 --out clip.mp4 --fps 30\n"
+    ),
+}

@@ -1,0 +1,59 @@
+"""``spikeview info``: a human summary of a spike stream."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from spikeview.cfa import cfa_to_str, site_masks
+from spikeview.io.source import SpikeSource
+
+
+def firing_rates(src: SpikeSource, sample_windows: int = 64, window: int = 64) -> dict[str, float]:
+    """Mean spikes per tick per photosite class, from windows spread evenly over the stream.
+
+    Returns ``{"all": rate}`` for monochrome streams and ``{"R", "Gr", "Gb", "B", "all"}`` for
+    Bayer streams. Rates are in spikes per tick, in [0, 1].
+    """
+    n = src.n_frames
+    window = max(1, min(window, n))
+    k = max(1, min(sample_windows, n // window))
+    starts = np.linspace(0, n - window, k).round().astype(int)
+    total = np.zeros((src.height, src.width), dtype=np.float64)
+    for a in starts:
+        total += src.count(int(a), int(a) + window)
+    rate = total / (k * window)
+    out: dict[str, float] = {}
+    if src.cfa is not None:
+        for name, mask in site_masks(src.cfa, src.height, src.width).items():
+            out[name] = float(rate[mask].mean()) if mask.any() else float("nan")
+    out["all"] = float(rate.mean())
+    return out
+
+
+def describe(src: SpikeSource, sample_windows: int = 64) -> str:
+    info = src.info
+    lines = []
+    if info.path is not None:
+        lines.append(f"file:        {info.path}")
+    flips = [n for n, f in (("vertical", info.flip_vertical), ("horizontal", info.flip_horizontal)) if f]
+    lines += [
+        f"format:      {info.format}",
+        f"geometry:    {info.width} x {info.height} (width x height)",
+        f"cfa:         {cfa_to_str(info.cfa)} (top-left 2x2 after flips)",
+        f"flips:       {', '.join(flips) if flips else 'none'}",
+        f"tick rate:   {info.tick_rate:g} Hz ({1e6 / info.tick_rate:g} us per tick)",
+        f"frames:      {info.n_frames} ticks",
+        f"duration:    {info.duration_s * 1e3:.3f} ms",
+    ]
+    if info.n_frames > 0:
+        rates = firing_rates(src, sample_windows=sample_windows)
+        parts = [f"{k} {v:.4f}" for k, v in rates.items()]
+        lines.append(f"firing rate: {', '.join(parts)} spikes/tick")
+    for key, value in info.extra.items():
+        if isinstance(value, dict):
+            summary = ", ".join(f"{k}={v}" for k, v in list(value.items())[:8])
+            more = " ..." if len(value) > 8 else ""
+            lines.append(f"{key + ':':<12} {summary}{more}")
+    for w in info.warnings:
+        lines.append(f"warning:     {w}")
+    return "\n".join(lines)

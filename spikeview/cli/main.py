@@ -1,0 +1,110 @@
+"""The ``spikeview`` command.
+
+Only argparse and the error classes are imported at start-up: numpy-heavy and torch/Qt modules are
+imported inside the sub-command that needs them, so ``spikeview --help`` stays instant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from typing import Callable, Sequence
+
+from spikeview import __version__
+from spikeview.errors import Cancelled, SpikeviewError
+
+EPILOG = """examples:
+  spikeview                                   open the app on the built-in demo capture
+  spikeview capture.dat                       open a capture in the app
+  spikeview info capture.dat --width 1000 --height 1000 --cfa BGGR
+  spikeview simulate --demo --ticks 2000 --out demo.dat
+  spikeview reconstruct demo.dat --method tfp --window 10 --at 1000 --out frame.png
+  spikeview reconstruct demo.dat --method tfi --range 0:2000:20 --out clip.mp4 --fps 30
+"""
+
+
+def _add_geometry_flags(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("stream geometry (override the sidecar; needed for files without one)")
+    g.add_argument("--format", choices=["plain", "raw400", "raw1m", "npz"], help="file format (default: sidecar, suffix or detection)")
+    g.add_argument("--width", type=int, help="frame width in pixels")
+    g.add_argument("--height", type=int, help="frame height in pixels")
+    g.add_argument("--cfa", metavar="{RGGB,BGGR,GRBG,GBRG,none}",
+                   help="colour filter: top-left 2x2 after the flips, or 'none' for monochrome")
+    g.add_argument("--flip-vertical", action=argparse.BooleanOptionalAction, default=None,
+                   help="rows are stored upside down (the ecosystem default for .dat files)")
+    g.add_argument("--flip-horizontal", action=argparse.BooleanOptionalAction, default=None,
+                   help="columns are stored mirrored")
+    g.add_argument("--tick-rate", type=float, help="readouts per second (default 20000)")
+    g.add_argument("--layout", choices=["thw", "hwt"], help="axis order of .npy/.npz arrays")
+
+
+def _open_from_args(args: argparse.Namespace):
+    from spikeview.io import open_source
+
+    kwargs = dict(format=args.format, width=args.width, height=args.height,
+                  flip_vertical=args.flip_vertical, flip_horizontal=args.flip_horizontal,
+                  tick_rate=args.tick_rate, layout=args.layout)
+    if args.cfa is not None:
+        kwargs["cfa"] = args.cfa
+    return open_source(args.input, **kwargs)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="spikeview",
+        description="View, simulate and reconstruct chromatic spike-camera captures.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"spikeview {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    from spikeview.cli import commands
+
+    for name, (helptext, add_args, run) in commands.COMMANDS.items():
+        p = sub.add_parser(name, help=helptext, description=helptext,
+                           formatter_class=argparse.RawDescriptionHelpFormatter,
+                           epilog=commands.EPILOGS.get(name))
+        add_args(p)
+        if getattr(add_args, "geometry", False):
+            _add_geometry_flags(p)
+        p.set_defaults(func=run)
+    return parser
+
+
+def _print_error(message: str) -> None:
+    print(f"spikeview: error: {message}", file=sys.stderr)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the process exit status (0 ok, 1 failed, 2 bad usage, 130 interrupted)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    from spikeview.cli import commands
+
+    # `spikeview` alone or `spikeview FILE` opens the app.
+    if not argv or (argv[0] not in commands.COMMANDS and not argv[0].startswith("-")):
+        argv = ["app", *argv]
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    run: Callable[[argparse.Namespace], int] = args.func
+    try:
+        return int(run(args) or 0)
+    except SpikeviewError as e:
+        _print_error(str(e))
+        return 1
+    except (Cancelled, KeyboardInterrupt):
+        _print_error("interrupted; files already finished are kept, the unfinished one was removed.")
+        return 130
+    except MemoryError:
+        _print_error("out of memory; reconstruct a shorter range or a smaller region.")
+        return 1
+    except Exception as e:  # last resort: one line, never a traceback (set SPIKEVIEW_DEBUG=1 to see it)
+        if os.environ.get("SPIKEVIEW_DEBUG"):
+            raise
+        _print_error(f"unexpected {type(e).__name__}: {e} (this is a bug; rerun with SPIKEVIEW_DEBUG=1 and report the traceback).")
+        return 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

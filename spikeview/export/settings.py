@@ -1,0 +1,198 @@
+"""Export settings (:class:`ExportConfig`) and what every exported frame records (:class:`ExportMetadata`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spikeview.config import Config
+from spikeview.errors import ParameterError
+
+#: EXR compressions offered (all lossless); OpenImageIO names
+EXR_COMPRESSIONS = ("zip", "piz", "none")
+#: display transfer functions for PNG and MP4
+TRANSFERS = ("srgb", "gamma", "linear")
+#: libx264 presets, fastest first
+X264_PRESETS = (
+    "ultrafast",
+    "superfast",
+    "veryfast",
+    "faster",
+    "fast",
+    "medium",
+    "slow",
+    "slower",
+    "veryslow",
+    "placebo",
+)
+#: how MP4 export makes an odd width/height even (yuv420p needs even sizes)
+EVEN_SIZE_MODES = ("pad", "crop")
+
+
+@dataclasses.dataclass
+class ExportConfig(Config):
+    """How frames are written. Saved into every output so it can be reproduced.
+
+    Attributes:
+        fps: MP4 playback rate in frames per second (> 0). Together with the tick rate and the
+            step between output frames it sets the slow-motion factor (see
+            :func:`spikeview.export.slow_motion_factor`).
+        crf: libx264 constant rate factor, 0 (best) to 51 (worst); 18 is visually lossless.
+        preset: libx264 speed/size preset, one of :data:`X264_PRESETS`.
+        compression: EXR compression, one of :data:`EXR_COMPRESSIONS` (all lossless).
+        png_bits: PNG bit depth, 8 or 16.
+        black, white: fixed display levels in linear units for PNG and MP4: ``black`` maps to 0
+            and ``white`` to full scale, values outside are clipped. Never chosen per frame (no
+            auto-levels), so brightness is comparable across a sequence. EXR and npy ignore
+            them and keep the linear values as they are.
+        transfer: display encoding for PNG and MP4 after the levels: ``"srgb"`` (IEC 61966-2-1
+            curve, the default), ``"gamma"`` (pure power ``1/gamma``) or ``"linear"`` (none).
+        gamma: exponent for ``transfer="gamma"`` (> 0).
+        first_frame: number of the first file of an EXR/PNG sequence; file ``i`` of the export
+            is numbered ``first_frame + i``.
+        even_size: MP4 only, for an odd width or height: ``"pad"`` repeats the last row/column
+            once (no image content lost, the video is one pixel larger) or ``"crop"`` drops it.
+    """
+
+    fps: float = 30.0
+    crf: int = 18
+    preset: str = "medium"
+    compression: str = "zip"
+    png_bits: int = 8
+    black: float = 0.0
+    white: float = 1.0
+    transfer: str = "srgb"
+    gamma: float = 2.2
+    first_frame: int = 0
+    even_size: str = "pad"
+
+    def __post_init__(self) -> None:
+        def bad(name: str, value: Any, fix: str) -> ParameterError:
+            return ParameterError(f"export setting '{name}' = {value!r} is not valid; {fix}.")
+
+        if not (math.isfinite(self.fps) and self.fps > 0):
+            raise bad("fps", self.fps, "use a positive frame rate such as 30")
+        if not 0 <= self.crf <= 51:
+            raise bad("crf", self.crf, "use 0 (best) to 51 (worst); 18 is visually lossless")
+        if self.preset not in X264_PRESETS:
+            raise bad("preset", self.preset, f"use one of {', '.join(X264_PRESETS)}")
+        if self.compression not in EXR_COMPRESSIONS:
+            raise bad("compression", self.compression, f"use one of {', '.join(EXR_COMPRESSIONS)}")
+        if self.png_bits not in (8, 16):
+            raise bad("png_bits", self.png_bits, "use 8 or 16")
+        if not (math.isfinite(self.black) and math.isfinite(self.white) and self.black < self.white):
+            raise bad("black/white", (self.black, self.white), "black must be less than white, e.g. 0 and 1")
+        if self.transfer not in TRANSFERS:
+            raise bad("transfer", self.transfer, f"use one of {', '.join(TRANSFERS)}")
+        if not (math.isfinite(self.gamma) and self.gamma > 0):
+            raise bad("gamma", self.gamma, "use a positive exponent such as 2.2")
+        if self.first_frame < 0:
+            raise bad("first_frame", self.first_frame, "use 0 or a positive number")
+        if self.even_size not in EVEN_SIZE_MODES:
+            raise bad("even_size", self.even_size, f"use one of {', '.join(EVEN_SIZE_MODES)}")
+
+
+def tomlable(value: Any, name: str = "params") -> Any:
+    """``value`` converted to what TOML can store (numpy scalars to Python, tuples to lists, ``None`` dropped).
+
+    Raises:
+        ParameterError: for a value TOML cannot hold (an array, an object…), naming its key.
+    """
+    if isinstance(value, Config):
+        value = value.to_dict()
+    if isinstance(value, dict):
+        return {str(k): tomlable(v, f"{name}.{k}") for k, v in value.items() if v is not None}
+    if isinstance(value, (list, tuple)):
+        return [tomlable(v, f"{name}[{i}]") for i, v in enumerate(value) if v is not None]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, (bool, int, str)):
+        return value
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            # TOML can store nan/inf, but a reproduction recipe with nan in it is a bug upstream
+            raise ParameterError(f"metadata '{name}' is {value}; pass a finite number.")
+        return value
+    raise ParameterError(
+        f"metadata '{name}' has type {type(value).__name__}, which a settings file cannot hold; "
+        "pass numbers, strings, booleans, lists or tables of them."
+    )
+
+
+@dataclasses.dataclass
+class ExportMetadata(Config):
+    """What produced the frames; written into every output so a frame can be reproduced.
+
+    Attributes:
+        source: the spike file (or a description such as ``"simulator: bars"``).
+        method: reconstruction method name (``"tfp"``, ``"tfi"``, ``"guided"``…).
+        tick_rate: readouts per second of the source (Hz), 20 kHz by default.
+        window: tick range ``[a, b)`` of the **first** output frame's window.
+        centre_tick: centre tick of the first output frame.
+        step_ticks: ticks between consecutive output frames. When given, frame ``i`` records
+            window ``[a + i·step, b + i·step)`` and centre ``centre_tick + i·step``; when not,
+            later frames record only what is passed to ``Exporter.write``.
+        params: the full parameter set (plain dict). A :class:`~spikeview.config.Config` or TOML
+            text passed here is converted to a dict.
+    """
+
+    source: str = ""
+    method: str = ""
+    tick_rate: float = 20_000.0
+    window: tuple[int, int] | None = None
+    centre_tick: int | None = None
+    step_ticks: int | None = None
+    params: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.source, Path):
+            self.source = str(self.source)
+        params: Any = self.params
+        if isinstance(params, Config):
+            params = params.to_dict()
+        elif isinstance(params, str):
+            try:
+                params = tomllib.loads(params)
+            except tomllib.TOMLDecodeError as e:
+                raise ParameterError(
+                    f"metadata 'params' is not valid TOML text ({e}); pass a dict or a Config."
+                ) from None
+        elif params is None:
+            params = {}
+        if not isinstance(params, dict):
+            raise ParameterError(
+                f"metadata 'params' has type {type(params).__name__}; pass a dict, a Config or TOML text."
+            )
+        self.params = tomlable(params)
+        if not (math.isfinite(self.tick_rate) and self.tick_rate > 0):
+            raise ParameterError(f"metadata 'tick_rate' = {self.tick_rate!r}; pass the positive readout rate in Hz.")
+        if self.window is not None:
+            a, b = (int(v) for v in self.window)
+            if not a < b:
+                raise ParameterError(f"metadata 'window' = {self.window!r} is empty; pass ticks [a, b) with a < b.")
+            self.window = (a, b)
+            if self.centre_tick is not None and not a <= self.centre_tick < b:
+                raise ParameterError(
+                    f"metadata 'centre_tick' = {self.centre_tick} lies outside the window [{a}, {b}); "
+                    "pass the centre of the first frame's window."
+                )
+        if self.step_ticks is not None and self.step_ticks <= 0:
+            raise ParameterError(f"metadata 'step_ticks' = {self.step_ticks}; pass a positive tick step.")
+
+    def frame_ticks(self, index: int) -> tuple[tuple[int, int] | None, int | None]:
+        """Window ``[a, b)`` and centre tick of output frame ``index``, where known (else ``None``)."""
+        if index == 0:
+            return self.window, self.centre_tick
+        if self.step_ticks is None:
+            return None, None
+        shift = index * self.step_ticks
+        window = None if self.window is None else (self.window[0] + shift, self.window[1] + shift)
+        centre = None if self.centre_tick is None else self.centre_tick + shift
+        return window, centre

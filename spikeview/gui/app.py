@@ -1,0 +1,76 @@
+"""Start the desktop app: ``spikeview`` (demo capture) or ``spikeview FILE``."""
+
+from __future__ import annotations
+
+import os
+import sys
+import traceback
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+
+def configure_pyqtgraph() -> None:
+    """Global pyqtgraph options the app relies on: row-major images, no antialiasing of images."""
+    import pyqtgraph as pg
+
+    pg.setConfigOptions(imageAxisOrder="row-major", antialias=False, background=(24, 24, 24), foreground=(220, 220, 220))
+
+
+def make_application(argv: list[str] | None = None) -> Any:
+    """The QApplication (created once), styled, with pyqtgraph configured."""
+    from PySide6 import QtGui, QtWidgets
+
+    app = QtWidgets.QApplication.instance()
+    if app is None:
+        app = QtWidgets.QApplication(argv if argv is not None else [sys.argv[0]])
+        app.setOrganizationName("spikeview")
+        app.setApplicationName("spikeview")
+        app.setStyle("Fusion")
+        pal = QtGui.QPalette()
+        dark, mid, text = QtGui.QColor(37, 37, 40), QtGui.QColor(53, 53, 58), QtGui.QColor(225, 225, 225)
+        for role, colour in ((QtGui.QPalette.ColorRole.Window, dark), (QtGui.QPalette.ColorRole.Base, QtGui.QColor(28, 28, 30)),
+                             (QtGui.QPalette.ColorRole.AlternateBase, mid), (QtGui.QPalette.ColorRole.Button, mid),
+                             (QtGui.QPalette.ColorRole.Text, text), (QtGui.QPalette.ColorRole.WindowText, text),
+                             (QtGui.QPalette.ColorRole.ButtonText, text), (QtGui.QPalette.ColorRole.ToolTipBase, mid),
+                             (QtGui.QPalette.ColorRole.ToolTipText, text),
+                             (QtGui.QPalette.ColorRole.Highlight, QtGui.QColor(255, 150, 30)),
+                             (QtGui.QPalette.ColorRole.HighlightedText, QtGui.QColor(20, 20, 20))):
+            pal.setColor(role, colour)
+        app.setPalette(pal)
+    configure_pyqtgraph()
+    return app
+
+
+def _excepthook(window: Any) -> Any:
+    """Exceptions that reach the event loop become a message; parameters are saved first."""
+
+    def hook(exc_type: type[BaseException], exc: BaseException, tb: TracebackType | None) -> None:
+        traceback.print_exception(exc_type, exc, tb, file=sys.stderr)
+        try:
+            window.save_settings()
+            window.show_error(f"Unexpected {exc_type.__name__}: {exc} (a bug; your parameters are saved — please report the "
+                              "terminal output).")
+        except Exception:  # the window itself is broken: nothing more to do than print
+            pass
+
+    return hook
+
+
+def run_app(path: str | os.PathLike[str] | None = None) -> int:
+    """Open the main window on ``path`` (or the built-in demo) and run the event loop; returns the exit status."""
+    app = make_application()
+    from spikeview.gui.main_window import MainWindow
+
+    window = MainWindow()
+    sys.excepthook = _excepthook(window)
+    window.show()
+    if path is None:
+        window.open_demo()
+    else:
+        window.open_path(Path(path))
+    return int(app.exec())
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(run_app(sys.argv[1] if len(sys.argv) > 1 else None))

@@ -1,0 +1,366 @@
+"""The glue between the session model and the background workers (Qt, but no widgets).
+
+:class:`Controller` listens to the :class:`~spikeview.gui.model.Session`'s events, decides which
+previews are stale, submits jobs (:mod:`spikeview.gui.jobs`) to the workers
+(:mod:`spikeview.gui.workers`), drops stale results by job id and hands fresh ones to the views
+through Qt signals. It also drives playback with a timer.
+
+Workers:
+
+* ``preview`` — stream frames, firing rates (throttled), the sequence's colour cast, the
+  degradation chain; newest-wins per channel, frames first;
+* ``guided`` — the guided sampler; owns the prior model (loaded once, kept in the worker's state);
+  parameter changes restart it after a debounce;
+* ``export`` — one export at a time, with progress and cancel.
+
+Playback is back-pressured: the next frame is requested only when the previous one has been
+shown, so a slow machine drops frames (real-time mode skips ticks) instead of queueing them, and
+the window never waits for a computation.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from PySide6 import QtCore
+
+from spikeview.gui import jobs
+from spikeview.gui.model import SPECS, Session
+from spikeview.gui.workers import Worker
+
+#: parameter groups whose change makes the stream previews stale
+_FRAME_GROUPS = {"stream", "display", "classical"}
+#: rates are recomputed at most this often during playback (ms); paused changes are immediate
+RATES_INTERVAL_MS = 250
+#: guided parameter changes restart a running job after this quiet time (ms)
+GUIDED_DEBOUNCE_MS = 400
+#: playback timer period (ms): the display asks for a frame at most this often
+PLAY_INTERVAL_MS = 10
+
+
+class Controller(QtCore.QObject):
+    """Session → jobs → views (see module docstring)."""
+
+    frames_ready = QtCore.Signal(object)  # core.StreamFrames
+    rates_ready = QtCore.Signal(object)  # core.RatesResult
+    alpha_history = QtCore.Signal(object)  # (ticks, alphas (N, C)) sorted by tick
+    degradation_ready = QtCore.Signal(object)  # jobs.DegradationView
+    guided_update = QtCore.Signal(object)  # jobs.GuidedUpdate
+    guided_done = QtCore.Signal(object)  # jobs.GuidedResult
+    guided_state = QtCore.Signal(str, str)  # state ("running", "done", "cancelled", "failed", "idle"), message
+    export_progress = QtCore.Signal(int, int)
+    export_done = QtCore.Signal(object)  # list[Path]
+    export_state = QtCore.Signal(str, str)  # "running" / "done" / "cancelled" / "failed", message
+    error = QtCore.Signal(str)  # a sentence for the user (status bar or dialog)
+    fps_changed = QtCore.Signal(float)
+    alpha_ready = QtCore.Signal(object)
+
+    def __init__(self, session: Session, parent: QtCore.QObject | None = None):
+        super().__init__(parent)
+        self.session = session
+        self.preview = Worker("spikeview-preview", priority=("frames", "degradation", "rates", "alpha"), parent=self)
+        self.guided = Worker("spikeview-guided", parent=self)
+        self.exporter = Worker("spikeview-export", parent=self)
+        for w in (self.preview, self.guided, self.exporter):
+            w.finished.connect(self._on_finished)
+            w.failed.connect(self._on_failed)
+            w.cancelled.connect(self._on_cancelled)
+            w.progress.connect(self._on_progress)
+        self.alpha: np.ndarray | None = None
+        self.alpha_note: str | None = None
+        self.enabled = {"tfi": True, "rates": True, "degradation": True}
+        self.errors: list[str] = []  # every error shown, for tests and the log
+        self.last_frames = None
+        self.guided_result: jobs.GuidedResult | None = None
+        self.guided_run = 0
+        self.guided_live = False
+        self._guided_key: tuple[Any, ...] | None = None
+        self._frames_dirty = False
+        self._rates_dirty = False
+        self._alpha_hist: dict[int, np.ndarray] = {}
+        self._shown_times: deque[float] = deque(maxlen=120)
+        self._last_advance = time.perf_counter()
+        self._last_rates = 0.0
+
+        self.play_timer = QtCore.QTimer(self)
+        self.play_timer.setInterval(PLAY_INTERVAL_MS)
+        self.play_timer.timeout.connect(self._play_tick)
+        self.rates_timer = QtCore.QTimer(self, singleShot=True)
+        self.rates_timer.timeout.connect(self._submit_rates)
+        self.guided_timer = QtCore.QTimer(self, singleShot=True, interval=GUIDED_DEBOUNCE_MS)
+        self.guided_timer.timeout.connect(self._guided_debounced)
+
+        ev = session.events
+        ev.source_changed.connect(self._on_source)
+        ev.tick_changed.connect(self._on_tick)
+        ev.param_changed.connect(self._on_param)
+        ev.roi_changed.connect(self._on_roi)
+        ev.playback_changed.connect(self._on_playback)
+
+    # ------------------------------------------------------------------------------ lifecycle
+    def shutdown(self) -> None:
+        """Stop playback and every worker (called when the window closes)."""
+        self.play_timer.stop()
+        self.rates_timer.stop()
+        self.guided_timer.stop()
+        ev = self.session.events
+        for e, cb in ((ev.source_changed, self._on_source), (ev.tick_changed, self._on_tick), (ev.param_changed, self._on_param),
+                      (ev.roi_changed, self._on_roi), (ev.playback_changed, self._on_playback)):
+            e.disconnect(cb)
+        for w in (self.preview, self.guided, self.exporter):
+            w.stop()
+
+    def set_enabled(self, what: str, on: bool) -> None:
+        """Skip work for hidden views (``"tfi"``, ``"rates"``, ``"degradation"``)."""
+        changed = self.enabled.get(what) != on
+        self.enabled[what] = on
+        if changed and on:
+            {"tfi": self.request_frames, "rates": self.request_rates, "degradation": self.request_degradation}[what]()
+
+    # ------------------------------------------------------------------------------ session events
+    def _on_source(self) -> None:
+        self.guided.cancel("guided")
+        self.guided_result = None
+        self._guided_key = None
+        self.alpha, self.alpha_note = None, None
+        self._alpha_hist.clear()
+        self.alpha_history.emit((np.zeros(0), np.zeros((0, 3))))
+        src = self.session.source
+        if src is not None and src.cfa is not None:
+            window = int(self.session.get("window"))
+            self.preview.submit("alpha", lambda ctx, s=src, w=window: jobs.alpha_job(s, w, ctx))
+        self.request_frames()
+        self.request_degradation()
+
+    def _on_tick(self, tick: int) -> None:
+        self.request_frames()
+        if not self.session.playing:
+            self.request_degradation()
+
+    def _on_param(self, name: str, value: Any) -> None:
+        group = SPECS[name].group
+        if group in _FRAME_GROUPS:
+            self.request_frames()
+        if group in _FRAME_GROUPS or group == "forward":
+            self.request_degradation()
+        if name in ("eta", "demosaic", "colour_cast") and self.guided_result is not None:
+            self._guided_key = None
+        if group in ("guided", "forward") or name in ("window", "demosaic", "colour_cast"):
+            if self.guided.is_active("guided") or self.guided_live:
+                self.guided_timer.start()
+
+    def _on_roi(self, roi: Any) -> None:
+        self.request_rates()
+        self.request_degradation()
+
+    def _on_playback(self, playing: bool) -> None:
+        if playing:
+            self._last_advance = time.perf_counter()
+            self.play_timer.start()
+        else:
+            self.play_timer.stop()
+            self.request_degradation()
+            self.request_rates()
+
+    # ------------------------------------------------------------------------------ playback
+    def _play_tick(self) -> None:
+        if self.preview.is_active("frames"):
+            return  # back-pressure: the last frame is not shown yet
+        now = time.perf_counter()
+        elapsed, self._last_advance = now - self._last_advance, now
+        self.session.advance(elapsed)
+
+    def display_fps(self) -> float:
+        """Frames shown per second over the last second or so (0 when idle)."""
+        t = self._shown_times
+        if len(t) < 2 or time.perf_counter() - t[-1] > 1.0:
+            return 0.0
+        recent = [x for x in t if t[-1] - x <= 1.0]
+        return (len(recent) - 1) / max(recent[-1] - recent[0], 1e-6) if len(recent) > 1 else 0.0
+
+    # ------------------------------------------------------------------------------ previews
+    def _request(self, **overrides: Any) -> jobs.PreviewRequest:
+        s = self.session
+        kw = dict(source=s.source, tick=s.tick, params=dict(s.params), alpha=self.alpha, roi=s.roi,
+                  want_tfi=self.enabled["tfi"])
+        kw.update(overrides)
+        return jobs.PreviewRequest(**kw)
+
+    def request_frames(self) -> None:
+        if self.session.source is None:
+            return
+        if self.preview.is_active("frames") and self.session.playing:
+            self._frames_dirty = True
+            return
+        req = self._request()
+        self.preview.submit("frames", lambda ctx, r=req: jobs.frames_job(r, ctx))
+
+    def request_rates(self) -> None:
+        if self.last_frames is None or not self.enabled["rates"]:
+            return
+        if not self.session.playing:
+            self._submit_rates()
+            return
+        wait = RATES_INTERVAL_MS - (time.perf_counter() - self._last_rates) * 1000
+        if wait <= 0:
+            self._submit_rates()
+        elif not self.rates_timer.isActive():
+            self.rates_timer.start(int(wait))
+
+    def _submit_rates(self) -> None:
+        f = self.last_frames
+        if f is None or self.session.source is None:
+            return
+        self._last_rates = time.perf_counter()
+        req = self._request(tick=f.tick)
+        self.preview.submit("rates", lambda ctx, r=req, m=f.mosaic: jobs.rates_job(r, m, ctx))
+
+    def request_degradation(self) -> None:
+        if self.session.source is None or not self.enabled["degradation"]:
+            return
+        g = self.guided_result
+        s = self.session
+        x = None
+        label = "TFP"
+        if g is not None and g.tick == s.tick and self._guided_key == self._guided_context():
+            x, label = g.image, f"guided run {g.run}"
+        req = self._request(x_override=x, x_label=label)
+        self.preview.submit("degradation", lambda ctx, r=req: jobs.degradation_job(r, ctx))
+
+    # ------------------------------------------------------------------------------ guided
+    def _guided_context(self) -> tuple[Any, ...]:
+        s = self.session
+        return (id(s.source), s.tick, s.roi, s.get("window"), s.get("eta"), s.get("colour_cast"))
+
+    def run_guided(self) -> int:
+        """Start (or restart) a guided reconstruction of the current window; returns the run number."""
+        s = self.session
+        if s.source is None:
+            self._error("Open a capture first (File ▸ Open), then run the guided reconstruction.")
+            return self.guided_run
+        self.guided_timer.stop()
+        self.guided_run += 1
+        gt = s.stream.ground_truth if s.stream is not None else None
+        req = jobs.GuidedRequest(s.source, s.tick, dict(s.params), self.alpha, s.roi, gt, self.guided_run)
+        self._guided_pending_key = self._guided_context()
+        self.guided.submit("guided", lambda ctx, r=req: jobs.guided_job(r, ctx), cancel_running=True)
+        self.guided_state.emit("running", f"Guided run {self.guided_run} started.")
+        return self.guided_run
+
+    def cancel_guided(self) -> None:
+        self.guided_timer.stop()
+        if self.guided.is_active("guided"):
+            self.guided.cancel("guided")
+            self.guided_state.emit("cancelled", f"Guided run {self.guided_run} cancelled.")
+
+    def _guided_debounced(self) -> None:
+        self.run_guided()
+
+    # ------------------------------------------------------------------------------ export
+    def start_export(self, out: str | Path) -> bool:
+        """Export the current frame or the marked range (session's export settings) to ``out``."""
+        s = self.session
+        if s.source is None:
+            self._error("Open a capture first, then export.")
+            return False
+        if self.exporter.is_active():
+            self._error("An export is already running: wait for it or cancel it first.")
+            return False
+        from spikeview.gui.presets import preset_dict
+
+        p = dict(s.params)
+        ticks = jobs.export_ticks(p, p["export_range"], s.tick, s.marked_range())
+        name = str(s.stream.path) if s.stream.path is not None else s.stream.label
+        roi = s.roi if p["export_method"] == "guided" else None
+        req = jobs.ExportRequest(s.source, name, ticks, p["export_method"], p, self.alpha, Path(out), roi, preset_dict(s))
+        self.exporter.submit("export", lambda ctx, r=req: jobs.export_job(r, ctx))
+        self.export_state.emit("running", f"Exporting {len(ticks)} frame(s) to {out}…")
+        return True
+
+    def cancel_export(self) -> None:
+        self.exporter.cancel("export")
+
+    # ------------------------------------------------------------------------------ results
+    def _on_progress(self, channel: str, job_id: int, payload: Any) -> None:
+        if channel == "guided":
+            if self.guided.is_current(channel, job_id):
+                self.guided_update.emit(payload)
+        elif channel == "export":
+            self.export_progress.emit(*payload)
+
+    def _on_finished(self, channel: str, job_id: int, result: Any) -> None:
+        worker = self._worker(channel)
+        if channel == "export":
+            self.export_done.emit(result)
+            self.export_state.emit("done", f"Exported {len(result)} file(s).")
+            return
+        if not worker.is_current(channel, job_id):
+            if channel == "frames":
+                self._after_frames()
+            return  # stale: a newer job of this channel was submitted
+        if channel == "frames":
+            self.last_frames = result
+            self._shown_times.append(time.perf_counter())
+            self.frames_ready.emit(result)
+            self.request_rates()
+            self._after_frames()
+        elif channel == "rates":
+            self._alpha_hist[int(result.tick)] = np.asarray(result.alpha, dtype=np.float64)
+            if len(self._alpha_hist) > 4000:  # keep memory bounded on very long sessions
+                for k in sorted(self._alpha_hist)[:1000]:
+                    del self._alpha_hist[k]
+            ticks = np.array(sorted(self._alpha_hist))
+            self.alpha_history.emit((ticks, np.array([self._alpha_hist[t] for t in ticks])))
+            self.rates_ready.emit(result)
+        elif channel == "alpha":
+            self.alpha, self.alpha_note = result
+            if self.alpha_note:
+                self._error(self.alpha_note)
+            self.alpha_ready.emit(self.alpha)
+            self.request_frames()
+            self.request_degradation()
+        elif channel == "degradation":
+            self.degradation_ready.emit(result)
+        elif channel == "guided":
+            self.guided_result = result
+            self._guided_key = getattr(self, "_guided_pending_key", None)
+            self.guided_done.emit(result)
+            msg = f"Guided run {result.run} finished in {result.elapsed:.1f} s"
+            if result.psnr is not None:
+                msg += f" (PSNR {result.psnr:.2f} dB, SSIM {result.ssim:.3f})"
+            self.guided_state.emit("done", msg + ".")
+            self.request_degradation()
+
+    def _after_frames(self) -> None:
+        if self._frames_dirty:
+            self._frames_dirty = False
+            self.request_frames()
+
+    def _on_failed(self, channel: str, job_id: int, message: str) -> None:
+        if channel == "export":
+            self.export_state.emit("failed", message)
+            self._error(f"Export failed: {message}")
+            return
+        worker = self._worker(channel)
+        if not worker.is_current(channel, job_id):
+            return
+        if channel == "guided":
+            self.guided_state.emit("failed", message)
+        self._error(message)
+
+    def _on_cancelled(self, channel: str, job_id: int) -> None:
+        if channel == "export":
+            self.export_state.emit("cancelled", "Export cancelled; frames already written were kept.")
+        elif channel == "guided" and self.guided.is_current(channel, job_id):
+            self.guided_state.emit("cancelled", "Guided run cancelled.")
+
+    def _worker(self, channel: str) -> Worker:
+        return self.guided if channel == "guided" else self.exporter if channel == "export" else self.preview
+
+    def _error(self, message: str) -> None:
+        self.errors.append(message)
+        self.error.emit(message)

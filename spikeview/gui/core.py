@@ -1,0 +1,483 @@
+"""The app's thin adapter over the core packages (no Qt).
+
+Everything the views show is computed here from the core (:mod:`spikeview.io`,
+:mod:`spikeview.classical`, :mod:`spikeview.sim`, :mod:`spikeview.ops`, :mod:`spikeview.guided`,
+:mod:`spikeview.export`), so the Qt side only moves arrays to the screen. Functions are pure and
+thread-safe given a thread-safe source (:class:`LockedSource`); workers call them off the GUI
+thread.
+
+Array conventions: frames are row-major ``(H, W)`` or ``(H, W, 3)``; SFR and reconstructions are
+float32 in ``[0, 1]``; display images are uint8 (what :class:`pyqtgraph.ImageItem` shows with fixed
+levels ``(0, 255)``); ticks are stream readout indices.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spikeview.cfa import SITE_NAMES, flip_cfa, parse_cfa, site_masks
+from spikeview.errors import ParameterError, SpikeviewError
+from spikeview.io.source import ArraySource, SpikeSource, StreamInfo
+
+from spikeview.gui.model import OpenedStream
+
+# ------------------------------------------------------------------------------------ sources
+
+
+class LockedSource(SpikeSource):
+    """A :class:`SpikeSource` whose reads are serialised by a lock.
+
+    The preview worker, the guided worker and the exporter read the same source from different
+    threads; file readers keep a file position, so reads must not interleave.
+    """
+
+    def __init__(self, inner: SpikeSource):
+        self.inner = inner
+        self.info = inner.info
+        self._lock = threading.Lock()
+
+    def _read(self, a: int, b: int) -> np.ndarray:
+        with self._lock:
+            return self.inner.read(a, b)
+
+    def count(self, a: int, b: int) -> np.ndarray:
+        with self._lock:
+            return self.inner.count(a, b)
+
+    def close(self) -> None:
+        with self._lock:
+            self.inner.close()
+
+
+class ViewSource(SpikeSource):
+    """Another reading of a source: its frames flipped vertically and/or a different CFA name.
+
+    Used to re-interpret a stream that cannot be re-opened from a file (the simulated demo). The
+    CFA names the top-left 2×2 of what :meth:`read` returns, as everywhere.
+    """
+
+    def __init__(self, inner: SpikeSource, cfa: str | None, flip_vertical: bool):
+        self.inner = inner
+        self.flip = bool(flip_vertical)
+        self.info = inner.info.replace(cfa=parse_cfa(cfa), flip_vertical=self.flip)
+
+    def _read(self, a: int, b: int) -> np.ndarray:
+        out = self.inner.read(a, b)
+        return np.ascontiguousarray(out[:, ::-1]) if self.flip else out
+
+    def count(self, a: int, b: int) -> np.ndarray:
+        out = self.inner.count(a, b)
+        return np.ascontiguousarray(out[::-1]) if self.flip else out
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+def memory_stream(base: SpikeSource, label: str, ground_truth: Callable[[int], np.ndarray] | None = None,
+                  cfa: str | None = None, flip_vertical: bool = False, *, _use_cfa: bool = False) -> OpenedStream:
+    """An :class:`OpenedStream` over an in-memory source that re-interprets without copying."""
+    cfa = cfa if _use_cfa else base.cfa
+    view: SpikeSource = ViewSource(base, cfa, flip_vertical) if (flip_vertical or cfa != base.cfa) else base
+    gt = ground_truth
+    if gt is not None and flip_vertical:
+        def gt(tick: int, _g=ground_truth) -> np.ndarray:  # the ground truth follows the flip
+            return np.ascontiguousarray(_g(tick)[::-1])
+
+    def reopen(**settings: Any) -> OpenedStream:
+        fv = bool(settings.get("flip_vertical", flip_vertical))
+        if "cfa" in settings:
+            new_cfa = parse_cfa(settings["cfa"])
+        else:  # flipping alone keeps the physical filter: its name follows the flip
+            new_cfa = flip_cfa(cfa, base.height, base.width, vertical=fv != flip_vertical)
+        return memory_stream(base, label, ground_truth, new_cfa, fv, _use_cfa=True)
+
+    return OpenedStream(source=LockedSource(view), label=label, reopen=reopen, ground_truth=gt,
+                        open_kwargs={"cfa": cfa or "none", "flip_vertical": flip_vertical})
+
+
+#: size of the built-in demo capture (square): simulates in about a second (spikeview.sim.demo)
+DEMO_SIZE = 256
+DEMO_TICKS = 1000
+
+
+def demo_stream(size: int = DEMO_SIZE, n_ticks: int = DEMO_TICKS) -> OpenedStream:
+    """The built-in demo capture (simulated, with motion and colour, ground truth known)."""
+    try:
+        from spikeview.sim.demo import demo_capture
+    except ImportError:  # the simulator is being written: a stand-in with the same interface
+        from spikeview.gui._fallback import demo_capture
+
+    cap = demo_capture(size=size, n_ticks=n_ticks)
+    return memory_stream(cap, "demo capture", cap.gt_at)
+
+
+def open_file(path: str | Path, **kwargs: Any) -> OpenedStream:
+    """Open a capture with :func:`spikeview.io.open_source` (sidecar, detection, or ``kwargs``).
+
+    Raises :class:`~spikeview.errors.GeometryError` (with ``candidates``) when the geometry is
+    unknown, and other :class:`~spikeview.errors.SpikeviewError` for bad files.
+    """
+    open_source = _open_source()
+    path = Path(path)
+    kwargs = {k: v for k, v in kwargs.items() if v is not None}
+    src = open_source(path, **kwargs)
+    info = src.info
+
+    def reopen(**settings: Any) -> OpenedStream:
+        merged = {**kwargs, "width": info.width, "height": info.height, "format": info.format, **settings}
+        if "flip_vertical" in settings and "cfa" not in settings and info.cfa is not None:
+            # a flip re-reads the same photosites upside down: keep the physical CFA
+            merged["cfa"] = flip_cfa(info.cfa, info.height, info.width, vertical=settings["flip_vertical"] != info.flip_vertical)
+        return open_file(path, **merged)
+
+    gt = None
+    open_kwargs = {**kwargs, "width": info.width, "height": info.height, "format": info.format,
+                   "cfa": info.cfa or "none", "flip_vertical": info.flip_vertical}
+    return OpenedStream(source=LockedSource(src), label=path.name, path=path, reopen=reopen, ground_truth=gt,
+                        open_kwargs=open_kwargs)
+
+
+def _open_source() -> Callable[..., SpikeSource]:
+    try:
+        from spikeview.io import open_source
+    except ImportError:  # the readers are being written: a stand-in with the same interface
+        from spikeview.gui._fallback import open_source
+    return open_source
+
+
+def geometry_candidates(path: str | Path) -> list[tuple[int, int]]:
+    """``(width, height)`` pairs that fit a plain file's size (known camera sizes first)."""
+    from spikeview.errors import GeometryError
+
+    try:
+        _open_source()(Path(path))
+    except GeometryError as e:
+        return list(e.candidates)
+    except SpikeviewError:
+        return []
+    return []
+
+
+# ------------------------------------------------------------------------------ classical
+def window_range(tick: int, window: int, n_frames: int) -> tuple[int, int]:
+    """Ticks ``[a, b)`` of the window around ``tick`` (the core's rule; window capped at the stream)."""
+    from spikeview.classical.windows import window_range as wr
+
+    return wr(int(tick), int(min(window, n_frames)), int(n_frames))
+
+
+def display_gamma(params: dict[str, Any]) -> str | float:
+    """The ``gamma`` argument of :func:`spikeview.classical.to_display` for the session's curve."""
+    t = params["transfer"]
+    return "srgb" if t == "srgb" else (1.0 if t == "linear" else 1.0 / float(params["gamma"]))
+
+
+def to_display(img: np.ndarray, black: float = 0.0, white: float = 1.0, gamma: str | float = 1.0) -> np.ndarray:
+    """Fixed levels → uint8 (:func:`spikeview.classical.to_display`; never auto-levels)."""
+    from spikeview.classical.display import to_display as td
+
+    return td(img, black, white, gamma)
+
+
+def show(img: np.ndarray, params: dict[str, Any]) -> np.ndarray:
+    """A float scene image → uint8 with the session's display levels and curve."""
+    return to_display(img, params["black"], max(params["white"], params["black"] + 1e-3), display_gamma(params))
+
+
+def signed_display(img: np.ndarray, scale: float) -> np.ndarray:
+    """Signed image → uint8 with 0 at mid-gray and ``±scale`` at black/white (linear)."""
+    s = max(float(scale), 1e-6)
+    return to_display(np.asarray(img, dtype=np.float32) / np.float32(2 * s) + np.float32(0.5), 0.0, 1.0, 1.0)
+
+
+def alpha_note(means: np.ndarray) -> tuple[np.ndarray, str | None]:
+    """Gray-world α from channel means, with the core's zero-mean rule but no warning.
+
+    :func:`spikeview.classical.alpha_from_means` warns (a ``ColourCastWarning``) when a channel is
+    dark; warnings are process-global and the app computes this in worker threads, so the same
+    fallback is applied here and the sentence is returned for the status bar instead.
+    """
+    from spikeview.classical.colour_cast import alpha_from_means
+
+    m = np.asarray(means, dtype=np.float64).reshape(-1)
+    valid = np.isfinite(m) & (m > 0)
+    if valid.all():
+        return alpha_from_means(m), None
+    fill = 1.0 / float(m[valid].mean()) if valid.any() else 1.0
+    alpha = np.where(valid, 1.0 / np.where(valid, m, 1.0), fill).astype(np.float32)
+    names = "RGB" if m.size == 3 else "Y" * m.size
+    bad = ", ".join(names[i] for i in np.flatnonzero(~valid))
+    return alpha, f"Colour cast: channel {bad} has no spikes, so its gray-world gain is undefined; using alpha = {fill:.4g}."
+
+
+def sequence_alpha(source: SpikeSource, window: int = 10, max_windows: int = 64) -> tuple[np.ndarray, str | None]:
+    """Gray-world α of the whole sequence (the sampling of :func:`spikeview.classical.estimate_alpha`)."""
+    from spikeview.classical.colour_cast import _channel_means_from_sums, _site_sums, sample_starts
+    from spikeview.classical.tfp import window_counts
+
+    window = max(1, min(int(window), source.n_frames))
+    total = np.zeros((source.height, source.width), dtype=np.uint64)
+    ticks = 0
+    for s0 in sample_starts(source.n_frames, window, max_windows):
+        e = min(s0 + window, source.n_frames)
+        total += window_counts(source, s0, e)
+        ticks += e - s0
+    sums = {k: (v / ticks, n) for k, (v, n) in _site_sums(total, source.cfa).items()}
+    return alpha_note(_channel_means_from_sums(sums, source.cfa))
+
+
+# ----------------------------------------------------------------------------- stream frames
+
+
+@dataclass
+class StreamFrames:
+    """The three Stream-panel images of one window (uint8, ready to show)."""
+
+    tick: int
+    a: int
+    b: int
+    raw: np.ndarray  # (H, W) uint8 0/255: spikes of the centre tick
+    tfp: np.ndarray  # (H, W, 3) uint8: demosaicked, colour-corrected TFP with the display levels
+    tfi: np.ndarray | None  # (H, W, 3) uint8 TFI, None when not computed
+    spike_rate: float  # mean SFR of the window (spikes per photosite per tick)
+    mosaic: np.ndarray  # (H, W) float32 TFP SFR (what the rates panel and the physics see)
+
+
+def stream_frames(source: SpikeSource, tick: int, params: dict[str, Any], alpha: np.ndarray | None,
+                  want_tfi: bool = True) -> StreamFrames:
+    """Raw spikes at ``tick``, TFP and TFI previews of the window around it.
+
+    One read covers the TFP window and the TFI search span, so a frame costs one source access;
+    the TFP image is :func:`spikeview.classical.preview_rgb` (the core's fast path) on that block.
+    """
+    from spikeview.classical.reconstruct import preview_rgb
+    from spikeview.classical.tfi import tfi_array
+
+    n = source.n_frames
+    window = int(min(params["window"], n))
+    a, b = window_range(tick, window, n)
+    hw = int(params["tfi_half_window"])
+    lo, hi = (min(a, max(0, tick - hw)), max(b, min(n, tick + hw + 1))) if want_tfi else (a, b)
+    block = source.read(lo, hi)
+    raw = block[tick - lo] * np.uint8(255)
+    cfa = source.cfa
+    sub = ArraySource(block, info=StreamInfo(width=source.width, height=source.height, n_frames=hi - lo,
+                                             tick_rate=source.tick_rate, cfa=cfa))
+    use_cast = bool(params["colour_cast"]) and cfa is not None
+    if use_cast and alpha is None:
+        alpha = alpha_note(_channel_means(block[a - lo:b - lo], cfa))[0]
+    levels = dict(black=params["black"], white=max(params["white"], params["black"] + 1e-3), gamma=display_gamma(params))
+    tfp_img = preview_rgb(sub, tick - lo, window, alpha=alpha, colour_cast=use_cast, eta=params["eta"],
+                          demosaic_method=params["demosaic"], **levels)
+    sfr = block[a - lo:b - lo].sum(axis=0, dtype=np.uint16).astype(np.float32) * np.float32(1.0 / (b - a))
+    tfi_img = None
+    if want_tfi:
+        tfi_img = _colour_frame(tfi_array(block, tick - lo, hw), cfa, params, alpha if use_cast else None)
+    return StreamFrames(tick=tick, a=a, b=b, raw=raw, tfp=tfp_img, tfi=tfi_img,
+                        spike_rate=float(sfr.mean()), mosaic=sfr)
+
+
+def _channel_means(block: np.ndarray, cfa: str | None) -> np.ndarray:
+    from spikeview.classical.colour_cast import channel_means as cm
+
+    return cm(block.mean(axis=0, dtype=np.float32), cfa)
+
+
+def _colour_frame(mosaic: np.ndarray, cfa: str | None, params: dict[str, Any], alpha: np.ndarray | None) -> np.ndarray:
+    """Mosaicked rate → corrected, demosaicked uint8 RGB (the pipeline of ``reconstruct_frame``)."""
+    from spikeview.classical.colour_cast import apply_colour_cast_mosaic
+    from spikeview.classical.demosaic import demosaic
+
+    if cfa is None:
+        img = show(mosaic, params)
+        return np.repeat(img[..., None], 3, axis=-1)
+    if alpha is not None:
+        mosaic = apply_colour_cast_mosaic(mosaic, cfa, alpha, params["eta"])
+    return show(demosaic(mosaic, cfa, params["demosaic"]), params)
+
+
+def classical_config(params: dict[str, Any], method: str = "tfp"):
+    """The :class:`spikeview.classical.ClassicalConfig` of the session's parameters."""
+    from spikeview.classical.reconstruct import ClassicalConfig
+
+    return ClassicalConfig(method=method, window=int(params["window"]), tfi_half_window=int(params["tfi_half_window"]),
+                           demosaic=params["demosaic"], colour_cast=bool(params["colour_cast"]), eta=float(params["eta"]))
+
+
+def reconstruct_classical(source: SpikeSource, tick: int, method: str, params: dict[str, Any],
+                          alpha: np.ndarray | None) -> np.ndarray:
+    """Classical frame (:func:`spikeview.classical.reconstruct_frame`): float32 ``(H, W, 3)`` or ``(H, W)`` in [0, 1]."""
+    from spikeview.classical.reconstruct import reconstruct_frame
+
+    cfg = classical_config(params, method)
+    if cfg.colour_cast and source.cfa is not None and alpha is None:
+        alpha = sequence_alpha(source, cfg.window)[0]
+    return reconstruct_frame(source, int(tick), cfg, alpha=alpha)
+
+
+# ----------------------------------------------------------------------------- firing rates
+
+
+@dataclass
+class RatesResult:
+    """Per-site SFR histograms and gray-world α of one window (or its ROI)."""
+
+    tick: int
+    edges: np.ndarray  # (n_bins + 1,) SFR bin edges
+    hists: dict[str, np.ndarray]  # site name → (n_bins,) fraction of photosites per bin
+    means: dict[str, float]  # site name → mean SFR
+    alpha: np.ndarray  # (3,) gray-world α of this window (R, G, B), (1,) for monochrome
+
+
+def site_rates(sfr: np.ndarray, cfa: str | None, window: int, roi: tuple[int, int, int, int] | None = None,
+               tick: int = 0) -> RatesResult:
+    """Histograms of the SFR per Bayer site (``R``, ``Gr``, ``Gb``, ``B``; ``all`` for mono).
+
+    The bins are the TFP levels ``{0, 1/Δτ, …, 1}`` (one bin per level) so a histogram shows the
+    quantisation exactly. An ROI keeps the CFA phase: site masks are taken on the full frame.
+    """
+    n_levels = int(window) + 1 if window <= 64 else 65
+    edges = np.linspace(-0.5 / (n_levels - 1), 1 + 0.5 / (n_levels - 1), n_levels + 1)
+    if cfa is None:
+        masks = {"all": np.ones(sfr.shape, bool)}
+    else:
+        masks = site_masks(cfa, *sfr.shape)
+    if roi is not None:
+        x, y, w, h = roi
+        sel = np.zeros(sfr.shape, bool)
+        sel[y:y + h, x:x + w] = True
+        masks = {k: m & sel for k, m in masks.items()}
+    hists, means = {}, {}
+    for name, m in masks.items():
+        vals = sfr[m]
+        hist, _ = np.histogram(vals, bins=edges)
+        hists[name] = hist.astype(np.float64) / max(vals.size, 1)
+        means[name] = float(vals.mean()) if vals.size else 0.0
+    if cfa is None:
+        ch = np.array([means["all"]])
+    else:
+        ngr, ngb = int(masks["Gr"].sum()), int(masks["Gb"].sum())
+        g = (means["Gr"] * ngr + means["Gb"] * ngb) / max(ngr + ngb, 1)
+        ch = np.array([means["R"], g, means["B"]])
+    return RatesResult(tick=tick, edges=edges, hists=hists, means=means, alpha=alpha_note(ch)[0])
+
+
+SITE_ORDER = SITE_NAMES
+
+# ----------------------------------------------------------------------------- degradation
+
+
+@dataclass
+class DegradationResult:
+    """The forward model applied operator by operator to the current reconstruction X.
+
+    Images are uint8 ready to show: ``x`` (X, RGB), ``mx`` (M X), ``cmx`` (C M X), ``qcmx`` (Q(C M X)),
+    ``y`` (the observed mosaicked TFP), ``residual`` (Y − Q(C M X), mid-gray = 0) and, when asked,
+    ``bands`` (the residual's Laplacian pyramid, finest first). ``rmse`` is the residual's RMS.
+    """
+
+    images: dict[str, np.ndarray]
+    bands: list[np.ndarray] = field(default_factory=list)
+    rmse: float = 0.0
+    residual_scale: float = 0.0
+
+
+#: fixed display range of the residual images (no per-frame scaling): ±0.5 SFR
+RESIDUAL_RANGE = 0.5
+
+
+def degradation_chain(x_img: np.ndarray, y_mosaic: np.ndarray, cfa: str | None, window: int, k: float, eta: float,
+                      alpha: np.ndarray | None, levels: int, show_pyramid: bool, display: dict[str, Any]) -> DegradationResult:
+    """Apply ``M``, ``C``, ``Q`` of :mod:`spikeview.ops` to ``x_img`` and compare with ``y_mosaic``.
+
+    Args:
+        x_img: ``(H, W, 3)`` (or ``(H, W)`` mono) float32 in [0, 1], the current reconstruction.
+        y_mosaic: ``(H, W)`` float32 observed TFP SFR (values ``{0, 1/Δτ, …, 1}``).
+        cfa: Bayer CFA of both; monochrome skips M and C (as the scene plan does).
+        window: Δτ in ticks (the quantiser's levels ``{0, 1/Δτ, …, 1}``); k: Q's sharpness.
+        eta, alpha: C scales channel c by ``η / α_c`` (``alpha`` ``None``: C skipped).
+        levels: Laplacian levels of the per-level residual (0 = none); ``show_pyramid`` computes them.
+        display: the session's display parameters for the scene-side images.
+
+    Sensor-side images (M X onwards, Y, residual) are shown in gray, linear 0..1 through the sRGB
+    curve, so the checkerboard of the mosaic stays visible; the residual maps ±0.5 to black/white.
+    """
+    import torch
+
+    from spikeview.ops.cast import colour_cast
+    from spikeview.ops.mosaic import mosaic
+    from spikeview.ops.quantise import soft_quantise
+
+    with torch.no_grad():
+        if x_img.ndim == 2 or cfa is None:
+            x1 = x_img if x_img.ndim == 2 else x_img.mean(axis=-1)
+            x = torch.from_numpy(np.ascontiguousarray(x1, dtype=np.float32))[None, None]
+            mx = x
+            cmx = x * (float(eta) / float(alpha[0])) if alpha is not None else x
+        else:
+            x = torch.from_numpy(np.ascontiguousarray(x_img.transpose(2, 0, 1), dtype=np.float32))[None]
+            mx = mosaic(x, cfa)  # (1, 1, H, W)
+            cx = colour_cast(x, tuple(float(a) for a in alpha), eta) if alpha is not None else x
+            cmx = mosaic(cx, cfa)
+        q = soft_quantise(cmx, levels=int(window), k=float(k))
+        y = torch.from_numpy(np.ascontiguousarray(y_mosaic, dtype=np.float32))[None, None]
+        res = y - q
+        rmse = float(torch.sqrt(torch.mean(res * res)))
+        bands_np: list[np.ndarray] = []
+        if show_pyramid and levels > 0:
+            from spikeview.ops.pyramid import laplacian_pyramid, max_pyramid_levels
+
+            n_lev = min(int(levels), max_pyramid_levels(*y_mosaic.shape))
+            if n_lev > 0:
+                bands_np = [t[0, 0].numpy() for t in laplacian_pyramid(res, n_lev)]
+    sensor = dict(black=0.0, white=1.0, gamma="srgb")
+    images = {
+        "x": show(x_img, display),
+        "mx": show(mx[0, 0].numpy(), display),
+        "cmx": to_display(cmx[0, 0].numpy(), **sensor),
+        "qcmx": to_display(q[0, 0].numpy(), **sensor),
+        "y": to_display(y_mosaic, **sensor),
+        "residual": signed_display(res[0, 0].numpy(), RESIDUAL_RANGE),
+    }
+    bands = [signed_display(bnd, RESIDUAL_RANGE / 2) for bnd in bands_np]
+    return DegradationResult(images=images, bands=bands, rmse=rmse, residual_scale=RESIDUAL_RANGE)
+
+
+# ------------------------------------------------------------------------------- metrics
+
+
+def psnr_ssim(x: np.ndarray, gt: np.ndarray) -> tuple[float, float]:
+    """PSNR (dB) and SSIM of ``x`` against ``gt``, both float in [0, 1] (``data_range=1``)."""
+    from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+
+    x = np.clip(np.asarray(x, dtype=np.float64), 0, 1)
+    gt = np.clip(np.asarray(gt, dtype=np.float64), 0, 1)
+    if x.shape != gt.shape:
+        raise ParameterError(f"reconstruction shape {x.shape} differs from ground truth {gt.shape}.")
+    mse = float(np.mean((x - gt) ** 2))
+    psnr = 100.0 if mse == 0 else float(peak_signal_noise_ratio(gt, x, data_range=1.0))
+    win = min(7, min(x.shape[:2]) // 2 * 2 - 1)
+    ssim = float(structural_similarity(gt, x, data_range=1.0, channel_axis=-1 if x.ndim == 3 else None,
+                                       win_size=max(win, 3)))
+    return psnr, ssim
+
+
+def crop_roi(img: np.ndarray, roi: tuple[int, int, int, int] | None, even: bool = True) -> tuple[np.ndarray, tuple[int, int]]:
+    """Crop ``img`` to ``roi`` (origin rounded down to even pixels to keep the CFA phase)."""
+    if roi is None:
+        return img, (0, 0)
+    x, y, w, h = roi
+    if even:
+        x, y = x - x % 2, y - y % 2
+    return img[y:y + h, x:x + w], (x, y)
+
+
+def fmt_rate(v: float) -> str:
+    return "—" if not math.isfinite(v) else f"{v:.3f}"

@@ -1,0 +1,584 @@
+"""The main window: dockable panels over one session, menus, shortcuts, status bar, settings.
+
+Ownership: the window owns a :class:`~spikeview.gui.model.Session` (the state), a
+:class:`~spikeview.gui.controller.Controller` (jobs and playback) and the five panels (views).
+Opening files goes through a loader worker so a slow file or the demo simulation never blocks
+the window. Everything the user sets is remembered in :class:`QtCore.QSettings` (layout, last
+folder, recent files, last parameters), written as soon as it changes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from spikeview.errors import GeometryError, SpikeviewError
+from spikeview.gui import core
+from spikeview.gui.controller import Controller
+from spikeview.gui.dialogs import ShortcutsDialog, StreamSettingsDialog, app_icon
+from spikeview.gui.model import OpenedStream, Session, format_us
+from spikeview.gui.panels.degradation import DegradationPanel
+from spikeview.gui.panels.export import ExportPanel
+from spikeview.gui.panels.guided import GuidedPanel
+from spikeview.gui.panels.rates import RatesPanel
+from spikeview.gui.panels.stream import StreamPanel
+from spikeview.gui.workers import Worker
+
+MAX_RECENT = 10
+#: bump when the dock layout changes incompatibly (older saved states are ignored)
+LAYOUT_VERSION = 1
+#: file suffixes offered by File ▸ Open
+CAPTURE_FILTER = "Spike captures (*.dat *.bin *.raw *.npy *.npz);;All files (*)"
+
+
+class NotificationBar(QtWidgets.QFrame):
+    """A slim, non-modal message strip with optional action buttons (errors, finished exports)."""
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None):
+        super().__init__(parent)
+        self.setObjectName("notification")
+        self.setFrameShape(QtWidgets.QFrame.Shape.StyledPanel)
+        self.label = QtWidgets.QLabel()
+        self.label.setWordWrap(True)
+        self.label.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.buttons = QtWidgets.QHBoxLayout()
+        close = QtWidgets.QToolButton(text="✕")
+        close.setAutoRaise(True)
+        close.setToolTip("Dismiss")
+        close.clicked.connect(self.hide)
+        lay = QtWidgets.QHBoxLayout(self)
+        lay.setContentsMargins(8, 3, 4, 3)
+        lay.addWidget(self.label, 1)
+        lay.addLayout(self.buttons)
+        lay.addWidget(close)
+        self.hide()
+        self.kind = ""
+
+    def show_message(self, text: str, kind: str = "info", actions: list[tuple[str, Any]] | None = None) -> None:
+        while self.buttons.count():
+            w = self.buttons.takeAt(0).widget()
+            if w is not None:
+                w.deleteLater()
+        for text_, slot in actions or []:
+            b = QtWidgets.QPushButton(text_)
+            b.clicked.connect(slot)
+            self.buttons.addWidget(b)
+        colour = {"error": "#5a1f1f", "warning": "#574515", "info": "#1f3a57", "success": "#1f4a2a"}.get(kind, "#333")
+        self.setStyleSheet(f"#notification {{ background: {colour}; border-radius: 3px; }} QLabel {{ color: #f0f0f0; }}")
+        self.label.setText(text)
+        self.kind = kind
+        self.show()
+
+    def text(self) -> str:
+        return self.label.text() if self.isVisible() else ""
+
+
+class MainWindow(QtWidgets.QMainWindow):
+    """The spikeview desktop window (see module docstring)."""
+
+    stream_opened = QtCore.Signal(object)
+
+    def __init__(self, settings: QtCore.QSettings | None = None, session: Session | None = None):
+        super().__init__()
+        self.setObjectName("spikeview_main")
+        self.setWindowTitle("spikeview")
+        self.setWindowIcon(app_icon())
+        self.setAcceptDrops(True)
+        self.settings = settings if settings is not None else QtCore.QSettings("spikeview", "spikeview")
+        self.session = session if session is not None else Session()
+        self._restore_params()
+        self.controller = Controller(self.session, self)
+        self.loader = Worker("spikeview-loader", parent=self)
+        self.loader.finished.connect(self._on_loaded)
+        self.loader.failed.connect(self._on_load_failed)
+        self.settings_dialog: StreamSettingsDialog | None = None
+        self._closing = False
+
+        # --- panels in docks
+        s = self.session
+        self.stream_panel = StreamPanel(s)
+        self.rates_panel = RatesPanel(s)
+        self.degradation_panel = DegradationPanel(s)
+        self.guided_panel = GuidedPanel(s)
+        self.export_panel = ExportPanel(s)
+        self.docks: dict[str, QtWidgets.QDockWidget] = {}
+        for key, title, panel in (("stream", "Stream", self.stream_panel), ("rates", "Firing rates and colour cast", self.rates_panel),
+                                  ("degradation", "Degradation preview", self.degradation_panel),
+                                  ("guided", "Guided reconstruction", self.guided_panel), ("export", "Export", self.export_panel)):
+            dock = QtWidgets.QDockWidget(title, self)
+            dock.setObjectName(f"dock_{key}")
+            dock.setWidget(panel)
+            dock.setFeatures(QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetMovable
+                             | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetFloatable
+                             | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetClosable)
+            self.docks[key] = dock
+        placeholder = QtWidgets.QWidget()
+        placeholder.setObjectName("central_placeholder")
+        placeholder.setMaximumSize(0, 0)
+        self.setCentralWidget(placeholder)
+        self.setDockNestingEnabled(True)
+        self.default_layout()
+        self.notice = NotificationBar()
+        bar = QtWidgets.QToolBar("Notifications")
+        bar.setObjectName("notification_bar")
+        bar.setMovable(False)
+        bar.setFloatable(False)
+        bar.addWidget(self.notice)
+        bar.toggleViewAction().setVisible(False)
+        self.addToolBar(QtCore.Qt.ToolBarArea.BottomToolBarArea, bar)
+
+        # --- status bar
+        sb = self.statusBar()
+        self.time_status = QtWidgets.QLabel(objectName="status_time")
+        self.rate_status = QtWidgets.QLabel(objectName="status_rate")
+        self.fps_status = QtWidgets.QLabel(objectName="status_fps")
+        for w in (self.time_status, self.rate_status, self.fps_status):
+            w.setFont(QtGui.QFontDatabase.systemFont(QtGui.QFontDatabase.SystemFont.FixedFont))
+            sb.addPermanentWidget(w)
+        self.fps_timer = QtCore.QTimer(self, interval=500)
+        self.fps_timer.timeout.connect(self._update_fps)
+        self.fps_timer.start()
+
+        self._make_actions()
+        self._connect()
+        self._restore_layout()
+        self.export_panel.set_folder(self.settings.value("last_export_dir", "", str) or None)
+        self._params_timer = QtCore.QTimer(self, singleShot=True, interval=500)
+        self._params_timer.timeout.connect(self._save_params)
+
+    # ------------------------------------------------------------------------------ layout
+    def default_layout(self) -> None:
+        d = self.docks
+        for dock in d.values():
+            dock.setFloating(False)
+            dock.show()
+        self.addDockWidget(QtCore.Qt.DockWidgetArea.LeftDockWidgetArea, d["stream"])
+        self.splitDockWidget(d["stream"], d["degradation"], QtCore.Qt.Orientation.Vertical)
+        self.addDockWidget(QtCore.Qt.DockWidgetArea.RightDockWidgetArea, d["guided"])
+        self.splitDockWidget(d["guided"], d["rates"], QtCore.Qt.Orientation.Horizontal)
+        self.splitDockWidget(d["rates"], d["export"], QtCore.Qt.Orientation.Vertical)
+        self.resizeDocks([d["stream"], d["guided"], d["rates"]], [820, 440, 420], QtCore.Qt.Orientation.Horizontal)
+        self.resizeDocks([d["stream"], d["degradation"]], [520, 430], QtCore.Qt.Orientation.Vertical)
+        self.resizeDocks([d["rates"], d["export"]], [620, 330], QtCore.Qt.Orientation.Vertical)
+
+    def _restore_layout(self) -> None:
+        geo = self.settings.value("window/geometry")
+        state = self.settings.value("window/state")
+        if int(self.settings.value("window/layout_version", 0, int)) != LAYOUT_VERSION:
+            state = None
+        if isinstance(geo, QtCore.QByteArray):
+            self.restoreGeometry(geo)
+        else:
+            self.resize(1700, 1000)
+        if isinstance(state, QtCore.QByteArray):
+            self.restoreState(state)
+
+    # ------------------------------------------------------------------------------ actions
+    def _action(self, menu: QtWidgets.QMenu, text: str, slot: Any, shortcut: Any = None, tip: str = "",
+                checkable: bool = False, name: str | None = None) -> QtGui.QAction:
+        act = QtGui.QAction(text, self)
+        if shortcut is not None:
+            if isinstance(shortcut, (list, tuple)):
+                act.setShortcuts([QtGui.QKeySequence(k) for k in shortcut])
+            else:
+                act.setShortcut(QtGui.QKeySequence(shortcut))
+        act.setStatusTip(tip)
+        act.setCheckable(checkable)
+        if name:
+            act.setObjectName(name)
+        (act.toggled if checkable else act.triggered).connect(slot)
+        menu.addAction(act)
+        self.addAction(act)  # shortcuts work even when the menu bar is hidden
+        return act
+
+    def _make_actions(self) -> None:
+        mb = self.menuBar()
+        K = QtGui.QKeySequence.StandardKey
+        s = self.session
+        f = mb.addMenu("&File")
+        self.act_open = self._action(f, "&Open…", self.open_dialog, K.Open, "Open a spike capture", name="act_open")
+        self._action(f, "Open the &demo capture", lambda: self.open_demo(), tip="The built-in simulated capture")
+        self.recent_menu = f.addMenu("Open &recent")
+        self._action(f, "Stream &settings (CFA, flip)…", self.stream_settings, "Ctrl+Shift+G", "Re-interpret the open capture")
+        f.addSeparator()
+        self._action(f, "&Load preset…", self.load_preset_dialog, "Ctrl+L", "Load parameters from a TOML preset")
+        self._action(f, "&Save preset…", self.save_preset_dialog, K.Save, "Save the parameters as a TOML preset")
+        f.addSeparator()
+        self.act_export = self._action(f, "&Export", self.export_now, "Ctrl+E", "Export with the Export panel's settings", name="act_export")
+        f.addSeparator()
+        self._action(f, "&Quit", self.close, K.Quit)
+
+        e = mb.addMenu("&Edit")
+        self.act_undo = self._action(e, "&Undo", lambda: s.undo(), K.Undo, name="act_undo")
+        self.act_redo = self._action(e, "&Redo", lambda: s.redo(), ["Ctrl+Shift+Z", "Ctrl+Y"], name="act_redo")
+        self.act_undo.setEnabled(False)
+        self.act_redo.setEnabled(False)
+        e.addSeparator()
+        self._action(e, "Reset parameters to defaults", self.reset_params)
+
+        p = mb.addMenu("&Playback")
+        self.act_play = self._action(p, "&Play / pause", lambda: s.toggle_playing(), "Space", name="act_play")
+        self._action(p, "Step &back one tick", lambda: s.step(-1), "Left", name="act_back")
+        self._action(p, "Step &forward one tick", lambda: s.step(1), "Right", name="act_fwd")
+        self._action(p, "Back one window", lambda: s.step(-int(s.get("window"))), "Shift+Left")
+        self._action(p, "Forward one window", lambda: s.step(int(s.get("window"))), "Shift+Right")
+        self._action(p, "First tick of the range", lambda: s.go_start(), "Home", name="act_home")
+        self._action(p, "Last tick of the range", lambda: s.go_end(), "End", name="act_end")
+        p.addSeparator()
+        self._action(p, "Mark &in", lambda: s.set_mark_in(), "I")
+        self._action(p, "Mark &out", lambda: s.set_mark_out(), "O")
+        self._action(p, "Clear marks", lambda: s.clear_marks())
+        self._action(p, "&Loop", lambda: s.set("loop", not s.get("loop")), "L")
+
+        g = mb.addMenu("&Guided")
+        self._action(g, "&Run", self.controller.run_guided, "Ctrl+R", name="act_run")
+        self._action(g, "&Cancel", self.controller.cancel_guided, "Escape", name="act_cancel")
+
+        v = mb.addMenu("&View")
+        for dock in self.docks.values():
+            v.addAction(dock.toggleViewAction())
+        v.addSeparator()
+        self._action(v, "Reset layout", self.default_layout)
+
+        h = mb.addMenu("&Help")
+        self._action(h, "&Keyboard shortcuts", self.show_help, "F1", name="act_help")
+        self._action(h, "&About spikeview", self.about)
+        self._rebuild_recent()
+
+    def _connect(self) -> None:
+        c, s = self.controller, self.session
+        c.frames_ready.connect(self._on_frames)
+        c.rates_ready.connect(self.rates_panel.show_rates)
+        c.alpha_history.connect(self.rates_panel.show_alpha_history)
+        c.alpha_ready.connect(self.rates_panel.show_sequence_alpha)
+        c.degradation_ready.connect(self.degradation_panel.show_result)
+        c.guided_update.connect(self.guided_panel.show_update)
+        c.guided_done.connect(self.guided_panel.show_result)
+        c.guided_state.connect(self.guided_panel.set_state)
+        c.guided_state.connect(self._on_guided_state)
+        c.export_progress.connect(self.export_panel.set_progress)
+        c.export_state.connect(self.export_panel.set_state)
+        c.export_done.connect(self._on_export_done)
+        c.error.connect(self.show_error)
+        self.guided_panel.run_requested.connect(c.run_guided)
+        self.guided_panel.cancel_requested.connect(c.cancel_guided)
+        self.guided_panel.live_toggled.connect(lambda v: setattr(c, "guided_live", bool(v)))
+        self.export_panel.export_requested.connect(self.export_to)
+        self.export_panel.cancel_requested.connect(c.cancel_export)
+        self.stream_panel.tfi_check.toggled.connect(lambda v: c.set_enabled("tfi", v))
+        for key, what in (("rates", "rates"), ("degradation", "degradation")):
+            self.docks[key].visibilityChanged.connect(lambda vis, w=what: c.set_enabled(w, vis) if not self._closing else None)
+        ev = s.events
+        self._session_links = [(ev.tick_changed, self._on_tick), (ev.undo_changed, self._on_undo_changed),
+                               (ev.param_changed, self._on_param), (ev.message, self._on_message),
+                               (ev.source_changed, self._on_source)]
+        for event, cb in self._session_links:
+            event.connect(cb)
+
+    # ------------------------------------------------------------------------------ opening
+    def open_demo(self, size: int = core.DEMO_SIZE, n_ticks: int = core.DEMO_TICKS) -> None:
+        """Simulate and open the built-in demo capture (in the background)."""
+        self.statusBar().showMessage("Simulating the demo capture…")
+        self.loader.submit("open", lambda ctx: ("ok", core.demo_stream(size, n_ticks), None))
+
+    def open_path(self, path: str | os.PathLike[str], **kwargs: Any) -> None:
+        """Open a capture: its sidecar/detection, the given settings, or ask with a live preview."""
+        path = Path(path)
+        if path.suffix.lower() == ".toml":
+            self.load_preset(path)
+            return
+        self.statusBar().showMessage(f"Opening {path.name}…")
+
+        def job(ctx: Any) -> tuple[str, Any, Any]:
+            try:
+                return ("ok", core.open_file(path, **kwargs), None)
+            except GeometryError as e:
+                return ("geometry", path, e)
+
+        self.loader.submit("open", job)
+
+    def _on_loaded(self, channel: str, job_id: int, result: Any) -> None:
+        if not self.loader.is_current(channel, job_id) or self._closing:
+            if isinstance(result, tuple) and result[0] == "ok" and result[1].path is not None:
+                result[1].source.close()
+            return
+        kind, payload, err = result
+        if kind == "geometry":
+            self.ask_stream_settings(payload, err)
+            return
+        self.set_stream(payload)
+
+    def _on_load_failed(self, channel: str, job_id: int, message: str) -> None:
+        self.statusBar().clearMessage()
+        self.show_error(message, dialog_title="Cannot open the capture")
+
+    def set_stream(self, stream: OpenedStream) -> None:
+        """Make ``stream`` the session's stream (closing the previous file)."""
+        old = self.session.stream
+        self.session.open_stream(stream)
+        if old is not None and old is not stream and old.path is not None and old.path != stream.path:
+            old.source.close()
+        if stream.path is not None:
+            self._add_recent(stream.path, stream.open_kwargs)
+            self.settings.setValue("last_dir", str(stream.path.parent))
+        warnings = list(getattr(stream.source.info, "warnings", []) or [])
+        msg = f"Opened {stream.label}: {stream.source.width}×{stream.source.height}, {stream.source.n_frames} ticks, CFA {stream.source.cfa or 'none'}."
+        self.statusBar().showMessage(msg, 8000)
+        if warnings:
+            self.notice.show_message(f"{stream.label}: " + " ".join(warnings), "warning")
+        self.stream_opened.emit(stream)
+
+    def ask_stream_settings(self, path: Path, err: GeometryError | None = None) -> StreamSettingsDialog:
+        """Show the settings dialog for a file that needs width/height/CFA (non-blocking)."""
+        initial = {"cfa": "RGGB", "flip_vertical": True}
+        cands = list(err.candidates) if err is not None else []
+        if cands:
+            initial.update(width=cands[0][0], height=cands[0][1])
+        msg = (f"{path.name} has no sidecar saying how to read it. Pick the size, the colour filter and the flip; "
+               "the preview updates as you go (wrong CFA or flip: wrong colours or unequal greens).")
+        if err is not None:
+            msg += f"\n{err}"
+        dlg = StreamSettingsDialog(f"Open {path.name}", lambda **kw: core.open_file(path, **kw), initial, cands, msg, parent=self)
+        dlg.accepted.connect(lambda: dlg.stream is not None and self.set_stream(dlg.stream))
+        dlg.finished.connect(lambda *_: setattr(self, "settings_dialog", None))
+        self.settings_dialog = dlg
+        self.statusBar().clearMessage()
+        dlg.open()
+        return dlg
+
+    def stream_settings(self) -> StreamSettingsDialog | None:
+        """Re-interpret the open stream (CFA, flip) with a live preview."""
+        st = self.session.stream
+        if st is None or st.reopen is None:
+            self.show_error("Open a capture first; its CFA and flip can then be changed here.")
+            return None
+        initial = dict(st.open_kwargs)
+        initial.setdefault("cfa", st.source.cfa or "none")
+        initial.setdefault("flip_vertical", st.source.info.flip_vertical)
+        dlg = StreamSettingsDialog(f"Stream settings — {st.label}", lambda **kw: st.reopen(**_only(kw, "cfa", "flip_vertical")),
+                                   initial, message="Change how the capture is interpreted; the preview shows the result.",
+                                   geometry=False, parent=self)
+        dlg.accepted.connect(lambda: dlg.stream is not None and self.session.open_stream(dlg.stream, keep_position=True))
+        dlg.finished.connect(lambda *_: setattr(self, "settings_dialog", None))
+        self.settings_dialog = dlg
+        dlg.open()
+        return dlg
+
+    def open_dialog(self) -> None:
+        start = self.settings.value("last_dir", str(Path.home()), str)
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Open a spike capture", start, CAPTURE_FILTER)
+        if path:
+            self.open_path(path)
+
+    # ------------------------------------------------------------------------------ recent files
+    def recent_files(self) -> list[dict[str, Any]]:
+        raw = self.settings.value("recent", "[]", str)
+        try:
+            items = json.loads(raw)
+        except (TypeError, ValueError):
+            return []
+        return [i for i in items if isinstance(i, dict) and "path" in i][:MAX_RECENT]
+
+    def _add_recent(self, path: Path, kwargs: dict[str, Any]) -> None:
+        items = [i for i in self.recent_files() if i["path"] != str(path)]
+        clean = {k: v for k, v in kwargs.items() if isinstance(v, (str, int, float, bool))}
+        items.insert(0, {"path": str(path), "kwargs": clean})
+        self.settings.setValue("recent", json.dumps(items[:MAX_RECENT]))
+        self._rebuild_recent()
+
+    def _rebuild_recent(self) -> None:
+        self.recent_menu.clear()
+        items = self.recent_files()
+        for item in items:
+            act = self.recent_menu.addAction(item["path"])
+            act.triggered.connect(lambda _=False, it=item: self._open_recent(it))
+        self.recent_menu.setEnabled(bool(items))
+
+    def _open_recent(self, item: dict[str, Any]) -> None:
+        p = Path(item["path"])
+        if not p.exists():
+            self.show_error(f"{p} no longer exists; it was removed from the recent files.")
+            self.settings.setValue("recent", json.dumps([i for i in self.recent_files() if i["path"] != item["path"]]))
+            self._rebuild_recent()
+            return
+        self.open_path(p, **item.get("kwargs", {}))
+
+    # ------------------------------------------------------------------------------ drag and drop
+    def dragEnterEvent(self, ev: QtGui.QDragEnterEvent) -> None:  # noqa: N802 - Qt override
+        if ev.mimeData().hasUrls() and any(u.isLocalFile() for u in ev.mimeData().urls()):
+            ev.acceptProposedAction()
+        else:
+            ev.ignore()
+
+    def dropEvent(self, ev: QtGui.QDropEvent) -> None:  # noqa: N802 - Qt override
+        files = [u.toLocalFile() for u in ev.mimeData().urls() if u.isLocalFile()]
+        if files:
+            ev.acceptProposedAction()
+            self.open_path(files[0])
+
+    # ------------------------------------------------------------------------------ presets
+    def load_preset(self, path: str | os.PathLike[str]) -> bool:
+        from spikeview.gui.presets import load_preset
+
+        try:
+            load_preset(self.session, path)
+        except SpikeviewError as e:
+            self.show_error(str(e), dialog_title="Cannot load the preset")
+            return False
+        self.settings.setValue("last_preset_dir", str(Path(path).parent))
+        self.statusBar().showMessage(f"Loaded preset {Path(path).name} (Ctrl+Z undoes it).", 8000)
+        return True
+
+    def save_preset(self, path: str | os.PathLike[str]) -> bool:
+        from spikeview.gui.presets import save_preset
+
+        try:
+            save_preset(self.session, path)
+        except SpikeviewError as e:
+            self.show_error(str(e), dialog_title="Cannot save the preset")
+            return False
+        self.settings.setValue("last_preset_dir", str(Path(path).parent))
+        self.statusBar().showMessage(f"Saved preset {path}.", 8000)
+        return True
+
+    def load_preset_dialog(self) -> None:
+        start = self.settings.value("last_preset_dir", str(Path.home()), str)
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Load a parameter preset", start, "Presets (*.toml);;All files (*)")
+        if path:
+            self.load_preset(path)
+
+    def save_preset_dialog(self) -> None:
+        start = self.settings.value("last_preset_dir", str(Path.home()), str)
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Save the parameters", str(Path(start) / "spikeview.toml"),
+                                                        "Presets (*.toml)")
+        if path:
+            self.save_preset(path if path.endswith(".toml") else path + ".toml")
+
+    def reset_params(self) -> None:
+        from spikeview.gui.model import default_params
+
+        self.session.update_params(default_params(), label="Reset parameters")
+
+    # ------------------------------------------------------------------------------ export
+    def export_now(self) -> None:
+        self.docks["export"].show()
+        self.docks["export"].raise_()
+        self.export_to(self.export_panel.path.text().strip())
+
+    def export_to(self, out: str) -> None:
+        if not out:
+            self.show_error("Choose an output file in the Export panel first.")
+            return
+        if self.controller.start_export(out):
+            self.settings.setValue("last_export_dir", str(Path(out).parent))
+
+    def _on_export_done(self, paths: list[Path]) -> None:
+        if not paths:
+            return
+        first = Path(paths[0])
+        what = first.name if len(paths) == 1 else f"{len(paths)} files ({first.name} …)"
+        self.notice.show_message(
+            f"Export finished: {what} in {first.parent}.", "success",
+            [("Open", lambda: QtGui.QDesktopServices.openUrl(QtCore.QUrl.fromLocalFile(str(first)))),
+             ("Show folder", lambda: QtGui.QDesktopServices.openUrl(QtCore.QUrl.fromLocalFile(str(first.parent))))])
+
+    # ------------------------------------------------------------------------------ messages
+    def show_error(self, message: str, dialog_title: str | None = None) -> None:
+        """Show an error in the notification strip (never modal, never a crash) and the status bar."""
+        self.notice.show_message(message, "error")
+        self.statusBar().showMessage(message.splitlines()[0], 10000)
+
+    def _on_message(self, message: str) -> None:
+        self.statusBar().showMessage(message, 8000)
+
+    def _on_guided_state(self, state: str, message: str) -> None:
+        self.statusBar().showMessage(message, 6000)
+
+    def show_help(self) -> ShortcutsDialog:
+        dlg = ShortcutsDialog(self)
+        dlg.setAttribute(QtCore.Qt.WidgetAttribute.WA_DeleteOnClose)
+        dlg.open()
+        self._help = dlg
+        return dlg
+
+    def about(self) -> None:
+        from spikeview import __version__
+
+        self.notice.show_message(
+            f"spikeview {__version__} — viewer, simulator and zero-shot guided reconstruction for chromatic spike cameras. "
+            "GPL-3.0-or-later (FFDNet weights GPL-3.0).", "info")
+
+    # ------------------------------------------------------------------------------ session → window
+    def _on_source(self) -> None:
+        st = self.session.stream
+        self.setWindowTitle("spikeview" if st is None else f"{st.label} — spikeview")
+        self._on_tick(self.session.tick)
+
+    def _on_frames(self, f: Any) -> None:
+        self.stream_panel.show_frames(f)
+        rate_hz = f.spike_rate * self.session.tick_rate
+        self.rate_status.setText(f"  rate {f.spike_rate:.3f} spikes/px/tick ({rate_hz / 1000:.1f} kHz)  ")
+
+    def _on_tick(self, tick: int) -> None:
+        s = self.session
+        self.time_status.setText(f"  tick {tick} · {format_us(s.ticks_to_us(tick))}  ")
+
+    def _update_fps(self) -> None:
+        fps = self.controller.display_fps()
+        self.fps_status.setText(f"  {fps:4.1f} fps  " if self.session.playing else "  paused  ")
+
+    def _on_undo_changed(self, can_undo: bool, can_redo: bool) -> None:
+        u, r = self.session.undo_text()
+        self.act_undo.setEnabled(can_undo)
+        self.act_redo.setEnabled(can_redo)
+        self.act_undo.setText(f"&Undo {u}" if u else "&Undo")
+        self.act_redo.setText(f"&Redo {r}" if r else "&Redo")
+
+    def _on_param(self, name: str, value: Any) -> None:
+        self._params_timer.start()
+
+    # ------------------------------------------------------------------------------ settings
+    def _restore_params(self) -> None:
+        raw = self.settings.value("params", "", str)
+        if not raw:
+            return
+        try:
+            values = json.loads(raw)
+        except (TypeError, ValueError):
+            return
+        if isinstance(values, dict):
+            skipped = self.session.update_params(values, record=False, strict=False)
+            if skipped:
+                self.session.events.message.emit(f"Ignored saved settings that no longer apply: {', '.join(skipped)}.")
+
+    def _save_params(self) -> None:
+        self.settings.setValue("params", json.dumps(self.session.params))
+
+    def save_settings(self) -> None:
+        self._save_params()
+        self.settings.setValue("window/geometry", self.saveGeometry())
+        self.settings.setValue("window/state", self.saveState())
+        self.settings.setValue("window/layout_version", LAYOUT_VERSION)
+        self.settings.sync()
+
+    def closeEvent(self, ev: QtGui.QCloseEvent) -> None:  # noqa: N802 - Qt override
+        self._closing = True
+        self.save_settings()
+        self.fps_timer.stop()
+        self._params_timer.stop()
+        self.controller.shutdown()
+        self.loader.stop()
+        for event, cb in self._session_links:
+            event.disconnect(cb)
+        st = self.session.stream
+        if st is not None and st.path is not None:
+            st.source.close()
+        super().closeEvent(ev)
+
+
+def _only(d: dict[str, Any], *keys: str) -> dict[str, Any]:
+    return {k: v for k, v in d.items() if k in keys}

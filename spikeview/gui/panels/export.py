@@ -1,0 +1,173 @@
+"""Export panel: EXR/MP4/PNG of the current frame or the marked range, in the background."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from PySide6 import QtCore, QtWidgets
+
+from spikeview.gui import jobs
+from spikeview.gui.model import Session
+from spikeview.gui.widgets import ParamCombo, ParamSpin, form, subscribe
+
+FORMAT_TEXT = {"png": "PNG (8-bit, display)", "exr": "EXR (half float, linear)", "mp4": "MP4 (H.264)"}
+RANGE_TEXT = {"frame": "Current frame", "marked": "Marked range (one frame per Δτ)"}
+METHOD_TEXT = {"tfp": "TFP (classical)", "tfi": "TFI (classical)", "guided": "Guided (ROI if drawn; slow)"}
+
+
+def suggested_name(stem: str, fmt: str, n_frames: int) -> str:
+    """File name for an export: sequences of images get a visible ``_%04d`` frame field."""
+    if fmt == "mp4":
+        return f"{stem}.mp4"
+    return f"{stem}_%04d.{fmt}" if n_frames > 1 else f"{stem}.{fmt}"
+
+
+class ExportPanel(QtWidgets.QWidget):
+    export_requested = QtCore.Signal(str)
+    cancel_requested = QtCore.Signal()
+
+    def __init__(self, session: Session, parent: QtWidgets.QWidget | None = None):
+        super().__init__(parent)
+        self.session = session
+        self.folder = Path.home()
+        self.fmt = ParamCombo(session, "export_format", FORMAT_TEXT)
+        self.range = ParamCombo(session, "export_range", RANGE_TEXT)
+        self.method = ParamCombo(session, "export_method", METHOD_TEXT)
+        self.fps = ParamSpin(session, "export_fps")
+        self.slowmo = QtWidgets.QLabel()
+        self.slowmo.setObjectName("slowmo_note")
+        self.slowmo.setWordWrap(True)
+        self.count = QtWidgets.QLabel()
+        self.count.setObjectName("export_count")
+        self.path = QtWidgets.QLineEdit()
+        self.path.setObjectName("export_path")
+        self.path.setToolTip("Output file; image sequences need a frame field such as %04d")
+        browse = QtWidgets.QToolButton(text="…")
+        browse.setToolTip("Choose where to write")
+        browse.clicked.connect(self._browse)
+        pl = QtWidgets.QHBoxLayout()
+        pl.setContentsMargins(0, 0, 0, 0)
+        pl.addWidget(self.path, 1)
+        pl.addWidget(browse)
+        pw = QtWidgets.QWidget()
+        pw.setLayout(pl)
+        self.export_btn = QtWidgets.QPushButton("Export")
+        self.export_btn.setObjectName("export_run")
+        self.export_btn.setToolTip("Write the files in the background (Ctrl+E)")
+        self.export_btn.clicked.connect(lambda: self.export_requested.emit(self.path.text().strip()))
+        self.cancel_btn = QtWidgets.QPushButton("Cancel")
+        self.cancel_btn.setObjectName("export_cancel")
+        self.cancel_btn.setEnabled(False)
+        self.cancel_btn.clicked.connect(self.cancel_requested)
+        self.progress = QtWidgets.QProgressBar()
+        self.progress.setObjectName("export_progress")
+        self.progress.setFormat("%v / %m frames")
+        self.progress.setValue(0)
+        self.status = QtWidgets.QLabel("")
+        self.status.setObjectName("export_status")
+        self.status.setWordWrap(True)
+        buttons = QtWidgets.QHBoxLayout()
+        buttons.addWidget(self.export_btn)
+        buttons.addWidget(self.cancel_btn)
+        buttons.addWidget(self.progress, 1)
+        lay = QtWidgets.QVBoxLayout(self)
+        lay.setContentsMargins(3, 3, 3, 3)
+        lay.addWidget(form([("Format", self.fmt), ("Frames", self.range), ("Method", self.method), ("Output fps", self.fps),
+                            ("", self.slowmo), ("", self.count), ("File", pw)]))
+        lay.addLayout(buttons)
+        lay.addWidget(self.status)
+        lay.addStretch(1)
+        ev = session.events
+        subscribe(self, ev.param_changed, lambda *_: self.refresh())
+        subscribe(self, ev.marks_changed, lambda *_: self.refresh())
+        subscribe(self, ev.source_changed, self._on_source)
+        subscribe(self, ev.tick_changed, self._on_tick)
+        self._auto_name = True
+        self.path.textEdited.connect(self._edited)
+        self._on_source()
+
+    def _edited(self, _text: str) -> None:
+        self._auto_name = False
+
+    def _on_source(self) -> None:
+        stream = self.session.stream
+        if stream is not None and stream.path is not None:
+            self.folder = stream.path.parent
+        self._auto_name = True
+        self.refresh()
+
+    def _on_tick(self, _tick: int) -> None:
+        if self.session.get("export_range") == "frame":
+            self.refresh()
+
+    def ticks(self) -> tuple[int, ...]:
+        s = self.session
+        if s.source is None:
+            return ()
+        return jobs.export_ticks(s.params, s.get("export_range"), s.tick, s.marked_range())
+
+    def stem(self) -> str:
+        s = self.session
+        base = s.stream.path.stem if (s.stream is not None and s.stream.path is not None) else "spikeview"
+        method = s.get("export_method")
+        if s.get("export_range") == "frame":
+            return f"{base}_{method}_t{s.tick}"
+        lo, hi = s.marked_range()
+        return f"{base}_{method}_{lo}-{hi}"
+
+    def refresh(self) -> None:
+        """Update the derived texts: frame count, slow-motion factor, the suggested file name."""
+        s = self.session
+        ticks = self.ticks()
+        n = len(ticks)
+        fmt = s.get("export_format")
+        self.fps.setEnabled(fmt == "mp4")
+        if s.source is None:
+            self.count.setText("No capture open.")
+            self.slowmo.setText("")
+            return
+        self.count.setText(f"{n} frame(s), centre ticks {ticks[0]}…{ticks[-1]}" if n > 1 else f"1 frame at tick {ticks[0]}")
+        try:
+            from spikeview.export import describe_slow_motion, slow_motion_factor
+
+            factor = slow_motion_factor(s.tick_rate, max(1, int(s.get("window"))), float(s.get("export_fps")))
+            self.slowmo.setText(describe_slow_motion(factor) + (" — for MP4" if fmt != "mp4" else ""))
+        except Exception as e:  # a note only; the export itself reports real errors
+            self.slowmo.setText(str(e))
+        if self._auto_name:
+            self.path.setText(str(self.folder / suggested_name(self.stem(), fmt, n)))
+
+    def _browse(self) -> None:
+        fmt = self.session.get("export_format")
+        start = self.path.text() or str(self.folder)
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Export to", start.replace("%04d", "0000"),
+                                                        f"{fmt.upper()} (*.{fmt});;All files (*)")
+        if path:
+            p = Path(path)
+            if len(self.ticks()) > 1 and fmt != "mp4" and "%" not in p.name:
+                p = p.with_name(suggested_name(p.stem, fmt, 2))
+            self.folder = p.parent
+            self._auto_name = False
+            self.path.setText(str(p))
+
+    def set_state(self, state: str, message: str) -> None:
+        running = state == "running"
+        self.export_btn.setEnabled(not running)
+        self.cancel_btn.setEnabled(running)
+        self.status.setText(message)
+        self.status.setStyleSheet("color: #ff6060;" if state == "failed" else "")
+        if running:
+            self.progress.setValue(0)
+
+    def set_progress(self, done: int, total: int) -> None:
+        self.progress.setRange(0, max(total, 1))
+        self.progress.setValue(done)
+
+    def folder_for_dialogs(self) -> Path:
+        return self.folder
+
+    def set_folder(self, folder: Any) -> None:
+        if folder:
+            self.folder = Path(folder)
+            self.refresh()

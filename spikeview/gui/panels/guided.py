@@ -1,0 +1,217 @@
+"""Guided reconstruction panel: sampler settings, scene plan, progress, live x̂₀, PSNR/SSIM curves."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pyqtgraph as pg
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from spikeview.gui.model import Session
+from spikeview.gui.widgets import ImagePane, ParamCombo, ParamSlider, ParamSpin, form, subscribe
+
+RUN_COLOURS = [(255, 170, 0), (0, 190, 255), (255, 90, 160), (120, 220, 90), (200, 140, 255), (255, 230, 80)]
+
+
+class GuidedPanel(QtWidgets.QWidget):
+    """Controls and live view of the guided sampler (the controller runs it in its worker)."""
+
+    run_requested = QtCore.Signal()
+    cancel_requested = QtCore.Signal()
+    live_toggled = QtCore.Signal(bool)
+
+    def __init__(self, session: Session, parent: QtWidgets.QWidget | None = None):
+        super().__init__(parent)
+        self.session = session
+        self.s = ParamSlider(session, "s", label="s")
+        self.k = ParamSlider(session, "k", label="k")
+        self.levels = ParamSlider(session, "levels", label="L")
+        self.t_start = ParamSlider(session, "t_start", label="t_s")
+        self.t_note = QtWidgets.QLabel()
+        self.steps = ParamSpin(session, "steps")
+        self.seed = ParamSpin(session, "seed")
+        self.prior = ParamCombo(session, "prior", {"ffdnet": "FFDNet (embedded)", "sd": "Stable Diffusion (folder)"})
+        self.guidance = ParamCombo(session, "guidance", {"hqs": "HQS (DiffPIR, fast)", "dps": "DPS (backprop)"})
+        self.model_path = QtWidgets.QLineEdit()
+        self.model_path.setObjectName("model_path")
+        self.model_path.setPlaceholderText("packaged FFDNet weights")
+        self.model_path.editingFinished.connect(lambda: session.set("model_path", self.model_path.text().strip()))
+        browse = QtWidgets.QToolButton(text="…")
+        browse.setToolTip("Choose a weights folder or .pth file")
+        browse.clicked.connect(self._browse_model)
+        mp = QtWidgets.QHBoxLayout()
+        mp.setContentsMargins(0, 0, 0, 0)
+        mp.addWidget(self.model_path, 1)
+        mp.addWidget(browse)
+        mpw = QtWidgets.QWidget()
+        mpw.setLayout(mp)
+        small = QtWidgets.QHBoxLayout()
+        small.setContentsMargins(0, 0, 0, 0)
+        for label, w in (("steps", self.steps), ("seed", self.seed)):
+            small.addWidget(QtWidgets.QLabel(label))
+            small.addWidget(w)
+        smallw = QtWidgets.QWidget()
+        smallw.setLayout(small)
+        tline = QtWidgets.QHBoxLayout()
+        tline.setContentsMargins(0, 0, 0, 0)
+        tline.addWidget(self.t_start, 1)
+        tline.addWidget(self.t_note)
+        tw = QtWidgets.QWidget()
+        tw.setLayout(tline)
+        settings = form([self.s, self.k, self.levels, tw, ("", smallw), ("Prior", self.prior), ("Weights", mpw),
+                         ("Guidance", self.guidance)])
+
+        self.run_btn = QtWidgets.QPushButton("Run")
+        self.run_btn.setObjectName("guided_run")
+        self.run_btn.setToolTip("Reconstruct the current window (the ROI when one is drawn)")
+        self.run_btn.clicked.connect(self.run_requested)
+        self.cancel_btn = QtWidgets.QPushButton("Cancel")
+        self.cancel_btn.setObjectName("guided_cancel")
+        self.cancel_btn.setEnabled(False)
+        self.cancel_btn.clicked.connect(self.cancel_requested)
+        self.live = QtWidgets.QCheckBox("Restart on change")
+        self.live.setToolTip("Re-run automatically (after a short pause) whenever a setting changes")
+        self.live.toggled.connect(self.live_toggled)
+        self.progress = QtWidgets.QProgressBar()
+        self.progress.setObjectName("guided_progress")
+        self.progress.setFormat("%v / %m steps")
+        self.progress.setValue(0)
+        self.status = QtWidgets.QLabel("Idle.")
+        self.status.setObjectName("guided_status")
+        self.status.setWordWrap(True)
+        buttons = QtWidgets.QHBoxLayout()
+        buttons.addWidget(self.run_btn)
+        buttons.addWidget(self.cancel_btn)
+        buttons.addWidget(self.live)
+        buttons.addWidget(self.progress, 1)
+
+        self.plan = QtWidgets.QPlainTextEdit()
+        self.plan.setObjectName("plan")
+        self.plan.setReadOnly(True)
+        self.plan.setPlaceholderText("The scene plan (which stages this window needs, and why) appears when a run starts.")
+        self.plan.setFont(QtGui.QFontDatabase.systemFont(QtGui.QFontDatabase.SystemFont.FixedFont))
+        self.plan.setMaximumHeight(110)
+        self.preview = ImagePane("x̂₀ (clean estimate)", min_size=120)
+        self.psnr_plot = pg.PlotWidget()
+        self.psnr_plot.setObjectName("psnr_plot")
+        self.psnr_plot.setLabel("left", "PSNR (dB)")
+        self.psnr_plot.setLabel("bottom", "elapsed (s)")
+        self.psnr_plot.setMenuEnabled(False)
+        self.ssim_plot = pg.PlotWidget()
+        self.ssim_plot.setObjectName("ssim_plot")
+        self.ssim_plot.setLabel("left", "SSIM")
+        self.ssim_plot.setLabel("bottom", "elapsed (s)")
+        self.ssim_plot.setMenuEnabled(False)
+        self.ssim_plot.setXLink(self.psnr_plot)
+        for plot in (self.psnr_plot, self.ssim_plot):
+            plot.getAxis("left").enableAutoSIPrefix(False)
+        self.psnr_plot.addLegend(offset=(-5, -5), labelTextSize="7pt")
+        self.clear_btn = QtWidgets.QToolButton(text="Clear curves")
+        self.clear_btn.clicked.connect(self.clear_curves)
+        self.metrics_box = QtWidgets.QWidget()
+        ml = QtWidgets.QVBoxLayout(self.metrics_box)
+        ml.setContentsMargins(0, 0, 0, 0)
+        ml.setSpacing(1)
+        ml.addWidget(self.psnr_plot)
+        ml.addWidget(self.ssim_plot)
+        ml.addWidget(self.clear_btn, 0, QtCore.Qt.AlignmentFlag.AlignRight)
+        live = QtWidgets.QHBoxLayout()
+        live.addWidget(self.preview, 1)
+        live.addWidget(self.metrics_box, 1)
+
+        lay = QtWidgets.QVBoxLayout(self)
+        lay.setContentsMargins(3, 3, 3, 3)
+        lay.addWidget(settings)
+        lay.addLayout(buttons)
+        lay.addWidget(self.status)
+        lay.addWidget(self.plan)
+        lay.addLayout(live, 1)
+
+        self.curves: dict[int, tuple[Any, Any, list[float], list[float], list[float]]] = {}
+        subscribe(self, session.events.param_changed, self._on_param)
+        subscribe(self, session.events.source_changed, self._on_source)
+        self._on_param("t_start", session.get("t_start"))
+        self._on_param("model_path", session.get("model_path"))
+        self._on_source()
+
+    # ------------------------------------------------------------------------------ model → view
+    def _on_param(self, name: str, value: Any) -> None:
+        if name == "t_start":
+            self.t_note.setText(f"σ = {255 * value:.0f}/255")
+        elif name == "model_path":
+            self.model_path.setText(value)
+        elif name == "prior":
+            self.model_path.setPlaceholderText("packaged FFDNet weights" if value == "ffdnet" else "folder with diffusers weights (required)")
+
+    def _on_source(self) -> None:
+        stream = self.session.stream
+        sim = stream is not None and stream.is_simulated
+        self.metrics_box.setVisible(sim)
+        self.preview.set_image(None)
+        self.plan.setPlainText("")
+        self.progress.setValue(0)
+
+    def _browse_model(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Prior weights", "", "Weights (*.pth *.safetensors *.bin *.json);;All files (*)")
+        if path:
+            self.session.set("model_path", path)
+
+    # ------------------------------------------------------------------------------ results
+    def set_state(self, state: str, message: str) -> None:
+        running = state == "running"
+        self.cancel_btn.setEnabled(running)
+        self.run_btn.setText("Restart" if running else "Run")
+        self.status.setText(message)
+        if state in ("failed",):
+            self.status.setStyleSheet("color: #ff6060;")
+        else:
+            self.status.setStyleSheet("")
+        if running:
+            self.progress.setValue(0)
+
+    def show_update(self, u: Any) -> None:
+        """Show a :class:`~spikeview.gui.jobs.GuidedUpdate` (plan text or a step)."""
+        if u.kind == "plan":
+            self.plan.setPlainText(u.text)
+            self.progress.setRange(0, max(u.total, 1))
+            self.progress.setValue(0)
+            return
+        self.progress.setRange(0, max(u.total, 1))
+        self.progress.setValue(u.step)
+        if u.preview is not None:
+            self.preview.set_image(u.preview)
+            self.preview.set_title(f"x̂₀ run {u.run}, step {u.step}/{u.total}")
+        if u.psnr is not None:
+            self._add_point(u.run, u.elapsed, u.psnr, u.ssim)
+
+    def show_result(self, r: Any) -> None:
+        self.preview.set_image(r.preview)
+        self.preview.set_title(f"result of run {r.run} (tick {r.tick})")
+        self.progress.setValue(self.progress.maximum())
+
+    def _add_point(self, run: int, t: float, psnr: float, ssim: float | None) -> None:
+        entry = self.curves.get(run)
+        if entry is None:
+            for old_run, (pc, sc, *_rest) in self.curves.items():  # earlier runs fade
+                c = QtGui.QColor(*RUN_COLOURS[old_run % len(RUN_COLOURS)])
+                c.setAlpha(110)
+                pc.setPen(pg.mkPen(c, width=1))
+                sc.setPen(pg.mkPen(c, width=1))
+            col = RUN_COLOURS[run % len(RUN_COLOURS)]
+            pc = self.psnr_plot.plot([], [], pen=pg.mkPen(col, width=2), symbol="o", symbolSize=4, symbolBrush=col,
+                                     symbolPen=None, name=f"run {run}")
+            sc = self.ssim_plot.plot([], [], pen=pg.mkPen(col, width=2), symbol="o", symbolSize=4, symbolBrush=col, symbolPen=None)
+            entry = self.curves[run] = (pc, sc, [], [], [])
+        pc, sc, ts, ps, ss = entry
+        ts.append(t)
+        ps.append(psnr)
+        ss.append(ssim if ssim is not None else float("nan"))
+        pc.setData(ts, ps)
+        sc.setData(ts, ss)
+
+    def clear_curves(self) -> None:
+        for pc, sc, *_ in self.curves.values():
+            self.psnr_plot.removeItem(pc)
+            self.ssim_plot.removeItem(sc)
+        self.psnr_plot.plotItem.legend.clear()
+        self.curves.clear()

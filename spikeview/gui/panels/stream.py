@@ -1,0 +1,229 @@
+"""Stream panel: raw spikes, TFP and TFI of the current window, transport and display controls."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pyqtgraph as pg
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from spikeview.gui.model import Session, format_us
+from spikeview.gui.widgets import ImagePane, ParamCheck, ParamCombo, ParamSlider, ParamSpin, subscribe, tool_button
+
+SPEED_TEXT = {"realtime": "Real time", "slowmo": "Slow motion ×1/N", "window": "Every window"}
+
+
+class ScrubBar(QtWidgets.QSlider):
+    """The tick slider, with the marked range painted under the groove."""
+
+    def __init__(self) -> None:
+        super().__init__(QtCore.Qt.Orientation.Horizontal)
+        self.marks: tuple[int | None, int | None] = (None, None)
+        self.setObjectName("scrub")
+        self.setToolTip("Scrub through the stream (ticks); Home/End jump to the ends, ←/→ step one tick")
+
+    def paintEvent(self, ev: QtGui.QPaintEvent) -> None:  # noqa: N802 - Qt override
+        lo, hi = self.marks
+        if (lo is not None or hi is not None) and self.maximum() > self.minimum():
+            p = QtGui.QPainter(self)
+            span = self.maximum() - self.minimum()
+            w = self.width() - 12
+            x0 = 6 + w * ((lo if lo is not None else self.minimum()) - self.minimum()) / span
+            x1 = 6 + w * ((hi if hi is not None else self.maximum()) - self.minimum()) / span
+            p.fillRect(QtCore.QRectF(x0, self.height() - 5, max(x1 - x0, 2), 4), QtGui.QColor(255, 170, 0))
+            p.end()
+        super().paintEvent(ev)
+
+
+class StreamPanel(QtWidgets.QWidget):
+    """Three linked image panes and the transport (see module docstring)."""
+
+    def __init__(self, session: Session, parent: QtWidgets.QWidget | None = None):
+        super().__init__(parent)
+        self.session = session
+        st = self.style()
+        # --- images
+        self.raw = ImagePane("Spikes at tick")
+        self.tfp = ImagePane("TFP")
+        self.tfi = ImagePane("TFI")
+        self.tfp.link(self.raw)
+        self.tfi.link(self.raw)
+        self.roi_item: pg.RectROI | None = None
+        images = QtWidgets.QHBoxLayout()
+        images.setSpacing(2)
+        for pane in (self.raw, self.tfp, self.tfi):
+            images.addWidget(pane, 1)
+
+        # --- transport
+        self.play_btn = tool_button("", "Play / pause (Space)", lambda: session.toggle_playing(),
+                                    icon=st.standardIcon(QtWidgets.QStyle.StandardPixmap.SP_MediaPlay), name="play")
+        self.home_btn = tool_button("", "First tick of the range (Home)", lambda: session.go_start(),
+                                    icon=st.standardIcon(QtWidgets.QStyle.StandardPixmap.SP_MediaSkipBackward))
+        self.back_btn = tool_button("", "One tick back (←)", lambda: session.step(-1),
+                                    icon=st.standardIcon(QtWidgets.QStyle.StandardPixmap.SP_MediaSeekBackward), name="step_back")
+        self.fwd_btn = tool_button("", "One tick forward (→)", lambda: session.step(1),
+                                   icon=st.standardIcon(QtWidgets.QStyle.StandardPixmap.SP_MediaSeekForward), name="step_fwd")
+        self.end_btn = tool_button("", "Last tick of the range (End)", lambda: session.go_end(),
+                                   icon=st.standardIcon(QtWidgets.QStyle.StandardPixmap.SP_MediaSkipForward))
+        self.scrub = ScrubBar()
+        self.scrub.valueChanged.connect(lambda v: session.set_tick(v))
+        self.time_label = QtWidgets.QLabel()
+        self.time_label.setObjectName("time")
+        self.time_label.setMinimumWidth(250)
+        self.time_label.setFont(QtGui.QFontDatabase.systemFont(QtGui.QFontDatabase.SystemFont.FixedFont))
+        transport = QtWidgets.QHBoxLayout()
+        for w in (self.home_btn, self.back_btn, self.play_btn, self.fwd_btn, self.end_btn):
+            transport.addWidget(w)
+        transport.addWidget(self.scrub, 1)
+        transport.addWidget(self.time_label)
+
+        # --- playback options, window, marks
+        self.speed = ParamCombo(session, "speed", SPEED_TEXT)
+        self.slowmo = ParamSpin(session, "slowmo")
+        self.slowmo.spin.setPrefix("N = ")
+        self.loop = ParamCheck(session, "loop")
+        self.window = ParamSpin(session, "window")
+        self.mark_in = tool_button("In", "Mark the start of the range at this tick (I)", lambda: session.set_mark_in(), name="mark_in")
+        self.mark_out = tool_button("Out", "Mark the end of the range at this tick (O)", lambda: session.set_mark_out(), name="mark_out")
+        self.mark_clear = tool_button("×", "Clear the marked range", lambda: session.clear_marks())
+        self.marks_label = QtWidgets.QLabel()
+        self.roi_btn = tool_button("ROI", "Draw a region of interest: rates, degradation and guided runs use it", self._toggle_roi,
+                                   checkable=True, name="roi")
+        self.tfi_check = QtWidgets.QCheckBox("TFI")
+        self.tfi_check.setChecked(True)
+        self.tfi_check.setToolTip("Compute the TFI preview (costs time on large frames)")
+        self.tfi_check.toggled.connect(self.tfi.setVisible)
+        options = QtWidgets.QHBoxLayout()
+        options.addWidget(QtWidgets.QLabel("Speed"))
+        options.addWidget(self.speed)
+        options.addWidget(self.slowmo)
+        options.addWidget(self.loop)
+        options.addSpacing(10)
+        options.addWidget(QtWidgets.QLabel("Window Δτ"))
+        options.addWidget(self.window)
+        options.addSpacing(10)
+        for w in (self.mark_in, self.mark_out, self.mark_clear, self.marks_label):
+            options.addWidget(w)
+        options.addStretch(1)
+        options.addWidget(self.tfi_check)
+        options.addWidget(self.roi_btn)
+
+        # --- display
+        self.black = ParamSlider(session, "black", label="Black")
+        self.white = ParamSlider(session, "white", label="White")
+        self.curve = ParamCombo(session, "transfer", {"srgb": "sRGB", "gamma": "Gamma", "linear": "Linear"})
+        self.demosaic = ParamCombo(session, "demosaic", {"bilinear": "Bilinear", "malvar2004": "Malvar 2004", "menon2007": "Menon 2007"})
+        self.cast = ParamCheck(session, "colour_cast", "Colour cast")
+        display = QtWidgets.QHBoxLayout()
+        display.addWidget(self.black, 2)
+        display.addWidget(self.white, 2)
+        display.addWidget(self.curve)
+        display.addWidget(self.demosaic)
+        display.addWidget(self.cast)
+
+        lay = QtWidgets.QVBoxLayout(self)
+        lay.setContentsMargins(3, 3, 3, 3)
+        lay.setSpacing(3)
+        lay.addLayout(images, 1)
+        lay.addLayout(transport)
+        lay.addLayout(options)
+        lay.addLayout(display)
+
+        ev = session.events
+        subscribe(self, ev.source_changed, self._on_source)
+        subscribe(self, ev.tick_changed, self._on_tick)
+        subscribe(self, ev.playback_changed, self._on_playback)
+        subscribe(self, ev.marks_changed, self._on_marks)
+        subscribe(self, ev.param_changed, self._on_param)
+        subscribe(self, ev.roi_changed, self._on_roi)
+        self._on_source()
+
+    # ------------------------------------------------------------------------------ model → view
+    def _on_source(self) -> None:
+        s = self.session
+        with QtCore.QSignalBlocker(self.scrub):
+            self.scrub.setRange(0, max(s.n_frames - 1, 0))
+            self.scrub.setValue(s.tick)
+            self.scrub.setPageStep(max(1, int(s.get("window"))))
+        self.window.spin.setMaximum(max(1, min(4096, s.n_frames or 4096)))
+        for pane in (self.raw, self.tfp, self.tfi):
+            pane.set_image(None)
+        self._on_tick(s.tick)
+        self._on_marks(s.mark_in, s.mark_out)
+        self._on_roi(s.roi)
+        self._update_window_note()
+
+    def _on_tick(self, tick: int) -> None:
+        with QtCore.QSignalBlocker(self.scrub):
+            self.scrub.setValue(tick)
+        self.time_label.setText(self.session.time_text())
+
+    def _on_playback(self, playing: bool) -> None:
+        icon = QtWidgets.QStyle.StandardPixmap.SP_MediaPause if playing else QtWidgets.QStyle.StandardPixmap.SP_MediaPlay
+        self.play_btn.setIcon(self.style().standardIcon(icon))
+
+    def _on_marks(self, lo: int | None, hi: int | None) -> None:
+        self.scrub.marks = (lo, hi)
+        self.scrub.update()
+        if lo is None and hi is None:
+            self.marks_label.setText("no range marked")
+        else:
+            a, b = self.session.play_range()
+            self.marks_label.setText(f"range {a}–{b} ({b - a + 1} ticks)")
+
+    def _on_param(self, name: str, value: Any) -> None:
+        if name == "window":
+            self.scrub.setPageStep(max(1, int(value)))
+            self._update_window_note()
+        if name == "speed":
+            self.slowmo.setEnabled(value == "slowmo")
+
+    def _update_window_note(self) -> None:
+        s = self.session
+        w = int(s.get("window"))
+        self.window.note.setText(f"= {format_us(s.ticks_to_us(w))}")
+        self.slowmo.setEnabled(s.get("speed") == "slowmo")
+
+    def show_frames(self, f: Any) -> None:
+        """Show a :class:`~spikeview.gui.core.StreamFrames` (from the controller)."""
+        self.raw.set_image(f.raw)
+        self.tfp.set_image(f.tfp)
+        if f.tfi is not None:
+            self.tfi.set_image(f.tfi)
+        s = self.session
+        w = f.b - f.a
+        self.raw.set_title(f"Spikes at tick {f.tick}")
+        self.tfp.set_title(f"TFP  Δτ = {w} ticks ({format_us(s.ticks_to_us(w))}), ticks [{f.a}, {f.b})")
+        self.tfi.set_title(f"TFI  ±{int(s.get('tfi_half_window'))} ticks")
+
+    # ------------------------------------------------------------------------------ ROI
+    def _toggle_roi(self, on: bool) -> None:
+        s = self.session
+        if on and s.roi is None and s.source is not None:
+            w, h = s.source.width, s.source.height
+            s.set_roi((w // 4 - (w // 4) % 2, h // 4 - (h // 4) % 2, max(8, w // 2), max(8, h // 2)))
+        elif not on:
+            s.set_roi(None)
+
+    def _on_roi(self, roi: tuple[int, int, int, int] | None) -> None:
+        with QtCore.QSignalBlocker(self.roi_btn):
+            self.roi_btn.setChecked(roi is not None)
+        if roi is None:
+            if self.roi_item is not None:
+                self.tfp.vb.removeItem(self.roi_item)
+                self.roi_item = None
+            return
+        x, y, w, h = roi
+        if self.roi_item is None:
+            self.roi_item = pg.RectROI((x, y), (w, h), pen=pg.mkPen((255, 200, 0), width=2), snapSize=2.0,
+                                       translateSnap=True, scaleSnap=True)
+            self.roi_item.sigRegionChangeFinished.connect(self._roi_moved)
+            self.tfp.vb.addItem(self.roi_item)
+        else:
+            with QtCore.QSignalBlocker(self.roi_item):
+                self.roi_item.setPos((x, y), update=False, finish=False)
+                self.roi_item.setSize((w, h), update=True, finish=False)
+
+    def _roi_moved(self, item: Any) -> None:
+        pos, size = item.pos(), item.size()
+        self.session.set_roi((pos.x(), pos.y(), size.x(), size.y()))

@@ -1,0 +1,288 @@
+"""Small Qt widgets shared by the panels: image panes and parameter editors bound to the session.
+
+Binding rule (napari style): a widget writes to the :class:`~spikeview.gui.model.Session` with
+``session.set(name, value)`` and reads back only through ``session.events.param_changed``; it
+keeps no state of its own. A slider drag is one undo step (``begin_group`` on press,
+``end_group`` on release).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from spikeview.errors import ParameterError
+from spikeview.gui.model import SPECS, Session
+
+# ------------------------------------------------------------------------------------- images
+
+
+class ImagePane(QtWidgets.QWidget):
+    """A titled pyqtgraph view of one uint8 image with fixed levels (0, 255), zoom and pan.
+
+    Images are row-major ``(H, W)`` or ``(H, W, 3)`` uint8 and are shown as they are: levels are
+    fixed, never recomputed per frame. Several panes can share zoom/pan with :meth:`link`.
+    """
+
+    def __init__(self, title: str, parent: QtWidgets.QWidget | None = None, *, min_size: int = 120):
+        super().__init__(parent)
+        self.title = QtWidgets.QLabel(title)
+        self.title.setObjectName("paneTitle")
+        self.title.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+        self.view = pg.GraphicsView()
+        self.view.setBackground(pg.mkColor(24, 24, 24))
+        self.vb = pg.ViewBox(lockAspect=True, invertY=True, enableMenu=False)
+        self.view.setCentralItem(self.vb)
+        self.item = pg.ImageItem(axisOrder="row-major")
+        self.item.setAutoDownsample(True)
+        self.vb.addItem(self.item)
+        self.view.setMinimumSize(min_size, min_size * 3 // 4)
+        lay = QtWidgets.QVBoxLayout(self)
+        lay.setContentsMargins(1, 1, 1, 1)
+        lay.setSpacing(1)
+        lay.addWidget(self.title)
+        lay.addWidget(self.view, 1)
+        self._shape: tuple[int, ...] | None = None
+
+    def set_image(self, img: np.ndarray | None) -> None:
+        """Show ``img`` (uint8) with levels (0, 255); ``None`` clears the pane."""
+        if img is None:
+            self.item.clear()
+            self._shape = None
+            return
+        img = np.asarray(img)
+        if img.dtype != np.uint8:
+            raise ParameterError(f"ImagePane shows uint8 images, got {img.dtype}; convert with to_display first.")
+        first = self._shape != img.shape
+        self.item.setImage(img, autoLevels=False, levels=(0, 255))
+        if first:
+            self._shape = img.shape
+            self.vb.autoRange(padding=0.01)
+
+    def image(self) -> np.ndarray | None:
+        return self.item.image
+
+    def link(self, other: "ImagePane") -> None:
+        self.vb.setXLink(other.vb)
+        self.vb.setYLink(other.vb)
+
+    def set_title(self, text: str) -> None:
+        self.title.setText(text)
+
+
+# --------------------------------------------------------------------------------- parameters
+
+
+def subscribe(widget: QtCore.QObject, event: Any, callback: Any) -> None:
+    """Connect ``callback`` to a session ``event`` for as long as ``widget`` lives."""
+    event.connect(callback)
+    widget.destroyed.connect(lambda *_, e=event, cb=callback: e.disconnect(cb))
+
+
+class ParamSlider(QtWidgets.QWidget):
+    """Label, slider and spin box for a numeric parameter; one drag = one undo step."""
+
+    RESOLUTION = 1000
+
+    def __init__(self, session: Session, name: str, parent: QtWidgets.QWidget | None = None, *, label: str | None = None):
+        super().__init__(parent)
+        self.session, self.name = session, name
+        spec = self.spec = SPECS[name]
+        self.is_int = spec.kind is int
+        lo, hi = float(spec.minimum), float(spec.maximum)
+        self.label = QtWidgets.QLabel(label or spec.label)
+        self.label.setToolTip(spec.help)
+        self.slider = QtWidgets.QSlider(QtCore.Qt.Orientation.Horizontal)
+        self.slider.setObjectName(f"slider_{name}")
+        self.slider.setToolTip(spec.help)
+        if self.is_int:
+            self.slider.setRange(int(lo), int(min(hi, lo + 10 * self.RESOLUTION)))
+            self.spin: QtWidgets.QAbstractSpinBox = QtWidgets.QSpinBox()
+            self.spin.setRange(int(lo), int(hi))
+        else:
+            self.slider.setRange(0, self.RESOLUTION)
+            self.spin = QtWidgets.QDoubleSpinBox()
+            self.spin.setRange(lo, hi)
+            step = spec.step or (hi - lo) / 100
+            self.spin.setSingleStep(step)
+            self.spin.setDecimals(max(0, min(4, int(np.ceil(-np.log10(step))) + 1)) if step < 1 else 1)
+        self.spin.setObjectName(f"spin_{name}")
+        self.spin.setKeyboardTracking(False)
+        if spec.unit:
+            self.spin.setSuffix(f" {spec.unit}")
+        self.spin.setMinimumWidth(84)
+        lay = QtWidgets.QHBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.addWidget(self.label)
+        lay.addWidget(self.slider, 1)
+        lay.addWidget(self.spin)
+        self.slider.sliderPressed.connect(lambda: session.begin_group(spec.label))
+        self.slider.sliderReleased.connect(session.end_group)
+        self.slider.valueChanged.connect(self._from_slider)
+        self.spin.valueChanged.connect(self._from_spin)
+        subscribe(self, session.events.param_changed, self._on_param)
+        self._show(session.get(name))
+
+    # slider positions ↔ values
+    def _to_pos(self, v: float) -> int:
+        if self.is_int:
+            return int(min(max(v, self.slider.minimum()), self.slider.maximum()))
+        lo, hi = float(self.spec.minimum), float(self.spec.maximum)
+        return int(round((v - lo) / (hi - lo) * self.RESOLUTION))
+
+    def _from_pos(self, p: int) -> float:
+        if self.is_int:
+            return int(p)
+        lo, hi = float(self.spec.minimum), float(self.spec.maximum)
+        v = lo + (hi - lo) * p / self.RESOLUTION
+        step = self.spec.step
+        return float(min(max(round(v / step) * step, lo), hi)) if step else v
+
+    def _from_slider(self, p: int) -> None:
+        self._write(self._from_pos(p))
+
+    def _from_spin(self, v: float) -> None:
+        self._write(int(v) if self.is_int else float(v))
+
+    def _write(self, v: Any) -> None:
+        try:
+            self.session.set(self.name, v)
+        except ParameterError as e:
+            self.session.events.message.emit(str(e))
+            self._show(self.session.get(self.name))
+
+    def _on_param(self, name: str, value: Any) -> None:
+        if name == self.name:
+            self._show(value)
+
+    def _show(self, value: Any) -> None:
+        with QtCore.QSignalBlocker(self.slider), QtCore.QSignalBlocker(self.spin):
+            self.slider.setValue(self._to_pos(value))
+            self.spin.setValue(value)
+
+    def set_value(self, value: Any) -> None:
+        """Set as a user would by dragging the slider to ``value`` (one undo step)."""
+        self.session.begin_group(self.spec.label)
+        try:
+            self._write(value)
+        finally:
+            self.session.end_group()
+
+
+class ParamCombo(QtWidgets.QComboBox):
+    """A combo box over a parameter's choices (``texts`` maps choice → shown text)."""
+
+    def __init__(self, session: Session, name: str, texts: dict[str, str] | None = None,
+                 parent: QtWidgets.QWidget | None = None):
+        super().__init__(parent)
+        self.session, self.name = session, name
+        self.setObjectName(f"combo_{name}")
+        spec = SPECS[name]
+        self.setToolTip(spec.help)
+        for c in spec.choices:
+            self.addItem((texts or {}).get(c, c), c)
+        self.currentIndexChanged.connect(self._changed)
+        subscribe(self, session.events.param_changed, self._on_param)
+        self._on_param(name, session.get(name))
+
+    def _changed(self, idx: int) -> None:
+        if idx >= 0:
+            self.session.set(self.name, self.itemData(idx))
+
+    def _on_param(self, name: str, value: Any) -> None:
+        if name == self.name:
+            with QtCore.QSignalBlocker(self):
+                self.setCurrentIndex(max(self.findData(value), 0))
+
+
+class ParamCheck(QtWidgets.QCheckBox):
+    """A check box for a boolean parameter."""
+
+    def __init__(self, session: Session, name: str, text: str | None = None, parent: QtWidgets.QWidget | None = None):
+        super().__init__(text or SPECS[name].label, parent)
+        self.session, self.name = session, name
+        self.setObjectName(f"check_{name}")
+        self.setToolTip(SPECS[name].help)
+        self.toggled.connect(lambda v: self.session.set(self.name, bool(v)))
+        subscribe(self, session.events.param_changed, self._on_param)
+        self._on_param(name, session.get(name))
+
+    def _on_param(self, name: str, value: Any) -> None:
+        if name == self.name:
+            with QtCore.QSignalBlocker(self):
+                self.setChecked(bool(value))
+
+
+class ParamSpin(QtWidgets.QWidget):
+    """A spin box for a numeric parameter (no slider), with an optional live note beside it."""
+
+    def __init__(self, session: Session, name: str, parent: QtWidgets.QWidget | None = None):
+        super().__init__(parent)
+        self.session, self.name = session, name
+        spec = SPECS[name]
+        if spec.kind is int:
+            self.spin: QtWidgets.QAbstractSpinBox = QtWidgets.QSpinBox()
+            self.spin.setRange(int(spec.minimum), int(spec.maximum))
+        else:
+            self.spin = QtWidgets.QDoubleSpinBox()
+            self.spin.setRange(float(spec.minimum), float(spec.maximum))
+            self.spin.setSingleStep(spec.step or 1.0)
+        self.spin.setObjectName(f"spin_{name}")
+        self.spin.setKeyboardTracking(False)
+        self.spin.setToolTip(spec.help)
+        if spec.unit:
+            self.spin.setSuffix(f" {spec.unit}")
+        self.note = QtWidgets.QLabel()
+        self.note.setObjectName(f"note_{name}")
+        lay = QtWidgets.QHBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.addWidget(self.spin)
+        lay.addWidget(self.note, 1)
+        self.spin.valueChanged.connect(self._changed)
+        subscribe(self, session.events.param_changed, self._on_param)
+        self._on_param(name, session.get(name))
+
+    def _changed(self, v: float) -> None:
+        try:
+            self.session.set(self.name, int(v) if SPECS[self.name].kind is int else float(v))
+        except ParameterError as e:
+            self.session.events.message.emit(str(e))
+
+    def _on_param(self, name: str, value: Any) -> None:
+        if name == self.name:
+            with QtCore.QSignalBlocker(self.spin):
+                self.spin.setValue(value)
+
+
+def form(rows: list[tuple[str, QtWidgets.QWidget] | QtWidgets.QWidget]) -> QtWidgets.QWidget:
+    """A compact form: ``(label, widget)`` pairs or full-width widgets."""
+    w = QtWidgets.QWidget()
+    lay = QtWidgets.QFormLayout(w)
+    lay.setContentsMargins(4, 2, 4, 2)
+    lay.setVerticalSpacing(3)
+    lay.setFieldGrowthPolicy(QtWidgets.QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
+    for r in rows:
+        if isinstance(r, tuple):
+            lay.addRow(r[0], r[1])
+        else:
+            lay.addRow(r)
+    return w
+
+
+def tool_button(text: str, tip: str, slot: Any, *, icon: QtGui.QIcon | None = None, checkable: bool = False,
+                name: str | None = None) -> QtWidgets.QToolButton:
+    b = QtWidgets.QToolButton()
+    b.setText(text)
+    b.setToolTip(tip)
+    b.setAutoRaise(False)
+    if icon is not None:
+        b.setIcon(icon)
+    b.setCheckable(checkable)
+    if name:
+        b.setObjectName(name)
+    if slot is not None:
+        (b.toggled if checkable else b.clicked).connect(slot)
+    return b

@@ -1,0 +1,180 @@
+"""Parameters of the guided reconstruction (SpikeDiff), as a TOML-saveable :class:`Config`.
+
+One :class:`GuidedConfig` holds everything that decides a guided result: the sampler (steps, start
+noise, guidance rule and its strength), the forward model (soft-quantisation sharpness ``k``,
+pyramid levels, colour-cast range ``eta``), the observation (window ``window`` in ticks) and the
+overrides of the scene plan (:mod:`spikeview.guided.plan`). ``GuidedConfig.save(path)`` writes TOML
+and ``GuidedConfig.load(path)`` reads it back unchanged; every output of the guided sampler can carry
+the config that made it.
+
+Naming: ``eta`` is the colour-cast range parameter η of METHOD.md (the forward model scales channel
+c by ``eta / alpha_c``; the CLI's ``--eta``), **not** DDIM's stochasticity, which is ``zeta`` here
+(DiffPIR's name for the mix of predicted and fresh noise when re-noising).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from spikeview.config import Config
+from spikeview.errors import ParameterError
+
+PRIORS = ("ffdnet", "sd")
+GUIDANCES = ("dps", "hqs")
+DIFFUSION_MODES = ("auto", "always", "never")
+FALLBACKS = ("baseline", "tfp")
+DEMOSAICS = ("bilinear", "malvar2004")
+
+#: the FFDNet prior was trained for noise levels up to about 75/255 (METHOD.md)
+SIGMA_MAX = 75.0 / 255.0
+
+
+def _check_range(name: str, value: float, lo: float, hi: float, *, lo_open: bool = False) -> None:
+    bad = not math.isfinite(value) or value > hi or (value <= lo if lo_open else value < lo)
+    if bad:
+        lo_s = f"> {lo:g}" if lo_open else f">= {lo:g}"
+        hi_s = "" if math.isinf(hi) else f" and <= {hi:g}"
+        raise ParameterError(f"GuidedConfig.{name} = {value!r} is out of range: use a number {lo_s}{hi_s}.")
+
+
+def _check_choice(name: str, value: str, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise ParameterError(f"GuidedConfig.{name} = {value!r} is not valid: use one of {', '.join(choices)}.")
+
+
+@dataclasses.dataclass
+class GuidedConfig(Config):
+    """Settings of one guided reconstruction (see the module docstring for the file format).
+
+    Attributes:
+        guidance: ``"hqs"`` (DiffPIR/HQS: data steps on x̂₀, one prior call per step, no backprop
+            through the prior; the default, fast on CPU) or ``"dps"`` (gradient of the non-squared
+            residual norm through the prior, one forward+backward per step).
+        prior: ``"ffdnet"`` (embedded pixel-space denoiser) or ``"sd"`` (a Stable-Diffusion-family
+            latent model in diffusers format from ``model_path``; optional extra).
+        model_path: weights directory for ``prior="sd"`` (or a FFDNet ``.pth`` replacing the
+            packaged weights); ``None`` uses the packaged FFDNet weights.
+        steps: number of sampler steps (prior calls) from the start noise level down to 0, >= 1.
+        t_start: start noise level σ_ts **as a fraction of 1** (pixel values in [0, 1]), in
+            ``[0, 75/255]``. The first prior call sees ``Z = Y₀ + σ_add·z`` and is told the total
+            noise ``sqrt(σ_obs² + σ_add²)``, where σ_obs is the data-derived noise of Y₀ and
+            ``σ_add = t_start`` (or, with ``top_up=True``, ``sqrt(max(t_start² - σ_obs², 0))`` so
+            that the total is ``max(t_start, σ_obs)``). ``t_start = 0`` starts from Y₀ itself.
+        top_up: add only the noise missing to reach ``t_start`` (see ``t_start``).
+        sigma_end: the last non-zero noise level of the schedule, in ``(0, t_start]``.
+        s: DPS step size (the gradient of ‖P(Y) − P(A(x̂₀))‖ with respect to x_t is scaled by ``s``),
+            >= 0. Ignored by HQS.
+        lam: HQS data weight λ: ρ_t = λ·σ_n²/σ_t² weighs the prior against the data, > 0.
+        data_steps: HQS preconditioned gradient steps on x̂₀ per sampler step (>= 0; 0 = no data
+            step, i.e. unguided; the first step is the closed-form proximal point when the
+            forward model is linear and single-scale).
+        zeta: re-noising mix in [0, 1]: 0 = deterministic (DDIM/DPIR: predicted noise only),
+            1 = fresh noise only (DiffPIR's ζ).
+        k: soft-quantisation sharpness of Q (tanh slope, >= 0; METHOD.md: 50 best; ``k = 0`` is a
+            flat staircase that gives no gradient, use ``quantise=False`` for no Q).
+        quantise: include Q in the forward model.
+        levels: band-pass levels L of the Laplacian pyramid of the multiscale loss (the pyramid has
+            ``L + 1`` bands: L differences ``X_l − U(D(X_l))`` and the coarse residual; 0 = plain
+            single-scale residual). Capped by the frame size by the plan (``str(plan)`` says so).
+        dense_gradient: use the bilinear dense-gradient variant of the mosaic M in guidance.
+        eta: colour-cast range parameter η (> 0): the corrected image is ``Y · α / η`` (2.0, as
+            :class:`~spikeview.classical.reconstruct.ClassicalConfig`, puts each channel's mean at 0.5).
+        alpha: fixed gains ``[α_R, α_G, α_B]`` (a calibration); ``None`` = gray-world estimate once
+            per sequence (:func:`spikeview.classical.colour_cast.estimate_alpha`).
+        alpha_max_windows: windows sampled from a long stream for that estimate.
+        window: TFP window Δτ in ticks (>= 1; SpikeDiff uses 10).
+        demosaic: demosaicking of the TFP start estimate Y₀ (``"bilinear"`` or ``"malvar2004"``).
+        sigma_scale: factor on the data-derived noise level handed to the prior (1 = as derived).
+        self_ensemble: rotate/flip the input of each prior call (a different one per step), > 0
+            helps the denoiser at no cost; ``False`` keeps the orientation.
+        seed: seed of the sampler's torch.Generator (results are deterministic for a seed).
+        warm_start: in video, start each window from the previous result re-noised to t_start.
+        use_mosaic, use_cast: plan overrides (``None`` = let the plan decide): force the mosaic M /
+            the colour cast C on or off.
+        levels_cap: plan override: ``False`` raises an error when ``levels`` exceeds what the frame
+            size allows instead of capping it.
+        diffusion: ``"auto"`` (the plan decides whether the window needs the sampler at all),
+            ``"always"`` or ``"never"`` (always fall back).
+        fallback: what a window that needs no diffusion gets: ``"baseline"`` (one prior pass) or
+            ``"tfp"`` (demosaicked, colour-corrected TFP); ``None`` = the plan picks by noise.
+        noise_target: noise level (σ of the corrected TFP estimate, fraction of 1) at or below which
+            the plan skips diffusion (see :mod:`spikeview.guided.plan`).
+        cast_tolerance: relative deviation of the colour-cast gains from neutral below which C is
+            dropped (0.05 = 5 %).
+        reuse: let the plan reuse the previous result when the window did not change (``None`` =
+            on for video, decided by a count test).
+        reuse_alpha: significance level of that count test (smaller = reuse more often).
+    """
+
+    guidance: str = "hqs"
+    prior: str = "ffdnet"
+    model_path: str | None = None
+    steps: int = 8
+    t_start: float = 50.0 / 255.0
+    top_up: bool = True
+    sigma_end: float = 2.0 / 255.0
+    s: float = 1.0
+    lam: float = 1.0
+    data_steps: int = 1
+    zeta: float = 0.0
+    k: float = 50.0
+    quantise: bool = True
+    levels: int = 2
+    dense_gradient: bool = True
+    eta: float = 2.0
+    alpha: list[float] | None = None
+    alpha_max_windows: int = 64
+    window: int = 10
+    demosaic: str = "bilinear"
+    sigma_scale: float = 1.0
+    self_ensemble: bool = True
+    seed: int = 0
+    warm_start: bool = False
+    use_mosaic: bool | None = None
+    use_cast: bool | None = None
+    levels_cap: bool = True
+    diffusion: str = "auto"
+    fallback: str | None = None
+    noise_target: float = 4.0 / 255.0
+    cast_tolerance: float = 0.05
+    reuse: bool | None = None
+    reuse_alpha: float = 1e-3
+
+    def __post_init__(self) -> None:
+        _check_choice("guidance", self.guidance, GUIDANCES)
+        _check_choice("prior", self.prior, PRIORS)
+        _check_choice("diffusion", self.diffusion, DIFFUSION_MODES)
+        _check_choice("demosaic", self.demosaic, DEMOSAICS)
+        if self.fallback is not None:
+            _check_choice("fallback", self.fallback, FALLBACKS)
+        for name in ("steps", "window", "levels", "data_steps", "seed", "alpha_max_windows"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise ParameterError(f"GuidedConfig.{name} = {v!r} must be a whole number.")
+        if self.alpha is not None:
+            a = [float(v) for v in self.alpha]
+            if len(a) != 3 or not all(math.isfinite(v) and v > 0 for v in a):
+                raise ParameterError(f"GuidedConfig.alpha = {self.alpha!r} must be three finite positive gains [R, G, B], or unset.")
+            self.alpha = a
+        if self.alpha_max_windows < 1:
+            raise ParameterError(f"GuidedConfig.alpha_max_windows = {self.alpha_max_windows} is out of range: use at least 1.")
+        if self.steps < 1:
+            raise ParameterError(f"GuidedConfig.steps = {self.steps} is out of range: use at least 1 step.")
+        if self.window < 1:
+            raise ParameterError(f"GuidedConfig.window = {self.window} is out of range: use a window of at least 1 tick.")
+        if self.levels < 0:
+            raise ParameterError(f"GuidedConfig.levels = {self.levels} is out of range: use 0 (no pyramid) or more.")
+        if self.data_steps < 0:
+            raise ParameterError(f"GuidedConfig.data_steps = {self.data_steps} is out of range: use 0 or more.")
+        _check_range("t_start", self.t_start, 0.0, SIGMA_MAX + 1e-9)
+        _check_range("sigma_end", self.sigma_end, 0.0, SIGMA_MAX + 1e-9, lo_open=True)
+        _check_range("s", self.s, 0.0, math.inf)
+        _check_range("lam", self.lam, 0.0, math.inf, lo_open=True)
+        _check_range("zeta", self.zeta, 0.0, 1.0)
+        _check_range("k", self.k, 0.0, math.inf)
+        _check_range("eta", self.eta, 0.0, math.inf, lo_open=True)
+        _check_range("sigma_scale", self.sigma_scale, 0.0, math.inf, lo_open=True)
+        _check_range("noise_target", self.noise_target, 0.0, 1.0)
+        _check_range("cast_tolerance", self.cast_tolerance, 0.0, math.inf)
+        _check_range("reuse_alpha", self.reuse_alpha, 0.0, 1.0, lo_open=True)

@@ -1,0 +1,207 @@
+"""What the guided sampler sees of one window: the mosaicked TFP, the CFA, Δτ and the colour cast.
+
+An :class:`Observation` is built from a :class:`~spikeview.io.source.SpikeSource` and a centre
+tick (:meth:`Observation.from_source`) or from a TFP array directly. It carries
+
+* ``y``: the ``(H, W)`` float32 mosaicked SFR (TFP, ``count / Δτ`` in ``{0, 1/Δτ, …, 1}``),
+* ``cfa``: the Bayer pattern of ``y``'s top-left 2×2 (``None`` = monochrome),
+* ``window``: Δτ in ticks, and ``ticks = (a, b)``, the ticks ``[a, b)`` that were counted,
+* ``alpha``: the sequence's gray-world gains ``(3,)`` (``None`` for monochrome), estimated **once
+  per sequence** by :func:`spikeview.classical.colour_cast.estimate_alpha` unless given,
+* ``eta``: the range parameter; the corrected estimate is ``Y · α / η``.
+
+The noise of ``y`` (:meth:`Observation.variance`) uses the binomial TFP model of
+:mod:`spikeview.ops.noise`, **scaled to the data**: an integrate-and-fire pixel with a random phase
+fires ``floor(pΔτ + U)`` times, whose variance is far below the binomial one, while sensor noise
+(shot noise, jitter, fixed pattern) moves it back up. The scale ``κ_c`` per channel is the ratio
+of a robust noise estimate from the frame itself (trimmed mean square of the finest diagonal
+Haar detail of each Bayer plane, :func:`haar_noise_variance`) to the model's mean variance, clipped to
+``[1/64, 4]``. So the noise level handed to the prior is derived from the data, not set by hand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from spikeview.cfa import channel_map, parse_cfa
+from spikeview.classical.tfp import counts_to_sfr, window_counts
+from spikeview.classical.windows import window_range
+from spikeview.errors import ParameterError
+from spikeview.io.source import SpikeSource
+
+#: clip range of the data-derived scale of the binomial variance model
+KAPPA_RANGE = (1.0 / 64.0, 4.0)
+#: pseudo-count of the binomial model (Jeffreys), see :func:`spikeview.ops.noise.tfp_variance`
+PRIOR_COUNT = 0.5
+
+
+def binomial_variance(y: np.ndarray, window: int, prior: float = PRIOR_COUNT) -> np.ndarray:
+    """:func:`spikeview.ops.noise.tfp_variance` on a numpy array (float32, shape of ``y``)."""
+    import torch
+
+    from spikeview.ops.noise import tfp_variance
+
+    return tfp_variance(torch.from_numpy(np.ascontiguousarray(y, dtype=np.float32)), window, prior).numpy()
+
+
+def _bayer_planes(y: np.ndarray) -> list[tuple[slice, slice]]:
+    return [(slice(i, None, 2), slice(j, None, 2)) for i in (0, 1) for j in (0, 1)]
+
+
+def haar_noise_variance(plane: np.ndarray, keep: float = 0.9) -> float | None:
+    """Robust noise variance of a 2-D plane from its finest diagonal Haar detail.
+
+    ``HH = (a - b - c + d) / 2`` over non-overlapping 2×2 blocks has the noise's variance for white
+    noise and is nearly blind to smooth content. Edges give large ``HH``, so the largest
+    ``1 − keep`` of ``HH²`` are dropped and the trimmed mean is divided by its Gaussian value
+    (``E[z² | z² <= q] · keep`` for the ``keep`` quantile ``q`` of χ²₁, 0.623 for keep = 0.9).
+    A trimmed mean, not Donoho's median, because TFP values are quantised (multiples of 1/Δτ),
+    which makes the median of ``|HH|`` jump between levels.
+
+    Returns:
+        The variance, or ``None`` for planes smaller than 2×2 (no block).
+    """
+    h, w = plane.shape
+    h2, w2 = h - h % 2, w - w % 2
+    if h2 < 2 or w2 < 2:
+        return None
+    p = plane[:h2, :w2].astype(np.float64)
+    hh2 = np.sort((((p[0::2, 0::2] - p[0::2, 1::2] - p[1::2, 0::2] + p[1::2, 1::2]) / 2.0) ** 2).ravel())
+    n_keep = max(1, int(np.ceil(keep * hh2.size)))
+    return float(hh2[:n_keep].sum() / hh2.size) / _trim_factor(keep)
+
+
+def _trim_factor(keep: float) -> float:
+    """``E[z² · 1{z² <= q}]`` for ``z ~ N(0, 1)`` and ``q`` the ``keep`` quantile of ``z²``."""
+    from scipy.stats import norm
+
+    a = float(norm.ppf(0.5 + keep / 2.0))
+    return keep - 2.0 * a * float(norm.pdf(a))
+
+
+@dataclass
+class Observation:
+    """One TFP window of a stream, with everything the forward model needs (see module docstring).
+
+    Attributes:
+        y: ``(H, W)`` float32 mosaicked SFR in [0, 1].
+        cfa: Bayer pattern (top-left 2×2 after flips) or ``None`` for monochrome.
+        window: Δτ in ticks.
+        alpha: ``(3,)`` float gray-world gains of the sequence, or ``None`` (monochrome, or no C).
+        eta: range parameter η > 0 (corrected estimate ``Y·α/η``).
+        ticks: ``(a, b)``: the ticks ``[a, b)`` counted (``None`` when built from an array).
+        center: the centre tick asked for (``None`` when built from an array).
+        previous: the observation of the window before (same size), for the plan's reuse test.
+    """
+
+    y: np.ndarray
+    cfa: str | None
+    window: int
+    alpha: np.ndarray | None = None
+    eta: float = 2.0
+    ticks: tuple[int, int] | None = None
+    center: int | None = None
+    previous: "Observation | None" = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        y = np.asarray(self.y)
+        if y.ndim != 2:
+            raise ParameterError(f"Observation.y must be an (H, W) mosaicked TFP frame, got shape {y.shape}.")
+        if y.shape[0] < 2 or y.shape[1] < 2:
+            raise ParameterError(f"Observation.y of shape {y.shape} is too small: frames need at least 2x2 pixels.")
+        self.y = np.clip(np.nan_to_num(y.astype(np.float32, copy=False), nan=0.0), 0.0, 1.0)
+        self.cfa = parse_cfa(self.cfa)
+        if isinstance(self.window, bool) or not isinstance(self.window, (int, np.integer)) or self.window < 1:
+            raise ParameterError(f"window = {self.window!r} must be a whole number of ticks >= 1.")
+        self.window = int(self.window)
+        if not (np.isfinite(self.eta) and self.eta > 0):
+            raise ParameterError(f"eta = {self.eta!r} must be a positive finite number (e.g. 2.0).")
+        if self.alpha is not None:
+            a = np.asarray(self.alpha, dtype=np.float64).reshape(-1)
+            if self.cfa is None or a.shape != (3,) or not np.all(np.isfinite(a)) or np.any(a <= 0):
+                if self.cfa is None:
+                    a = None  # monochrome: no cast
+                else:
+                    raise ParameterError(f"alpha must be three finite positive gains [R, G, B], got {self.alpha!r}.")
+            self.alpha = a
+
+    # -------------------------------------------------------------------------- construction
+    @classmethod
+    def from_source(cls, source: SpikeSource, center: int, window: int = 10, *, alpha: np.ndarray | list[float] | None = None,
+                    eta: float = 2.0, previous: bool = False) -> "Observation":
+        """The ``window``-tick TFP window around ``center`` (see :func:`~spikeview.classical.windows.window_range`).
+
+        Args:
+            source: spike stream; its CFA names the mosaic.
+            center: centre tick.
+            window: Δτ in ticks.
+            alpha: the sequence's gray-world gains (estimate them once per sequence with
+                :func:`spikeview.classical.colour_cast.estimate_alpha`); ``None`` = no colour cast.
+            eta: range parameter.
+            previous: also read the window just before (for the plan's reuse test), when there is one.
+        """
+        a, b = window_range(center, window, source.n_frames)
+        y = counts_to_sfr(window_counts(source, a, b), b - a)
+        prev = None
+        if previous and a - window >= 0:
+            pa, pb = a - window, a
+            prev = cls(counts_to_sfr(window_counts(source, pa, pb), window), source.cfa, window, alpha, eta, (pa, pb), None)
+        return cls(y, source.cfa, b - a, alpha, eta, (a, b), int(center), prev)
+
+    # ------------------------------------------------------------------------------ geometry
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (int(self.y.shape[0]), int(self.y.shape[1]))
+
+    @property
+    def channels(self) -> int:
+        """3 for a Bayer CFA, 1 for monochrome."""
+        return 1 if self.cfa is None else 3
+
+    def channel_map(self) -> np.ndarray:
+        """``(H, W)`` int channel index of every photosite (zeros for monochrome)."""
+        if self.cfa is None:
+            return np.zeros(self.shape, dtype=np.int8)
+        return channel_map(self.cfa, *self.shape)
+
+    def gains(self) -> np.ndarray:
+        """Sensor-side gain per channel, ``η / α_c`` (ones when there is no cast)."""
+        if self.alpha is None:
+            return np.ones(self.channels)
+        return self.eta / self.alpha
+
+    # --------------------------------------------------------------------------------- noise
+    def noise_scale(self) -> np.ndarray:
+        """Data-derived scale κ_c of the binomial variance per channel (see module docstring).
+
+        Returns:
+            ``(channels,)`` float64 in :data:`KAPPA_RANGE`; 1 where a channel's planes are too small
+            or flat (no estimate).
+        """
+        model = binomial_variance(self.y, self.window)
+        cmap = self.channel_map()
+        est: dict[int, list[float]] = {c: [] for c in range(self.channels)}
+        mod: dict[int, list[float]] = {c: [] for c in range(self.channels)}
+        planes = _bayer_planes(self.y) if self.cfa is not None else [(slice(None), slice(None))]
+        for sl in planes:
+            v = haar_noise_variance(self.y[sl])
+            if v is None:
+                continue
+            c = int(cmap[sl][0, 0])
+            est[c].append(v)
+            mod[c].append(float(model[sl].mean()))
+        out = np.ones(self.channels)
+        for c in range(self.channels):
+            if est[c] and np.mean(mod[c]) > 0:
+                out[c] = np.clip(np.mean(est[c]) / np.mean(mod[c]), *KAPPA_RANGE)
+        return out
+
+    def variance(self) -> np.ndarray:
+        """``(H, W)`` float32 per-photosite variance of ``y`` (SFR² units): κ_c × binomial model."""
+        kappa = self.noise_scale()
+        return (binomial_variance(self.y, self.window) * kappa[self.channel_map()]).astype(np.float32)
+
+    def previous_window(self) -> "Observation | None":
+        return self.previous

@@ -1,0 +1,220 @@
+"""The scene plan: which stages a window needs, decided from the data before sampling, with reasons.
+
+:func:`make_plan` looks at one :class:`~spikeview.guided.observation.Observation` and the
+:class:`~spikeview.guided.config.GuidedConfig` and returns a :class:`Plan`. Every choice carries a
+one-line reason and every one can be overridden by the config (the reason then says so):
+
+============  ==========================================================================  ==================
+choice        rule                                                                        override
+============  ==========================================================================  ==================
+mosaic (M)    on for a Bayer CFA, off for a monochrome stream (nothing to demosaic)        ``use_mosaic``
+cast (C)      off when the gains η/α_c are within ``cast_tolerance`` of their mean            ``use_cast``
+              (the cast is neutral: C would only rescale), on otherwise; off without M
+levels        ``levels``, capped at what the frame size allows (each level halves the        ``levels_cap``
+              size; the coarsest band keeps at least 1 pixel)
+diffusion     skipped when the data-derived noise σ of the corrected TFP estimate is at    ``diffusion``
+              or below ``noise_target`` (bright or long windows: TFP already meets the
+              target); then ``fallback`` is ``"tfp"`` when σ <= noise_target / 4, else
+              the one-pass ``"baseline"``
+reuse         the previous window's result is reused when the counts of this window and   ``reuse``
+              the previous one agree within their noise (χ² test at level
+              ``reuse_alpha``); ``changed`` marks the 16×16 blocks that did change
+============  ==========================================================================  ==================
+
+``str(plan)`` prints the decisions and their reasons, one per line.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import chi2
+
+from spikeview.errors import ParameterError
+from spikeview.guided.config import GuidedConfig
+from spikeview.guided.observation import Observation
+from spikeview.ops.pyramid import max_pyramid_levels
+
+#: block size (pixels) of the region-level change test
+BLOCK = 16
+
+
+@dataclass
+class Plan:
+    """What the guided reconstruction of one window will do, and why.
+
+    Attributes:
+        mosaic: use M (a Bayer CFA and a 3-channel prior); False = reconstruct a gray frame.
+        cast: use C in the forward model (and correct the start estimate by it).
+        levels: pyramid levels actually used (band-pass levels; 0 = plain residual).
+        diffusion: run the sampler; False = return ``fallback``.
+        fallback: ``"baseline"`` or ``"tfp"``: what a window without diffusion gets.
+        reuse: the previous result can be returned unchanged (the window did not change).
+        changed: ``(ceil(H/16), ceil(W/16))`` bool map of blocks whose counts changed, or ``None``
+            when there is no previous window.
+        sigma: per-channel data-derived noise level of the corrected TFP estimate (fraction of 1).
+        reasons: one sentence per choice, keyed by the attribute name.
+    """
+
+    mosaic: bool
+    cast: bool
+    levels: int
+    diffusion: bool
+    fallback: str
+    reuse: bool
+    changed: np.ndarray | None
+    sigma: np.ndarray
+    reasons: dict[str, str] = field(default_factory=dict)
+
+    def __str__(self) -> str:
+        sig = ", ".join(f"{255 * s:.1f}" for s in self.sigma)
+        lines = [f"plan (noise σ of the TFP estimate per channel: {sig} /255):"]
+        values = {
+            "mosaic": "on" if self.mosaic else "off",
+            "cast": "on" if self.cast else "off",
+            "levels": str(self.levels),
+            "diffusion": "on" if self.diffusion else f"off -> {self.fallback}",
+            "reuse": "yes" if self.reuse else "no",
+        }
+        for key, val in values.items():
+            lines.append(f"  {key:<9} {val:<16} {self.reasons.get(key, '')}")
+        return "\n".join(lines)
+
+
+def max_levels(height: int, width: int) -> int:
+    """Largest number of band-pass pyramid levels an ``H × W`` frame allows (ops' bands minus 1)."""
+    return max_pyramid_levels(height, width) - 1
+
+
+def estimate_sigma(obs: Observation, use_mosaic: bool = True, use_cast: bool = True) -> np.ndarray:
+    """Per-channel noise σ of the bilinear-demosaicked, colour-corrected TFP estimate Y₀.
+
+    Propagates :meth:`Observation.variance` (binomial model scaled to the data) through bilinear
+    demosaicking (:func:`spikeview.ops.noise.demosaic_variance`) and the correction gains α_c/η,
+    then takes the RMS over pixels. Monochrome (or ``use_mosaic=False``): RMS of the photosite σ.
+
+    Returns:
+        ``(3,)`` (or ``(1,)``) float64 σ in [0, 1] image units.
+    """
+    import torch
+
+    from spikeview.ops.noise import demosaic_variance
+
+    var = obs.variance()
+    if obs.cfa is None or not use_mosaic:
+        return np.array([math.sqrt(float(var.mean()))])
+    v = demosaic_variance(torch.from_numpy(var)[None, None], obs.cfa)[0].numpy()
+    gain = (obs.alpha / obs.eta) if (use_cast and obs.alpha is not None) else np.ones(3)
+    return np.sqrt(v.reshape(3, -1).mean(axis=1)) * gain
+
+
+def changed_blocks(obs: Observation, alpha: float = 1e-3) -> np.ndarray | None:
+    """Blocks whose counts differ from the previous window by more than their noise.
+
+    For every photosite ``d = y − y_prev`` has variance ``Var[y] + Var[y_prev]`` when nothing moved;
+    per 16×16 block, ``Σ d² / (Var[y] + Var[y_prev])`` is compared with the ``1 − alpha`` quantile of
+    χ² with as many degrees of freedom as photosites.
+
+    Returns:
+        ``(ceil(H/16), ceil(W/16))`` bool array (True = changed), or ``None`` without a previous window.
+    """
+    prev = obs.previous
+    if prev is None or prev.y.shape != obs.y.shape:
+        return None
+    var = obs.variance() + prev.variance()
+    z = (obs.y - prev.y) ** 2 / np.maximum(var, 1e-8)
+    h, w = z.shape
+    bh, bw = -(-h // BLOCK), -(-w // BLOCK)
+    out = np.zeros((bh, bw), dtype=bool)
+    for i in range(bh):
+        for j in range(bw):
+            blk = z[i * BLOCK:(i + 1) * BLOCK, j * BLOCK:(j + 1) * BLOCK]
+            out[i, j] = float(blk.sum()) > chi2.ppf(1.0 - alpha, blk.size)
+    return out
+
+
+def _cast_neutral(obs: Observation, tol: float) -> tuple[bool, str]:
+    g = obs.gains()
+    dev = float(np.max(np.abs(g / g.mean() - 1.0)))
+    if dev <= tol:
+        return True, f"gains η/α = {np.round(g, 3).tolist()} are within {100 * tol:.0f}% of neutral ({100 * dev:.1f}%)"
+    return False, f"gains η/α = {np.round(g, 3).tolist()} deviate {100 * dev:.0f}% from neutral"
+
+
+def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
+    """Analyse one window and decide the stages (see the module docstring for the rules).
+
+    Args:
+        obs: the window (with ``previous`` set when the reuse test should run).
+        params: the reconstruction settings (defaults if ``None``).
+
+    Raises:
+        ParameterError: ``params.levels`` exceeds the size cap while ``params.levels_cap`` is False.
+    """
+    p = params if params is not None else GuidedConfig()
+    r: dict[str, str] = {}
+
+    # --- M
+    if p.use_mosaic is not None:
+        mosaic = bool(p.use_mosaic) and obs.cfa is not None
+        r["mosaic"] = f"set by use_mosaic={p.use_mosaic}" + ("" if mosaic or not p.use_mosaic else " (but the stream is monochrome)")
+    elif obs.cfa is None:
+        mosaic, r["mosaic"] = False, "monochrome stream: no CFA to model"
+    else:
+        mosaic, r["mosaic"] = True, f"Bayer {obs.cfa} stream"
+
+    # --- C
+    if not mosaic:
+        cast, r["cast"] = False, "no colour channels (M is off)"
+    elif obs.alpha is None:
+        cast, r["cast"] = False, "no colour-cast estimate (α) given"
+    elif p.use_cast is not None:
+        cast, r["cast"] = bool(p.use_cast), f"set by use_cast={p.use_cast}"
+    else:
+        neutral, why = _cast_neutral(obs, p.cast_tolerance)
+        cast, r["cast"] = (not neutral), why
+
+    # --- levels
+    top = max_levels(*obs.shape)
+    if p.levels > top:
+        if not p.levels_cap:
+            raise ParameterError(
+                f"GuidedConfig.levels = {p.levels} is too many for a {obs.shape[0]}x{obs.shape[1]} frame: use at most {top}."
+            )
+        levels, r["levels"] = top, f"capped from {p.levels}: a {obs.shape[0]}x{obs.shape[1]} frame allows at most {top}"
+    else:
+        levels, r["levels"] = p.levels, f"as set (a {obs.shape[0]}x{obs.shape[1]} frame allows up to {top})"
+
+    # --- diffusion
+    sigma = estimate_sigma(obs, mosaic, cast)
+    smax = float(sigma.max())
+    auto_fallback = "tfp" if smax <= p.noise_target / 4 else "baseline"
+    fallback = p.fallback or auto_fallback
+    if p.diffusion == "always":
+        diffusion, r["diffusion"] = True, "set by diffusion='always'"
+    elif p.diffusion == "never":
+        diffusion, r["diffusion"] = False, "set by diffusion='never'"
+    elif smax <= p.noise_target:
+        diffusion = False
+        r["diffusion"] = (f"TFP noise σ = {255 * smax:.2f}/255 already meets the target {255 * p.noise_target:.2f}/255 "
+                          f"(bright or long window)")
+    else:
+        diffusion = True
+        r["diffusion"] = f"TFP noise σ = {255 * smax:.1f}/255 is above the target {255 * p.noise_target:.2f}/255"
+    if not diffusion:
+        r["diffusion"] += f"; fallback {fallback}" + (" (set by fallback)" if p.fallback else "")
+
+    # --- reuse
+    changed = changed_blocks(obs, p.reuse_alpha) if p.reuse is not False else None
+    if p.reuse is False:
+        reuse, r["reuse"] = False, "set by reuse=False"
+    elif changed is None:
+        reuse, r["reuse"] = False, "no previous window to compare with"
+    elif not changed.any():
+        reuse, r["reuse"] = True, f"counts match the previous window within their noise (all {changed.size} blocks)"
+    else:
+        reuse = False
+        r["reuse"] = f"{int(changed.sum())} of {changed.size} blocks changed beyond their noise"
+    return Plan(mosaic, cast, levels, diffusion, fallback, reuse, changed, sigma, r)

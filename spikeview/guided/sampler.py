@@ -1,0 +1,267 @@
+"""The guided sampler (SpikeDiff): a small driver over prior, schedule, guidance and forward model.
+
+Parts (diffusers style, each swappable):
+
+* **prior**: a :class:`~spikeview.guided.priors.base.DenoiserPrior` (``denoise(x, σ)``), FFDNet by default;
+* **schedule**: :class:`~spikeview.guided.schedule.VESchedule` (``set_timesteps`` then ``step``);
+* **guidance**: :class:`~spikeview.guided.guidance.DPSGuidance` or :class:`~spikeview.guided.guidance.HQSGuidance`;
+* **forward model**: :class:`spikeview.ops.forward.ForwardModel` (A = Q∘C∘M) inside a
+  :class:`~spikeview.guided.likelihood.DataTerm` (noise weights + multiscale loss).
+
+:meth:`GuidedSampler.run` reconstructs one window:
+
+1. plan the window (:func:`~spikeview.guided.plan.make_plan`); a window that needs no diffusion
+   returns the one-pass baseline or TFP, one whose counts did not change returns the previous result;
+2. ``Y₀`` = bilinear-demosaicked, colour-corrected TFP; σ_obs,c = its data-derived noise per
+   channel (× ``sigma_scale``);
+3. start: ``Z = Y₀ + σ_add·z`` with ``σ_add = t_start`` (or the top-up ``sqrt(t_start² − σ_obs²)``),
+   the prior told the total ``σ'_c = sqrt(σ_obs,c² + σ_add,c²)`` (capped at the prior's
+   ``sigma_max``). A warm start replaces ``Y₀`` by the previous result and σ_obs by 0;
+4. ``steps`` guided steps down a geometric per-channel σ ladder from σ' to ``sigma_end``, then 0;
+   after every step ``callback(step, total, preview)`` gets x̂₀ as an image, and the cancel flag is
+   checked before every step (:class:`spikeview.errors.Cancelled`);
+5. the last x̂₀, clamped to [0, 1], is the frame.
+
+Everything random comes from one ``torch.Generator`` seeded by ``params.seed``: a run is
+deterministic for a seed. Graphs live for one step only (inputs are detached between steps).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+
+from spikeview.errors import Cancelled, ParameterError
+from spikeview.guided.baseline import baseline, start_estimate, to_image, to_tensor
+from spikeview.guided.config import GuidedConfig
+from spikeview.guided.guidance import DPSGuidance, GuidanceRule, HQSGuidance
+from spikeview.guided.likelihood import DataTerm
+from spikeview.guided.observation import Observation
+from spikeview.guided.plan import Plan, make_plan
+from spikeview.guided.priors.base import DenoiserPrior, PriorUnavailableError
+from spikeview.guided.schedule import VESchedule
+from spikeview.ops.forward import ForwardModel
+
+#: ``callback(step, total, preview)``: step in 1..total, preview an (H, W, 3)/(H, W) float32 image of x̂₀
+Callback = Callable[[int, int, np.ndarray], Any]
+
+
+@functools.lru_cache(maxsize=4)
+def _load_ffdnet(color: bool, path: str | None) -> DenoiserPrior:
+    from spikeview.guided.priors.ffdnet import FFDNetDenoiser
+
+    return FFDNetDenoiser(color=color, weights=path)
+
+
+def load_prior(params: GuidedConfig, channels: int) -> DenoiserPrior:
+    """The prior named by ``params.prior`` for ``channels`` (3 RGB, 1 gray); loaded once and cached.
+
+    Raises:
+        PriorUnavailableError: weights missing, or ``prior="sd"`` without a usable ``model_path``.
+    """
+    if params.prior == "ffdnet":
+        return _load_ffdnet(channels == 3, params.model_path)
+    from spikeview.guided.latent import load_latent_prior
+
+    return load_latent_prior(params.model_path, channels)
+
+
+def _cancelled(cancel: Any) -> bool:
+    if cancel is None:
+        return False
+    if hasattr(cancel, "is_set"):
+        return bool(cancel.is_set())
+    if callable(cancel):
+        return bool(cancel())
+    return bool(cancel)
+
+
+@dataclass
+class RunInfo:
+    """What the last :meth:`GuidedSampler.run` did (for logs, benchmarks and the GUI).
+
+    Attributes:
+        plan: the window's plan.
+        mode: ``"diffusion"``, ``"baseline"``, ``"tfp"`` or ``"reused"``.
+        steps: prior calls made by the sampler.
+        sigma_start: per-channel σ' of the first prior call (fractions of 1).
+        seconds: wall-clock time of the run.
+    """
+
+    plan: Plan | None = None
+    mode: str = ""
+    steps: int = 0
+    sigma_start: list[float] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+class GuidedSampler:
+    """Driver of the guided reconstruction (see the module docstring).
+
+    Args:
+        params: settings; the guidance rule and the prior follow from them unless given.
+        prior: a denoiser to use instead of loading ``params.prior`` (e.g. a stand-in in tests);
+            it must have as many channels as the frames (3 for Bayer, 1 for monochrome).
+        guidance: a guidance rule to use instead of the one ``params`` names.
+    """
+
+    def __init__(self, params: GuidedConfig | None = None, *, prior: DenoiserPrior | None = None,
+                 guidance: GuidanceRule | None = None):
+        self.params = params if params is not None else GuidedConfig()
+        self._prior = prior
+        self._guidance = guidance
+        self.info = RunInfo()
+
+    # -------------------------------------------------------------------------------- parts
+    def prior_for(self, channels: int, params: GuidedConfig) -> DenoiserPrior:
+        if self._prior is not None:
+            if getattr(self._prior, "channels", channels) != channels:
+                raise ParameterError(
+                    f"the given prior works on {self._prior.channels} channel(s) but these frames have {channels}; "
+                    "pass a matching prior (RGB for Bayer streams, gray for monochrome)."
+                )
+            return self._prior
+        return load_prior(params, channels)
+
+    @staticmethod
+    def guidance_for(params: GuidedConfig) -> GuidanceRule:
+        if params.guidance == "dps":
+            return DPSGuidance(params.s)
+        return HQSGuidance(params.lam, params.data_steps)
+
+    @staticmethod
+    def forward_model(obs: Observation, plan: Plan, params: GuidedConfig) -> ForwardModel:
+        """A = Q∘C∘M for the plan (M off = gray frame, C off = no cast)."""
+        alpha = obs.alpha if (plan.cast and obs.alpha is not None) else None
+        return ForwardModel(obs.cfa if plan.mosaic else None, obs.window, alpha=alpha,
+                            eta=obs.eta if alpha is not None else 1.0, k=params.k if params.quantise else None,
+                            dense_grad=params.dense_gradient, cast=alpha is not None, levels=plan.levels + 1, norm="l2")
+
+    # ---------------------------------------------------------------------------------- run
+    def run(self, observation: Observation, params: GuidedConfig | None = None, callback: Callback | None = None,
+            cancel: Any = None, *, init: np.ndarray | None = None, previous: np.ndarray | None = None,
+            plan: Plan | None = None) -> np.ndarray:
+        """Reconstruct the frame of one window.
+
+        Args:
+            observation: the window (:meth:`Observation.from_source`).
+            params: settings for this run (default: the sampler's ``params``).
+            callback: ``callback(step, total, preview)`` after every step (preview = x̂₀ image).
+            cancel: a ``threading.Event``-like object (``is_set()``), a callable returning True to
+                stop, or a bool; checked before every step.
+            init: warm start: a previous result ``(H, W, 3)``/``(H, W)`` in [0, 1] to re-noise to
+                ``t_start`` instead of Y₀.
+            previous: the previous window's result, returned as is when the plan finds that the
+                counts did not change.
+            plan: a precomputed plan (default: :func:`make_plan`).
+
+        Returns:
+            ``(H, W, 3)`` float32 RGB in [0, 1] for a Bayer stream (``(H, W)`` when M is off).
+
+        Raises:
+            Cancelled: the cancel flag was set.
+            ParameterError: inconsistent settings (e.g. a prior with the wrong channels).
+        """
+        p = params if params is not None else self.params
+        t0 = time.perf_counter()
+        plan = plan if plan is not None else make_plan(observation, p)
+        info = RunInfo(plan=plan)
+        self.info = info
+        if _cancelled(cancel):
+            raise Cancelled("guided reconstruction cancelled before the first step")
+        channels = 3 if plan.mosaic else 1
+        if plan.reuse and previous is not None and (previous.ndim == 3) == (channels == 3):
+            info.mode, info.seconds = "reused", time.perf_counter() - t0
+            return previous.astype(np.float32, copy=True)
+        if not plan.diffusion:
+            if plan.fallback == "tfp":
+                out = start_estimate(observation, plan.mosaic, plan.cast, p.demosaic)
+            else:
+                out = baseline(observation, self.prior_for(channels, p), sigma_scale=p.sigma_scale,
+                               use_mosaic=plan.mosaic, use_cast=plan.cast, demosaic=p.demosaic)
+            info.mode, info.seconds = plan.fallback, time.perf_counter() - t0
+            if callback is not None:
+                callback(1, 1, out)
+            return out
+        out = self._sample(observation, p, plan, channels, callback, cancel, init)
+        info.mode, info.seconds = "diffusion", time.perf_counter() - t0
+        return out
+
+    def _sample(self, obs: Observation, p: GuidedConfig, plan: Plan, channels: int, callback: Callback | None,
+                cancel: Any, init: np.ndarray | None) -> np.ndarray:
+        prior = self.prior_for(channels, p)
+        rule = self._guidance if self._guidance is not None else self.guidance_for(p)
+        gen = torch.Generator().manual_seed(int(p.seed))
+        fm = self.forward_model(obs, plan, p)
+        y = torch.from_numpy(obs.y)[None, None]
+        data = DataTerm(fm, y, torch.from_numpy(obs.variance())[None, None], plan.levels)
+
+        sigma_obs = np.asarray(plan.sigma, dtype=np.float64) * p.sigma_scale
+        if sigma_obs.size != channels:
+            sigma_obs = np.full(channels, float(np.sqrt(np.mean(sigma_obs ** 2))))
+        if init is not None:
+            x_start = np.asarray(init, dtype=np.float32)
+            if x_start.shape != (obs.shape if channels == 1 else obs.shape + (3,)):
+                raise ParameterError(f"init has shape {x_start.shape}, expected that of the frame; pass the previous result of the same stream.")
+            sigma_obs = np.zeros(channels)
+            t_s = max(p.t_start, p.sigma_end)
+        else:
+            x_start = start_estimate(obs, plan.mosaic, plan.cast, p.demosaic)
+            t_s = p.t_start
+        if p.top_up:
+            sigma_add = np.sqrt(np.maximum(t_s ** 2 - sigma_obs ** 2, 0.0))
+        else:
+            sigma_add = np.full(channels, t_s)
+        sigma_first = np.minimum(np.sqrt(sigma_obs ** 2 + sigma_add ** 2), getattr(prior, "sigma_max", math.inf))
+        sigma_first = np.maximum(sigma_first, 1e-4)
+        self.info.sigma_start = sigma_first.tolist()
+
+        schedule = VESchedule(tuple(sigma_first), p.sigma_end)
+        schedule.set_timesteps(p.steps)
+        x0 = to_tensor(x_start)
+        add = torch.as_tensor(sigma_add, dtype=x0.dtype).view(1, -1, 1, 1)
+        x = schedule.add_noise(x0, add, gen)
+        for i in range(p.steps):
+            if _cancelled(cancel):
+                raise Cancelled(f"guided reconstruction cancelled at step {i + 1} of {p.steps}")
+            sigma = schedule.sigma(i, x)
+            transform = (i % 8) if p.self_ensemble else None
+            x, x0 = rule.step(prior, schedule, data, x, i, sigma, zeta=p.zeta, generator=gen, transform=transform)
+            self.info.steps = i + 1
+            if callback is not None:
+                callback(i + 1, p.steps, to_image(x0))
+        out = to_image(x0)
+        if not np.all(np.isfinite(out)):  # pragma: no cover - guarded by clamps; never return NaN
+            out = np.nan_to_num(out, nan=0.0)
+        return out
+
+
+def reconstruct_frame(source, center: int, params: GuidedConfig | None = None, *, alpha: np.ndarray | None = None,
+                      callback: Callback | None = None, cancel: Any = None, sampler: GuidedSampler | None = None) -> np.ndarray:
+    """Guided reconstruction of the window of ``source`` centred on tick ``center``.
+
+    Args:
+        source: a :class:`~spikeview.io.source.SpikeSource`.
+        center: centre tick.
+        params: settings (defaults if ``None``).
+        alpha: the sequence's gray-world gains; ``None`` uses ``params.alpha`` or estimates them over
+            the whole stream (:func:`spikeview.classical.colour_cast.estimate_alpha`).
+        callback, cancel: see :meth:`GuidedSampler.run`.
+        sampler: reuse a sampler (and its loaded prior).
+
+    Returns:
+        ``(H, W, 3)`` float32 in [0, 1] (``(H, W)`` for monochrome).
+    """
+    from spikeview.guided.video import resolve_alpha
+
+    p = params if params is not None else GuidedConfig()
+    a = resolve_alpha(source, p, alpha)
+    obs = Observation.from_source(source, center, p.window, alpha=a, eta=p.eta)
+    return (sampler or GuidedSampler(p)).run(obs, p, callback, cancel)

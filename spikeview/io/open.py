@@ -1,0 +1,254 @@
+"""Opening any spike file as a :class:`~spikeview.io.source.SpikeSource`.
+
+Where each setting comes from, first match wins:
+
+* **format**: the ``format`` argument; the suffix ``.npy``/``.npz`` (→ ``npz``); the sidecar;
+  detection: a raw 1000×1000 stream is recognised by its block tags, otherwise the file size is
+  matched against the known geometries (plain 1000×1000, plain 400×250, raw 400×250) and the
+  given width/height.
+* **width/height**: the arguments; the sidecar; the format (raw formats have fixed sizes); the
+  array shape (``.npy``/``.npz``); detection by file size as above.
+* **cfa, flips, tick rate**: the arguments; the sidecar; the format's defaults (plain and raw
+  400×250 files are stored upside down: ``flip_vertical=True``; raw 1000×1000 and arrays: no flip;
+  20,000 ticks per second; monochrome).
+
+When the geometry stays ambiguous or unknown, :class:`~spikeview.errors.GeometryError` lists the
+``(width, height)`` candidates that fit and the flags to pass. Any detection that was a guess is
+stated in ``info.warnings``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spikeview.cfa import parse_cfa
+from spikeview.errors import GeometryError, InputFileError, ParameterError
+from spikeview.io._base import check_dims, check_tick_rate, open_bytes
+from spikeview.io.sidecar import SIDECAR_SUFFIX, read_sidecar
+from spikeview.io.source import DEFAULT_TICK_RATE, FORMATS, SpikeSource
+
+#: plain-file geometries tried by size detection, as (width, height)
+KNOWN_PLAIN_GEOMETRIES: tuple[tuple[int, int], ...] = ((1000, 1000), (400, 250))
+#: default vertical flip of each format (plain and raw400 files are stored upside down)
+DEFAULT_FLIP_VERTICAL = {"plain": True, "raw400": True, "raw1m": False, "npz": False}
+#: aspect ratios (w, h) used to suggest geometries for a plain file of unknown size
+_ASPECTS = ((1, 1), (8, 5), (4, 3), (16, 9), (5, 4), (3, 2), (2, 1))
+
+
+class _Unset:
+    def __repr__(self) -> str:
+        return "<unset>"
+
+
+#: marks "not given" for arguments where ``None`` is a meaningful value (``cfa=None`` = monochrome)
+UNSET: Any = _Unset()
+
+
+def open_source(path: str | os.PathLike[str], *, format: str | None = None, width: int | None = None,
+                height: int | None = None, cfa: str | None = UNSET, flip_vertical: bool | None = None,
+                flip_horizontal: bool | None = None, tick_rate: float | None = None, layout: str | None = None,
+                key: str | None = None, tag_check: str | None = None) -> SpikeSource:
+    """Open a spike file: sidecar read automatically, explicit arguments override it.
+
+    Args:
+        path: a plain ``.dat``, raw 400×250, raw 1000×1000, ``.npy`` or ``.npz`` spike file.
+        format: ``plain``, ``raw400``, ``raw1m`` or ``npz`` (also for ``.npy``); default: see the
+            module docstring.
+        width, height: decoded frame size in pixels.
+        cfa: top-left 2×2 after the flips (``"RGGB"`` …), or ``None``/``"none"`` for monochrome.
+            Leave unset to take it from the sidecar (monochrome when there is none).
+        flip_vertical, flip_horizontal: flips applied after decoding.
+        tick_rate: readouts per second (Hz), default 20,000.
+        layout: ``"thw"``/``"hwt"`` axis order of ``.npy``/``.npz`` arrays.
+        key: the ``.npz`` member that holds the spikes.
+        tag_check: raw 1000×1000 only: ``"sequence"`` (default) or ``"lenient"``.
+
+    Returns:
+        A :class:`SpikeSource` (close it, or use it as a context manager). Its ``info.extra`` holds
+        the sidecar's free-form tables (``simulation``, ``recording`` …).
+
+    Raises:
+        InputFileError: missing file, folder, empty file, unreadable or damaged file, bad sidecar.
+        GeometryError: format or geometry could not be determined (``candidates`` lists the
+            ``(width, height)`` pairs that would fit).
+        ParameterError: an argument has an invalid value (unknown CFA, negative width …).
+    """
+    path = Path(path)
+    _check_path(path)
+    side = read_sidecar(path)
+    st = side.stream if side is not None else None
+
+    # ---------------------------------------------------------------------------- settings
+    if format is not None:
+        fmt: str | None = _check_format(format)
+    elif path.suffix.lower() in (".npy", ".npz"):
+        fmt = "npz"
+    elif st is not None:
+        fmt = st.format
+    else:
+        fmt = None
+    if width is not None or height is not None:
+        check_dims(width if width is not None else 1, height if height is not None else 1)
+    w = width if width is not None else (st.width if st is not None else None)
+    h = height if height is not None else (st.height if st is not None else None)
+    if cfa is not UNSET:
+        cfa_v = parse_cfa(cfa)
+    else:
+        cfa_v = parse_cfa(st.cfa) if st is not None else None
+    tr = check_tick_rate(tick_rate) if tick_rate is not None else (st.tick_rate if st is not None else DEFAULT_TICK_RATE)
+    if tag_check is not None and fmt not in (None, "raw1m"):
+        raise ParameterError(f"tag_check applies only to raw 1000x1000 streams, not to format {fmt!r}; drop it.")
+    notes: list[str] = []
+
+    # --------------------------------------------------------------------------- detection
+    if fmt is None:
+        fmt, w, h, note = _detect(path, width=w, height=h)
+        notes.append(note)
+    if layout is not None and fmt != "npz":
+        raise ParameterError(f"layout applies only to .npy/.npz arrays, not to format {fmt!r}; drop --layout.")
+
+    fv = flip_vertical if flip_vertical is not None else (st.flip_vertical if st is not None else DEFAULT_FLIP_VERTICAL[fmt])
+    fh = flip_horizontal if flip_horizontal is not None else (st.flip_horizontal if st is not None else False)
+
+    # ------------------------------------------------------------------------------ reader
+    src: SpikeSource
+    if fmt == "plain":
+        if w is None or h is None:
+            raise _unknown_plain_geometry(path, w, h)
+        from spikeview.io.plain import PlainDatSource
+
+        src = PlainDatSource(path, w, h, flip_vertical=fv, flip_horizontal=fh, cfa=cfa_v, tick_rate=tr)
+    elif fmt in ("raw400", "raw1m"):
+        from spikeview.io import raw
+
+        fixed = (raw.RAW400_WIDTH, raw.RAW400_HEIGHT) if fmt == "raw400" else (raw.RAW1M_WIDTH, raw.RAW1M_HEIGHT)
+        given = (width, height)
+        if any(g is not None and g != f for g, f in zip(given, fixed)):
+            raise ParameterError(f"{fmt} streams are always {fixed[0]}x{fixed[1]}, but width/height "
+                                 f"{width}x{height} were given; drop --width/--height or change --format.")
+        if fmt == "raw400":
+            src = raw.Raw400Source(path, flip_vertical=fv, flip_horizontal=fh, cfa=cfa_v, tick_rate=tr)
+        else:
+            src = raw.Raw1MSource(path, flip_vertical=fv, flip_horizontal=fh, cfa=cfa_v, tick_rate=tr,
+                                  tag_check=tag_check or "sequence")
+    else:
+        from spikeview.io.arrays import NpySource
+
+        src = NpySource(path, layout=layout, width=w, height=h, cfa=cfa_v, tick_rate=tr, flip_vertical=fv,
+                        flip_horizontal=fh, key=key)
+
+    src.info.warnings.extend(n for n in notes if n)
+    if side is not None:
+        src.info.extra.update(side.tables)
+        src.info.extra.setdefault("sidecar", str(side.path))
+    return src
+
+
+# --------------------------------------------------------------------------------- helpers
+def _check_path(path: Path) -> None:
+    if not path.exists():
+        raise InputFileError(f"{path}: file not found; check the path.")
+    if path.is_dir():
+        raise InputFileError(f"{path}: is a folder; point to a spike file (.dat, .npy, .npz) inside it.")
+    if path.suffix == SIDECAR_SUFFIX and path.with_suffix("").is_file():
+        raise InputFileError(f"{path}: is a sidecar (settings), not spike data; open {path.with_suffix('').name} instead.")
+    try:
+        size = path.stat().st_size
+    except OSError as e:
+        raise InputFileError(f"{path}: cannot read the file ({e.strerror or e}); check the path.") from None
+    if size == 0:
+        raise InputFileError(f"{path}: the file is empty (0 bytes); check that the capture finished writing.")
+
+
+def _check_format(format: str) -> str:
+    fmt = str(format).strip().lower()
+    if fmt == "npy":
+        fmt = "npz"
+    if fmt not in FORMATS:
+        raise ParameterError(f"format {format!r} is unknown: use one of {', '.join(FORMATS)}.")
+    return fmt
+
+
+def _detect(path: Path, *, width: int | None, height: int | None) -> tuple[str, int, int, str]:
+    """Format and geometry of a file without suffix or sidecar hints; ``(format, w, h, note)``."""
+    from spikeview.io import raw
+
+    _, buf = open_bytes(path, "spike")
+    size = int(buf.size)
+    if width in (None, raw.RAW1M_WIDTH) and height in (None, raw.RAW1M_HEIGHT) and raw.looks_like_raw1m(buf):
+        return "raw1m", raw.RAW1M_WIDTH, raw.RAW1M_HEIGHT, (
+            f"{path.name}: detected a raw 1000x1000 stream from its block tags; pass --format to be explicit.")
+    del buf
+    if width is not None and height is not None:
+        if (width, height) == (raw.RAW400_WIDTH, raw.RAW400_HEIGHT) and size % raw.RAW400_FRAME_BYTES == 0 \
+                and size % (width * height // 8) != 0:
+            return "raw400", width, height, (f"{path.name}: read as a raw 400x250 stream (its size is whole "
+                                             f"416-bit-row frames); pass --format to be explicit.")
+        return "plain", width, height, ""
+    cands = _size_candidates(size)
+    if width is not None or height is not None:
+        cands = [c for c in cands if (width is None or c[1] == width) and (height is None or c[2] == height)]
+    if len(cands) == 1:
+        fmt, w, h = cands[0]
+        what = "a raw 400x250 stream" if fmt == "raw400" else f"a plain {w}x{h} file"
+        return fmt, w, h, (f"{path.name}: no sidecar, read as {what} because its size ({size} bytes) is a whole number "
+                           f"of such frames; pass --format, --width and --height to be explicit.")
+    if len(cands) > 1:
+        listed = "; ".join(f"--format {f} --width {w} --height {h}" for f, w, h in cands)
+        geoms = list(dict.fromkeys((w, h) for _, w, h in cands))
+        raise GeometryError(f"{path}: its size ({size} bytes) fits several formats, so pass one of: {listed}.", geoms)
+    raise _unknown_plain_geometry(path, width, height, size)
+
+
+def _size_candidates(size: int) -> list[tuple[str, int, int]]:
+    """Known formats whose frame size divides ``size`` exactly, as ``(format, width, height)``."""
+    from spikeview.io import raw
+
+    out = [("plain", w, h) for (w, h) in KNOWN_PLAIN_GEOMETRIES if size % (w * h // 8) == 0]
+    if size % raw.RAW400_FRAME_BYTES == 0:
+        out.append(("raw400", raw.RAW400_WIDTH, raw.RAW400_HEIGHT))
+    return out
+
+
+def plain_geometry_candidates(size: int, limit: int = 8) -> list[tuple[int, int]]:
+    """``(width, height)`` pairs whose plain frames divide a file of ``size`` bytes exactly.
+
+    Known sensor sizes come first, then frames with common aspect ratios (1:1, 8:5, 4:3, 16:9,
+    5:4, 3:2, 2:1), largest first, at most ``limit`` in all.
+    """
+    out: list[tuple[int, int]] = [(w, h) for (w, h) in KNOWN_PLAIN_GEOMETRIES if size % (w * h // 8) == 0]
+    if size <= 0:
+        return out
+    r = int(math.isqrt(size))
+    small = np.arange(1, r + 1, dtype=np.int64)
+    small = small[size % small == 0]
+    divisors = np.unique(np.concatenate([small, size // small]))
+    extra = set()
+    for d in divisors[::-1]:  # frame bytes, largest first
+        pixels = int(d) * 8
+        for a, b in _ASPECTS:
+            if pixels % (a * b):
+                continue
+            k = math.isqrt(pixels // (a * b))
+            if k * k * a * b == pixels and min(a * k, b * k) >= 8:
+                extra.add((a * k, b * k))
+        if len(out) + len(extra) >= 4 * limit:
+            break
+    rest = sorted(extra - set(out), key=lambda wh: (-(wh[0] * wh[1]), wh))
+    return (out + rest)[:limit]
+
+
+def _unknown_plain_geometry(path: Path, width: int | None, height: int | None, size: int | None = None) -> GeometryError:
+    if size is None:
+        size = path.stat().st_size
+    cands = plain_geometry_candidates(size)
+    if width is not None or height is not None:
+        cands = [(w, h) for (w, h) in cands if (width is None or w == width) and (height is None or h == height)]
+    hint = f"; sizes that fit exactly: {', '.join(f'{w}x{h}' for w, h in cands)}" if cands else ""
+    return GeometryError(f"{path}: a plain .dat file has no header and its size ({size} bytes) is not whole frames of "
+                         f"a known sensor, so pass --width and --height (and --format if it is not plain){hint}.", cands)

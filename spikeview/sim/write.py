@@ -1,0 +1,276 @@
+"""Simulate straight to files: the plain ``.dat``, its TOML sidecar and the ground truth.
+
+For ``out/capture.dat`` :func:`simulate_to_file` writes
+
+* ``out/capture.dat`` — plain packed frames, ``H·W/8`` bytes per tick, pixel ``row·W + col`` at
+  bit ``p % 8`` of byte ``p // 8`` (least significant bit first), rows stored upside down when
+  ``config.flip_vertical`` (the ecosystem's convention; readers flip them back by default);
+* ``out/capture.dat.toml`` — the sidecar: ``[stream]`` (geometry, tick rate, CFA after the
+  reader's flips, flips), ``[simulation]`` (every :class:`SimConfig` setting; reload it with
+  ``SimConfig.load(path, table="simulation")``), ``[scene]`` (what was simulated) and
+  ``[ground_truth]`` (file name and ticks);
+* ``out/capture.gt.npz`` — ``frames`` (N, H, W, 3) float32 linear RGB in display orientation
+  (not flipped), ``ticks`` (N,) int64 and ``tick_rate`` (float64 scalar); frame ``i`` is the clean
+  scene at tick ``ticks[i]`` (every ``config.gt_every`` ticks from 0). Read it with
+  :func:`load_ground_truth`.
+
+Everything streams: spikes are packed chunk by chunk and ground-truth frames are appended as
+they are rendered, so memory stays at one chunk whatever ``n_ticks`` is. Files appear under their
+final names only when complete (written under temporary names, then renamed).
+"""
+
+from __future__ import annotations
+
+import os
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+
+from spikeview.cfa import cfa_to_str
+from spikeview.errors import Cancelled, InputFileError, OutputFileError, ParameterError
+from spikeview.io.source import StreamInfo
+from spikeview.sim.config import SimConfig
+from spikeview.sim.scenes import Scene
+from spikeview.sim.simulator import CancelCheck, ProgressCallback, SpikeSimulator
+
+
+def sidecar_path(dat_path: str | Path) -> Path:
+    """The sidecar of a spike file: ``capture.dat`` → ``capture.dat.toml``."""
+    p = Path(dat_path)
+    return p.with_name(p.name + ".toml")
+
+
+def ground_truth_path(dat_path: str | Path) -> Path:
+    """The ground truth of a spike file: ``capture.dat`` → ``capture.gt.npz``."""
+    p = Path(dat_path)
+    return p.with_name(p.stem + ".gt.npz")
+
+
+@dataclass
+class SimulationFiles:
+    """What :func:`simulate_to_file` wrote.
+
+    Attributes:
+        dat: the spike file; sidecar: its TOML sidecar; ground_truth: the ``.gt.npz``.
+        info: the stream as a reader should see it (after its flips).
+    """
+
+    dat: Path
+    sidecar: Path
+    ground_truth: Path
+    info: StreamInfo
+
+
+class _GroundTruthWriter:
+    """Appends (H, W, 3) float32 frames to the ``frames`` array of an ``.npz`` without holding them."""
+
+    def __init__(self, fileobj: BinaryIO, n: int, height: int, width: int):
+        self._zip = zipfile.ZipFile(fileobj, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True)
+        self._expected = n
+        self._written = 0
+        self._entry = self._zip.open("frames.npy", mode="w", force_zip64=True)
+        np.lib.format.write_array_header_2_0(
+            self._entry, {"descr": np.lib.format.dtype_to_descr(np.dtype("<f4")), "fortran_order": False,
+                          "shape": (n, height, width, 3)})
+
+    def append(self, frame: np.ndarray) -> None:
+        self._entry.write(np.ascontiguousarray(frame, dtype="<f4").tobytes())
+        self._written += 1
+
+    def finish(self, ticks: np.ndarray, tick_rate: float) -> None:
+        if self._written != self._expected:
+            raise RuntimeError(f"ground truth has {self._written} frames, expected {self._expected}")
+        self._entry.close()
+        for name, arr in (("ticks", np.asarray(ticks, dtype=np.int64)), ("tick_rate", np.asarray(tick_rate, dtype=np.float64))):
+            with self._zip.open(f"{name}.npy", mode="w") as f:
+                np.lib.format.write_array(f, arr, allow_pickle=False)
+        self._zip.close()
+
+    def abort(self) -> None:
+        try:
+            self._entry.close()
+            self._zip.close()
+        except Exception:  # the temporary file is removed anyway
+            pass
+
+
+def _stream_table(info: StreamInfo) -> dict[str, Any]:
+    return {"format": info.format, "width": info.width, "height": info.height, "n_frames": info.n_frames,
+            "tick_rate": info.tick_rate, "cfa": cfa_to_str(info.cfa), "flip_vertical": info.flip_vertical,
+            "flip_horizontal": info.flip_horizontal}
+
+
+def _write_sidecar(path: Path, tables: dict[str, Any]) -> None:
+    import tomli_w
+
+    path.write_text(tomli_w.dumps(tables), encoding="utf-8")
+
+
+def _temp(path: Path) -> Path:
+    return path.with_name(f".{path.name}.tmp{os.getpid()}")
+
+
+def simulate_to_file(scene: Scene | str | Path, config: SimConfig, out_path: str | Path, *,
+                     progress: ProgressCallback | None = None, cancel: CancelCheck | None = None,
+                     overwrite: bool = True) -> SimulationFiles:
+    """Simulate ``config.n_ticks`` ticks of ``scene`` into a plain ``.dat``, sidecar and ground truth.
+
+    Args:
+        scene: a :class:`Scene` or a path :func:`~spikeview.sim.scenes.open_scene` opens (not
+            closed here when you pass a Scene).
+        config: the settings (``config.flip_vertical`` decides the row order in the file).
+        out_path: the ``.dat`` to write; the sidecar and ground truth go next to it (see the
+            module docstring).
+        progress: ``progress(done_ticks, total_ticks)`` after each chunk.
+        cancel: polled between chunks; returning True removes the partial files and raises
+            :class:`~spikeview.errors.Cancelled`.
+        overwrite: replace existing files (default); when False an existing file is an error.
+
+    Returns:
+        The :class:`SimulationFiles` written.
+
+    Raises:
+        ParameterError: bad settings, a scene shorter than the run, or ``width · height`` not a
+            multiple of 8 (plain frames must be whole bytes).
+        OutputFileError: the folder is missing or not writable, or a file exists and
+            ``overwrite`` is False.
+    """
+    out_path = Path(out_path)
+    targets = [out_path, sidecar_path(out_path), ground_truth_path(out_path)]
+    if not out_path.parent.is_dir():
+        raise OutputFileError(f"{out_path.parent}: output folder does not exist; create it or choose another path.")
+    if not overwrite:
+        for t in targets:
+            if t.exists():
+                raise OutputFileError(f"{t}: file exists; delete it, choose another name, or allow overwriting.")
+    sim = SpikeSimulator(scene, config)
+    h, w = sim.height, sim.width
+    if (h * w) % 8:
+        if not isinstance(scene, Scene):
+            sim.close()
+        raise ParameterError(
+            f"A plain .dat frame must be whole bytes but {w}x{h} = {w * h} pixels is not a multiple of 8: "
+            "set width/height (or crop) so that width·height divides by 8."
+        )
+    gt_ticks = np.arange(0, config.n_ticks, config.gt_every, dtype=np.int64)
+    temps = [_temp(t) for t in targets]
+    gt_writer: _GroundTruthWriter | None = None
+    try:
+        with open(temps[0], "wb") as fdat, open(temps[2], "wb") as fgt:
+            gt_writer = _GroundTruthWriter(fgt, len(gt_ticks), h, w)
+            buf = np.empty((sim.chunk_ticks, h, w), dtype=np.uint8)
+            next_gt = 0
+            total = config.n_ticks
+            while sim.tick < total:
+                if cancel is not None and cancel():
+                    raise Cancelled(f"Simulation cancelled at tick {sim.tick} of {total}.")
+                a = sim.tick
+                end = min(total, a + sim.chunk_ticks)
+                k = 0
+                # run up to each ground-truth tick, then render it: the scene is only ever asked
+                # for later times, so videos decode forward without rewinding
+                while sim.tick < end:
+                    if next_gt < len(gt_ticks) and gt_ticks[next_gt] == sim.tick:
+                        gt_writer.append(sim.gt_at(sim.tick))
+                        next_gt += 1
+                    stop = end if next_gt >= len(gt_ticks) else min(end, int(gt_ticks[next_gt]))
+                    stop = max(stop, sim.tick + 1)
+                    n = stop - sim.tick
+                    sim.run(n, out=buf[k:k + n])
+                    k += n
+                chunk = buf[:k]
+                if config.flip_vertical:
+                    chunk = chunk[:, ::-1]
+                fdat.write(np.packbits(chunk.reshape(k, h * w), axis=1, bitorder="little").tobytes())
+                if progress is not None:
+                    progress(sim.tick, total)
+            gt_writer.finish(gt_ticks, config.tick_rate)
+        info = StreamInfo(width=w, height=h, n_frames=config.n_ticks, tick_rate=config.tick_rate, cfa=config.cfa_or_none,
+                          format="plain", flip_vertical=config.flip_vertical, path=out_path)
+        tables: dict[str, Any] = {
+            "stream": _stream_table(info),
+            "simulation": config.to_dict(),
+            "scene": sim.scene.describe(),
+            "ground_truth": {"file": targets[2].name, "n_frames": int(len(gt_ticks)), "every_ticks": config.gt_every,
+                             "first_tick": 0},
+        }
+        _write_sidecar(temps[1], tables)
+        for tmp, final in zip(temps, targets):
+            os.replace(tmp, final)
+    except BaseException as e:
+        if gt_writer is not None:
+            gt_writer.abort()
+        for tmp in temps:
+            tmp.unlink(missing_ok=True)
+        if isinstance(e, OSError):
+            raise OutputFileError(f"{out_path}: could not write the simulation ({e.strerror or e}); check the folder and free space.") from None
+        raise
+    finally:
+        if not isinstance(scene, Scene):
+            sim.close()
+    info.extra = {"simulation": tables["simulation"], "scene": tables["scene"]}
+    return SimulationFiles(dat=out_path, sidecar=targets[1], ground_truth=targets[2], info=info)
+
+
+# ---------------------------------------------------------------------------------------------
+# reading the ground truth back
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class GroundTruth:
+    """Ground-truth frames of a simulated capture.
+
+    Attributes:
+        frames: (N, H, W, 3) float32 linear RGB in [0, 1], display orientation.
+        ticks: (N,) int64 tick of each frame (increasing).
+        tick_rate: ticks per second.
+    """
+
+    frames: np.ndarray
+    ticks: np.ndarray
+    tick_rate: float
+
+    def __len__(self) -> int:
+        return len(self.ticks)
+
+    def at(self, tick: int) -> np.ndarray:
+        """The frame stored for ``tick``; raises :class:`ParameterError` naming the nearest stored ticks."""
+        i = int(np.searchsorted(self.ticks, tick))
+        if i < len(self.ticks) and self.ticks[i] == tick:
+            return self.frames[i]
+        near = sorted({int(self.ticks[j]) for j in (i - 1, i) if 0 <= j < len(self.ticks)})
+        raise ParameterError(f"No ground truth at tick {tick}: frames are stored at ticks {near} nearby "
+                             f"(every {int(self.ticks[1] - self.ticks[0]) if len(self.ticks) > 1 else '-'} ticks); use one of those.")
+
+    def nearest(self, tick: float) -> tuple[int, np.ndarray]:
+        """``(stored_tick, frame)`` of the stored frame closest to ``tick``."""
+        i = int(np.argmin(np.abs(self.ticks - tick)))
+        return int(self.ticks[i]), self.frames[i]
+
+
+def load_ground_truth(path: str | Path) -> GroundTruth:
+    """Read a ``.gt.npz`` written by :func:`simulate_to_file` (or give the ``.dat`` it belongs to).
+
+    Raises:
+        InputFileError: missing file, or not a ground-truth file.
+    """
+    p = Path(path)
+    if p.suffix.lower() != ".npz":
+        p = ground_truth_path(p)
+    if not p.is_file():
+        raise InputFileError(f"{p}: ground-truth file not found; it is written next to the .dat by simulate_to_file.")
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            if "frames" not in z or "ticks" not in z:
+                raise InputFileError(f"{p}: holds {', '.join(z.files) or 'nothing'}, not 'frames' and 'ticks'; "
+                                     "point to a .gt.npz written by the simulator.")
+            frames = z["frames"]
+            ticks = z["ticks"].astype(np.int64)
+            tick_rate = float(z["tick_rate"]) if "tick_rate" in z else 20_000.0
+    except (OSError, ValueError, zipfile.BadZipFile) as e:
+        raise InputFileError(f"{p}: not a readable .npz ({e}); re-run the simulation.") from None
+    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.shape[0] != ticks.shape[0]:
+        raise InputFileError(f"{p}: frames {frames.shape} and ticks {ticks.shape} do not match; re-run the simulation.")
+    return GroundTruth(frames=frames.astype(np.float32, copy=False), ticks=ticks, tick_rate=tick_rate)

@@ -1,0 +1,108 @@
+"""spikeview.classical.tfp / tfi against hand cases and slow references."""
+
+import numpy as np
+import pytest
+
+from spikeview.classical import tfi, tfi_array, tfp, tfp_array, window_counts, window_range
+from spikeview.errors import ParameterError
+from spikeview.io import ArraySource
+
+
+def _random_spikes(seed, shape, p=0.3):
+    rng = np.random.default_rng(seed)
+    return (rng.random(shape) < p).astype(np.uint8)
+
+
+# --- TFP ---------------------------------------------------------------------------------------
+def test_tfp_is_count_over_window():
+    spikes = np.zeros((20, 2, 3), dtype=np.uint8)
+    spikes[::2, 0, 0] = 1  # every other tick: any 10-tick window holds 5 spikes -> 0.5
+    spikes[::5, 0, 1] = 1  # every fifth tick: 2 spikes per 10 ticks -> 0.2
+    spikes[:, 1, 2] = 1  # every tick -> 1.0
+    out = tfp(ArraySource(spikes), center=10, window=10)
+    assert out.dtype == np.float32 and out.shape == (2, 3)
+    np.testing.assert_array_equal(out, np.array([[0.5, 0.2, 0.0], [0.0, 0.0, 1.0]], dtype=np.float32))
+
+
+def test_tfp_matches_numpy_on_random_stream_at_edges_and_inside():
+    spikes = _random_spikes(0, (40, 8, 8))
+    src = ArraySource(spikes)
+    for center in (0, 3, 20, 39):
+        a, b = window_range(center, 9, 40)
+        expected = spikes[a:b].sum(axis=0) / 9.0
+        np.testing.assert_allclose(tfp(src, center, 9), expected, rtol=0, atol=1e-7)
+    # edge windows are shifted, not shortened: values stay multiples of 1/9
+    out = tfp(src, 0, 9) * 9
+    np.testing.assert_allclose(out, np.round(out), atol=1e-5)
+
+
+def test_tfp_array_mean_over_time():
+    spikes = _random_spikes(1, (7, 5, 6))
+    np.testing.assert_allclose(tfp_array(spikes), spikes.mean(axis=0), atol=1e-7)
+    with pytest.raises(ParameterError):
+        tfp_array(spikes[0])
+
+
+def test_window_counts_beyond_uint16():
+    # 70,000 ticks overflow SpikeSource.count's uint16: counted in chunks (uint32 result)
+    spikes = np.ones((70_000, 2, 2), dtype=np.uint8)
+    spikes[:, 0, 0] = 0
+    counts = window_counts(ArraySource(spikes), 0, 70_000)
+    assert counts.dtype == np.uint32
+    np.testing.assert_array_equal(counts, [[0, 70_000], [70_000, 70_000]])
+
+
+# --- TFI ---------------------------------------------------------------------------------------
+def _tfi_reference(spikes, t, hw):
+    """Slow TFI straight from the definition in spikeview.classical.tfi's docstring."""
+    n, h, w = spikes.shape
+    out = np.empty((h, w))
+    for y in range(h):
+        for x in range(w):
+            prev = next((k for k in range(t, max(0, t - hw) - 1, -1) if spikes[k, y, x]), None)
+            nxt = next((k for k in range(t + 1, min(n - 1, t + hw) + 1) if spikes[k, y, x]), None)
+            interval = 2 * hw if prev is None or nxt is None else nxt - prev
+            out[y, x] = 1.0 / interval
+    return out
+
+
+def test_tfi_regular_spikes_every_4_ticks():
+    spikes = np.zeros((64, 3, 4), dtype=np.uint8)
+    for y in range(3):
+        for x in range(4):
+            spikes[(x + y) % 4 :: 4, y, x] = 1  # every 4 ticks, different phases
+    out = tfi(ArraySource(spikes), center=30, half_window=8)
+    np.testing.assert_array_equal(out, np.full((3, 4), 0.25, dtype=np.float32))
+
+
+def test_tfi_hand_cases():
+    spikes = np.zeros((20, 1, 4), dtype=np.uint8)
+    spikes[10, 0, 0] = spikes[13, 0, 0] = 1  # spike at t itself counts as "previous": 1/3
+    spikes[:, 0, 1] = 1  # every tick: interval 1
+    spikes[9, 0, 2] = 1  # no later spike within half_window: capped at 2 * 5
+    out = tfi_array(spikes, t=10, half_window=5)
+    np.testing.assert_allclose(out, [[1 / 3, 1.0, 1 / 10, 1 / 10]], rtol=1e-6)
+    assert np.isfinite(out).all()
+
+
+@pytest.mark.parametrize("seed, hw", [(0, 3), (1, 6), (2, 1)])
+def test_tfi_matches_slow_reference_on_random_streams(seed, hw):
+    spikes = _random_spikes(seed, (30, 6, 7), p=0.15)
+    src = ArraySource(spikes)
+    for t in (0, 1, 14, 28, 29):  # both ends of the stream (search cut there) and inside
+        expected = _tfi_reference(spikes, t, hw)
+        np.testing.assert_allclose(tfi(src, t, hw), expected, rtol=1e-6)
+        np.testing.assert_allclose(tfi_array(spikes.astype(bool), t, hw), expected, rtol=1e-6)
+
+
+def test_tfi_range():
+    spikes = _random_spikes(3, (50, 8, 8), p=0.05)
+    out = tfi(ArraySource(spikes), 25)  # default half_window 32
+    assert out.dtype == np.float32
+    assert out.min() >= 1 / 64 and out.max() <= 1
+
+
+@pytest.mark.parametrize("kwargs", [{"center": 20}, {"center": -1}, {"center": 3, "half_window": 0}])
+def test_tfi_bad_arguments(kwargs):
+    with pytest.raises(ParameterError):
+        tfi(ArraySource(np.zeros((20, 2, 2), dtype=np.uint8)), **kwargs)

@@ -1,0 +1,338 @@
+"""The app's session model, adapters, jobs and presets, driven headless (no Qt imported)."""
+
+from __future__ import annotations
+
+import sys
+import threading
+
+import numpy as np
+import pytest
+
+from spikeview.errors import Cancelled, InputFileError, ParameterError
+from spikeview.gui import core, jobs
+from spikeview.gui.model import SPECS, Event, OpenedStream, Session, default_params, format_us
+from spikeview.io.source import ArraySource
+
+
+def periodic_stream(h: int = 16, w: int = 16, n: int = 200, period: int = 4, cfa: str | None = "RGGB") -> OpenedStream:
+    """Every photosite fires once every ``period`` ticks (phase by column), so TFP over a multiple
+    of ``period`` ticks is exactly ``1/period`` everywhere."""
+    t = np.arange(n)[:, None, None]
+    phase = np.arange(w)[None, None, :] % period
+    spikes = ((t + phase) % period == 0).astype(np.uint8) * np.ones((1, h, 1), np.uint8)
+    return core.memory_stream(ArraySource(spikes, cfa=cfa), "periodic")
+
+
+class Ctx:
+    """A job context like the worker's (see spikeview.gui.workers.JobContext)."""
+
+    def __init__(self) -> None:
+        self.cancelled = threading.Event()
+        self.state: dict = {}
+        self.reports: list = []
+
+    def report(self, payload) -> None:
+        self.reports.append(payload)
+
+    def check(self) -> None:
+        if self.cancelled.is_set():
+            raise Cancelled("cancelled")
+
+
+# ---------------------------------------------------------------------------------------- events
+def test_event_connect_emit_disconnect_in_order():
+    ev, calls = Event("x"), []
+    a = ev.connect(lambda v: calls.append(("a", v)))
+    ev.connect(lambda v: calls.append(("b", v)))
+    ev.emit(1)
+    ev.disconnect(a)
+    ev.emit(2)
+    ev.disconnect(a)  # twice is fine
+    assert calls == [("a", 1), ("b", 1), ("b", 2)]
+
+
+def test_model_imports_no_qt():
+    code = "import sys, spikeview.gui.model, spikeview.gui.core, spikeview.gui.jobs, spikeview.gui.presets; " \
+           "print([m for m in ('PySide6', 'pyqtgraph') if m in sys.modules])"
+    import subprocess
+
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
+
+
+# ---------------------------------------------------------------------------------- parameters
+def test_set_validates_and_emits_once():
+    s = Session()
+    seen = []
+    s.events.param_changed.connect(lambda n, v: seen.append((n, v)))
+    s.set("k", 20)
+    s.set("k", 20.0)  # same value: no event
+    assert seen == [("k", 20.0)] and isinstance(s.get("k"), float)
+    with pytest.raises(ParameterError, match="Quantiser sharpness k must lie in"):
+        s.set("k", -1.0)
+    with pytest.raises(ParameterError, match="must be one of"):
+        s.set("guidance", "magic")
+    with pytest.raises(ParameterError, match="whole number"):
+        s.set("steps", 2.5)
+    with pytest.raises(ParameterError, match="Unknown parameter"):
+        s.set("nope", 1)
+    assert s.get("k") == 20.0
+
+
+def test_defaults_match_the_core_configs():
+    from spikeview.classical.reconstruct import ClassicalConfig
+    from spikeview.guided.config import GuidedConfig
+
+    d, g, c = default_params(), GuidedConfig(), ClassicalConfig()
+    for name in ("steps", "s", "k", "levels", "t_start", "guidance", "prior", "seed", "window"):
+        assert d[name] == getattr(g, name), name
+    for name in ("window", "tfi_half_window", "demosaic", "colour_cast", "eta"):
+        assert d[name] == getattr(c, name), name
+
+
+def test_undo_redo_and_one_drag_is_one_step():
+    s = Session()
+    s.set("k", 10.0)
+    s.begin_group("k drag")  # slider pressed ...
+    for v in (11.0, 12.0, 13.0, 40.0):
+        s.set("k", v)
+    s.end_group()  # ... released
+    s.set("speed", "realtime")  # playback settings are not undoable
+    assert s.undo_text() == ("k drag", None)
+    assert s.undo() and s.get("k") == 10.0
+    assert s.undo() and s.get("k") == SPECS["k"].default
+    assert not s.undo()
+    assert s.redo() and s.get("k") == 10.0
+    assert s.redo() and s.get("k") == 40.0
+    assert s.get("speed") == "realtime"
+
+
+def test_group_that_returns_to_the_start_leaves_no_step_and_new_change_clears_redo():
+    s = Session()
+    with s.undo_group("drag"):
+        s.set("eta", 3.0)
+        s.set("eta", 2.0)
+    assert not s.undo_stack.can_undo
+    s.set("eta", 3.0)
+    s.undo()
+    s.set("eta", 1.0)
+    assert not s.undo_stack.can_redo
+
+
+def test_update_params_is_atomic_and_one_step():
+    s = Session()
+    with pytest.raises(ParameterError):
+        s.update_params({"k": 30.0, "steps": 0})
+    assert s.get("k") == SPECS["k"].default  # nothing applied
+    s.update_params({"k": 30.0, "steps": 4, "eta": 1.5}, label="Preset")
+    assert s.undo_text()[0] == "Preset"
+    s.undo()
+    assert s.params == default_params()
+    assert s.update_params({"k": 31.0, "gone": 1, "steps": -3}, strict=False) == ["gone", "steps"]
+
+
+# -------------------------------------------------------------------------------- time, playback
+def test_open_stream_resets_tick_marks_and_shrinks_window():
+    s = Session({"window": 500})
+    msgs = []
+    s.events.message.connect(msgs.append)
+    s.open_stream(periodic_stream(n=100))
+    assert s.tick == 50 and s.get("window") == 100
+    assert msgs and "shortened to 100" in msgs[0]
+    assert s.window_range() == (0, 100)
+
+
+def test_window_range_matches_the_core_rule():
+    s = Session({"window": 10})
+    s.open_stream(periodic_stream(n=200))
+    for t in (0, 3, 100, 196, 199):
+        s.set_tick(t)
+        assert s.window_range() == core.window_range(t, 10, 200)
+
+
+def test_scrub_clamps_and_time_text():
+    s = Session()
+    s.open_stream(periodic_stream(n=200))
+    s.set_tick(10_000)
+    assert s.tick == 199
+    s.step(-300)
+    assert s.tick == 0
+    s.set_tick(20)
+    assert s.time_text() == f"tick 20 / 199 · {format_us(1000)}"  # 20 ticks × 50 µs
+    assert format_us(61700) == "61\u2009700 µs"
+
+
+def test_advance_every_window_loops_over_marks():
+    s = Session({"window": 10, "speed": "window", "loop": True})
+    s.open_stream(periodic_stream(n=200))
+    s.set_tick(100)
+    s.set_mark_in()
+    s.set_tick(125)
+    s.set_mark_out()
+    s.set_tick(100)
+    s.set_playing(True)
+    assert [s.advance(0.0) for _ in range(4)] == [110, 120, 100, 110]
+
+
+def test_advance_real_time_and_slow_motion_carry_fractions():
+    s = Session({"speed": "realtime"})
+    s.open_stream(periodic_stream(n=2000))
+    s.set_tick(0)
+    s.set_playing(True)
+    assert s.advance(0.01) == 200  # 10 ms at 20 kHz
+    s.set("speed", "slowmo")
+    s.set("slowmo", 2000)  # 10 ticks per second
+    ticks = [s.advance(0.03) for _ in range(10)]  # 0.3 ticks per frame
+    assert ticks[-1] == 203 and ticks[0] == 200
+
+
+def test_advance_stops_at_the_end_without_loop():
+    s = Session({"window": 50, "speed": "window", "loop": False})
+    s.open_stream(periodic_stream(n=200))
+    s.set_tick(180)
+    s.set_playing(True)
+    assert s.advance(0.0) == 199 and not s.playing
+    s.set_playing(True)  # parked at the end: play starts over
+    assert s.tick == 0 and s.playing
+
+
+def test_roi_is_clipped_and_full_frame_means_none():
+    s = Session()
+    s.open_stream(periodic_stream(16, 16))
+    s.set_roi((-4, 2, 10, 40))
+    assert s.roi == (0, 2, 6, 14)
+    s.set_roi((0, 0, 16, 16))
+    assert s.roi is None
+
+
+def test_reinterpret_flip_keeps_the_physical_cfa():
+    s = Session()
+    s.open_stream(periodic_stream(16, 16, cfa="RGGB"))
+    s.set_tick(77)
+    s.reinterpret(flip_vertical=True)
+    assert s.source.cfa == "GBRG" and s.tick == 77  # even height: row parity swaps
+    s.reinterpret(cfa="BGGR")
+    assert s.source.cfa == "BGGR" and s.source.info.flip_vertical
+
+
+# ------------------------------------------------------------------------------ core adapters
+def test_stream_frames_of_a_periodic_stream():
+    st = periodic_stream(16, 16, n=200, period=4, cfa=None)
+    p = default_params() | {"window": 8, "transfer": "linear"}
+    f = core.stream_frames(st.source, 100, p, None)
+    assert (f.a, f.b) == (96, 104)
+    assert f.raw.dtype == np.uint8 and set(np.unique(f.raw)) <= {0, 255}
+    np.testing.assert_allclose(f.mosaic, 0.25)  # fires 2 of 8 ticks
+    assert f.spike_rate == pytest.approx(0.25)
+    assert f.tfp.shape == (16, 16, 3) and f.tfp.dtype == np.uint8
+    assert np.all(np.abs(f.tfp.astype(int) - 64) <= 1)  # 0.25 → 63.75, linear
+    assert f.tfi is not None and np.all(np.abs(f.tfi.astype(int) - 64) <= 1)  # interval 4 → 1/4
+
+
+def test_site_rates_histogram_and_roi():
+    sfr = np.full((8, 8), 0.2, np.float32)
+    sfr[0::2, 0::2] = 0.6  # the R sites of RGGB
+    r = core.site_rates(sfr, "RGGB", window=10)
+    assert set(r.hists) == {"R", "Gr", "Gb", "B"}
+    centres = (r.edges[:-1] + r.edges[1:]) / 2
+    assert centres[np.argmax(r.hists["R"])] == pytest.approx(0.6)
+    assert centres[np.argmax(r.hists["Gb"])] == pytest.approx(0.2)
+    assert r.hists["B"].sum() == pytest.approx(1.0)
+    np.testing.assert_allclose(r.alpha, [1 / 0.6, 1 / 0.2, 1 / 0.2], rtol=1e-6)
+    roi = core.site_rates(sfr, "RGGB", 10, roi=(2, 2, 2, 2))
+    assert roi.means["R"] == pytest.approx(0.6)
+
+
+def test_alpha_of_a_dark_channel_falls_back_without_warning():
+    alpha, note = core.alpha_note(np.array([0.2, 0.4, 0.0]))
+    np.testing.assert_allclose(alpha, [5.0, 2.5, 1 / 0.3], rtol=1e-6)
+    assert note is not None and "channel B has no spikes" in note
+
+
+def test_cfa_hint_flags_unequal_greens():
+    from spikeview.gui.panels.rates import cfa_hint
+
+    assert cfa_hint({"R": 0.2, "Gr": 0.3, "Gb": 0.31, "B": 0.1}) == ""
+    assert "flip" in cfa_hint({"R": 0.2, "Gr": 0.3, "Gb": 0.1, "B": 0.1})
+    assert "CFA is probably wrong" in cfa_hint({"R": 0.4, "Gr": 0.1, "Gb": 0.1, "B": 0.3})
+
+
+def test_degradation_chain_of_a_consistent_scene_has_a_small_residual():
+    # X grey 0.5, α = (2, 4, 8), η = 2: C M X = 0.5·2/α = (0.5, 0.25, 0.125) per site; Y on the
+    # 8-level grid holds exactly those values, and k = 500 makes Q nearly hard rounding.
+    h = w = 8
+    x = np.full((h, w, 3), 0.5, np.float32)
+    alpha = np.array([2.0, 4.0, 8.0])
+    from spikeview.cfa import channel_map
+
+    y = np.array([0.5, 0.25, 0.125], np.float32)[channel_map("RGGB", h, w)]
+    p = default_params()
+    res = core.degradation_chain(x, y, "RGGB", 8, 500.0, 2.0, alpha, 2, True, p)
+    assert res.rmse < 0.01
+    assert set(res.images) == {"x", "mx", "cmx", "qcmx", "y", "residual"}
+    assert all(im.dtype == np.uint8 for im in res.images.values())
+    assert len(res.bands) == 2
+    wrong = core.degradation_chain(x, y, "RGGB", 8, 500.0, 1.0, alpha, 0, False, p)  # η halves C M X
+    assert wrong.rmse > 0.05
+
+
+# ---------------------------------------------------------------------------------------- jobs
+def test_export_ticks():
+    p = default_params() | {"window": 10}
+    assert jobs.export_ticks(p, "frame", 42, (0, 99)) == (42,)
+    assert jobs.export_ticks(p, "marked", 42, (20, 55)) == (20, 30, 40, 50)
+
+
+def test_guided_job_reports_every_step_and_cancels(tmp_path):
+    st = periodic_stream(16, 16, n=100, period=3)
+    gt = np.full((16, 16, 3), 0.5, np.float32)
+    p = default_params() | {"steps": 3}
+    req = jobs.GuidedRequest(st.source, 50, p, np.array([3.0, 3.0, 3.0]), None, lambda t: gt, run=7)
+    ctx = Ctx()
+    res = jobs.guided_job(req, ctx)
+    steps = [u for u in ctx.reports if u.kind == "step"]
+    assert ctx.reports[0].kind == "plan" and "mosaic" in ctx.reports[0].text
+    assert [u.step for u in steps] == [1, 2, 3] and all(u.run == 7 for u in steps)
+    assert all(u.psnr is not None and u.preview.dtype == np.uint8 for u in steps)
+    assert res.image.shape == (16, 16, 3) and res.psnr is not None
+    ctx2 = Ctx()
+    ctx2.cancelled.set()
+    with pytest.raises(Cancelled):
+        jobs.guided_job(req, ctx2)
+
+
+# ------------------------------------------------------------------------------------- presets
+def test_preset_round_trip_through_the_core_configs(tmp_path):
+    from spikeview.config import load_toml
+    from spikeview.gui.presets import load_preset, save_preset
+
+    a = Session()
+    a.update_params({"k": 75.0, "steps": 12, "guidance": "dps", "eta": 1.5, "window": 20, "demosaic": "malvar2004",
+                     "export_fps": 24.0, "transfer": "gamma", "gamma": 1.8, "speed": "slowmo"})
+    path = save_preset(a, tmp_path / "p.toml")
+    data = load_toml(path)
+    assert data["guided"]["k"] == 75.0 and data["classical"]["window"] == 20 and data["export"]["fps"] == 24.0
+    b = Session()
+    load_preset(b, path)
+    assert b.params == a.params
+    assert b.undo_text()[0] == "Load preset p.toml"
+
+
+def test_bad_preset_names_the_file_and_changes_nothing(tmp_path):
+    from spikeview.gui.presets import load_preset
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[guided]\nsteps = 0\n")
+    s = Session()
+    with pytest.raises(ParameterError, match="bad.toml"):
+        load_preset(s, bad)
+    (tmp_path / "x.toml").write_text("a = 1\n")
+    with pytest.raises(InputFileError, match="not a spikeview preset"):
+        load_preset(s, tmp_path / "x.toml")
+    assert s.params == default_params()
+
+
+def test_every_spec_default_validates():
+    for spec in SPECS.values():
+        assert spec.validate(spec.default) == spec.default
