@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import statistics
 import sys
@@ -197,13 +198,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--t-start", type=float, default=0.5)
     ap.add_argument("--s", type=float, default=1.0)
+    ap.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     ap.add_argument("--no-components", action="store_true")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
 
+    if args.threads:
+        torch.set_num_threads(args.threads)
     obs = make_observation(args.size)
     machine = {"python": platform.python_version(), "torch": torch.__version__, "diffusers": import_diffusers().__version__,
-               "cpu": platform.processor() or platform.machine(), "threads": torch.get_num_threads()}
+               "cpu": platform.processor() or platform.machine(), "threads": torch.get_num_threads(),
+               "load_avg": [round(v, 2) for v in os.getloadavg()]}
     if torch.cuda.is_available() and args.device != "cpu":
         machine["gpu"] = torch.cuda.get_device_name(0)
     print(json.dumps(machine), flush=True)

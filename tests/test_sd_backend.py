@@ -52,6 +52,15 @@ def _tiny_modules(seed: int = 0, **unet_changes):
     return unet, vae, diffusers.DDIMScheduler(**SD21_SCHEDULER)
 
 
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    # Tiny networks: one thread is faster, and several threads spin badly on a shared, loaded CPU.
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
 @pytest.fixture(scope="module")
 def model_dir(tmp_path_factory):
     if not HAS_DIFFUSERS:
@@ -243,6 +252,8 @@ def test_guided_config_maps_onto_the_latent_sampler():
     assert cfg.dense_gradient is False and cfg.cast is False
     with pytest.raises(ParameterError, match='guidance = "dps"'):
         LatentConfig.coerce(GuidedConfig(prior="sd", guidance="hqs"))
+    with pytest.raises(ParameterError, match="t_start = 0"):
+        LatentConfig.coerce(GuidedConfig(prior="sd", guidance="dps", t_start=0.0))
 
 
 # ------------------------------------------------------------------------------------- sampling

@@ -34,10 +34,11 @@ def parse_range(text: str, default_step: int) -> tuple[int, int, int]:
 
 
 def progress(total: int, desc: str, unit: str = "frame"):
-    """A tqdm progress bar on stderr (hidden for a single item)."""
+    """A tqdm progress bar on stderr (hidden for a single item and when stderr is not a terminal)."""
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, disable=total <= 1, dynamic_ncols=True)
+    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, dynamic_ncols=True,
+                disable=total <= 1 or not sys.stderr.isatty())
 
 
 # ----------------------------------------------------------------------------------- info

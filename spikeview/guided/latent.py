@@ -123,19 +123,24 @@ class LatentConfig(Config):
         becomes ``ddim_eta``; ``use_cast=False`` turns C off.
 
         Raises:
-            ParameterError: ``guidance`` is not ``"dps"`` or ``use_mosaic`` is ``False`` (the latent
-                sampler has DPS guidance and always applies M).
+            ParameterError: ``guidance`` is not ``"dps"``, ``t_start`` is 0, or ``use_mosaic`` is
+                ``False`` (the latent sampler has DPS guidance, starts from a noised latent and always
+                applies M).
         """
         if cfg.guidance != "dps":
             raise ParameterError(
                 f"GuidedConfig.guidance = {cfg.guidance!r} is not available with prior = 'sd': the latent sampler uses DPS; set guidance = \"dps\"."
+            )
+        if not cfg.t_start > 0:
+            raise ParameterError(
+                "GuidedConfig.t_start = 0 (start from Y₀ without noise) is not available with prior = 'sd': use a start noise level > 0."
             )
         if getattr(cfg, "use_mosaic", None) is False:
             raise ParameterError("GuidedConfig.use_mosaic = false is not available with prior = 'sd'; leave it unset.")
         return cls(
             model_path=cfg.model_path,
             steps=cfg.steps,
-            sigma_start=cfg.t_start if cfg.t_start > 0 else None,
+            sigma_start=cfg.t_start,
             s=cfg.s,
             ddim_eta=cfg.zeta,
             seed=cfg.seed,
@@ -308,7 +313,7 @@ class LatentGuidedSampler:
         return ForwardModel(
             cfa,
             10 if window is None else int(window),
-            alpha=None if alpha is None else torch.as_tensor(np.asarray(alpha, dtype=np.float64)),
+            alpha=None if alpha is None else torch.as_tensor(np.asarray(alpha, dtype=np.float32)),
             eta=1.0 if eta is None else float(eta),
             k=cfg.k,
             dense_grad=cfg.dense_gradient,

@@ -148,8 +148,11 @@ class PackedFileSource(SpikeSource):
             raise ParameterError(f"window must be at least 1 tick, got {window}; pass a positive window length.")
         n = (b - a) // window
         offs = self._frame_offsets(a, a + n * window).reshape(n, window)
-        if out is not None and out.shape != (n, self.height, self.width):
-            raise ParameterError(f"out has shape {out.shape}, expected {(n, self.height, self.width)}; allocate it to match.")
+        if out is not None:
+            dtype = np.uint16 if window <= 65535 else np.uint32
+            if out.shape != (n, self.height, self.width) or out.dtype != dtype or not out.flags.c_contiguous:
+                raise ParameterError(f"out must be a C-contiguous {np.dtype(dtype).name} array of shape "
+                                     f"{(n, self.height, self.width)}, got {out.dtype} {out.shape}; allocate it to match.")
         return self._count_offsets(offs, out)
 
     def _count_offsets(self, offsets: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:

@@ -35,6 +35,8 @@ from numba import njit
 
 #: the most frames one kernel pass accumulates (8 bit planes); longer windows take several passes
 MAX_FRAMES_PER_PASS = 255
+#: the most frames counted into uint16 (longer windows are summed in uint32 from uint16 parts)
+_MAX_UINT16_FRAMES = 65535
 #: target size of the per-thread working chunk (bytes of one frame); keeps the planes in L1
 _CHUNK_BYTES = 1024
 
@@ -298,12 +300,12 @@ def count_frames(buf: np.ndarray, offsets: np.ndarray, *, row_bytes: int, n_rows
             copied to which output columns.
         width: output width in pixels.
         flip_vertical, flip_horizontal: output row ``n_rows-1-r`` / mirrored columns.
-        out: optional ``(n_windows, n_rows, width)`` uint16/uint32 C-contiguous array to fill
-            (reusing one buffer avoids page faults on fresh memory).
+        out: optional C-contiguous ``(n_windows, n_rows, width)`` array of the returned dtype
+            to fill (reusing one buffer avoids page faults on fresh memory).
 
     Returns:
         ``(n_windows, n_rows, width)`` counts, uint16 when windows hold at most 65,535 frames,
-        else uint32 (or ``out``'s dtype).
+        else uint32.
     """
     buf = np.asarray(buf)
     if isinstance(buf, np.memmap):
@@ -314,15 +316,24 @@ def count_frames(buf: np.ndarray, offsets: np.ndarray, *, row_bytes: int, n_rows
     n_win, n_per = offsets.shape
     if n_win and n_per and (offsets.min() < 0 or offsets.max() + n_rows * row_bytes > buf.size):
         raise ValueError("frame offsets run past the end of the buffer")
-    dtype = np.uint16 if n_per <= 65535 else np.uint32
+    dtype = np.uint16 if n_per <= _MAX_UINT16_FRAMES else np.uint32
     if out is None:
         out = np.empty((n_win, n_rows, width), dtype=dtype)
-    elif out.shape != (n_win, n_rows, width) or not out.flags.c_contiguous or out.dtype not in (np.uint16, np.uint32):
-        raise ValueError(f"out must be a C-contiguous uint16/uint32 array of shape {(n_win, n_rows, width)}")
+    elif out.shape != (n_win, n_rows, width) or not out.flags.c_contiguous or out.dtype != dtype:
+        raise ValueError(f"out must be a C-contiguous {np.dtype(dtype).name} array of shape {(n_win, n_rows, width)}")
     if n_win == 0:
         return out
     if n_per == 0:
         out[...] = 0
+        return out
+    if dtype == np.uint32:
+        # the kernel counts in uint16 (one compiled variant): sum uint16 parts of <= 65535 frames
+        out[...] = 0
+        for g0 in range(0, n_per, _MAX_UINT16_FRAMES):
+            part = count_frames(buf, offsets[:, g0:g0 + _MAX_UINT16_FRAMES], row_bytes=row_bytes, n_rows=n_rows,
+                                segments=segments, width=width, flip_vertical=flip_vertical,
+                                flip_horizontal=flip_horizontal)
+            out += part
         return out
     segs = np.ascontiguousarray(segments, dtype=np.int64).reshape(-1, 3)
     chunk_rows = max(1, _CHUNK_BYTES // row_bytes)

@@ -339,7 +339,7 @@ class SyncStats:
                        f"(the capture starts mid-frame).")
         if self.skipped_bytes:
             out.append(f"{name}: lost synchronisation {self.resyncs} time(s) and skipped {self.skipped_bytes} corrupt "
-                       f"bytes (about {self.skipped_frames} frames), so ticks after a gap are not evenly spaced in time.")
+                       f"bytes (about {self.skipped_frames} frame(s)), so ticks after a gap are not evenly spaced in time.")
         if self.trailing_bytes:
             out.append(f"{name}: the last {self.trailing_bytes} bytes do not form a complete frame and are not read.")
         return out

@@ -32,7 +32,9 @@ from spikeview.ops.pyramid import (
     max_pyramid_levels,
     multiscale_loss,
     pyr_down,
+    pyr_down_adjoint,
     pyr_up,
+    pyr_up_adjoint,
 )
 from spikeview.ops.quantise import SoftQuantise, hard_quantise, soft_quantise
 
@@ -60,7 +62,9 @@ __all__ = [
     "mosaic_dense_grad",
     "multiscale_loss",
     "pyr_down",
+    "pyr_down_adjoint",
     "pyr_up",
+    "pyr_up_adjoint",
     "soft_quantise",
     "tfp_variance",
 ]

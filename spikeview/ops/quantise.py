@@ -10,7 +10,7 @@ For ``x`` in the cell ``[l, u)`` between neighbouring levels (``u = l + 1/Δτ``
   midpoint** ``(l + u)/2``, a staircase with zero gradient (so ``k = 0`` does not mean identity).
 * Within a cell ``q`` is smooth with ``dq/dx = (u − l) · k · (1 − tanh²) / 2``; ``tanh`` saturates,
   so every ``k ≥ 0`` (1e6 included) gives finite values and finite gradients.
-* At a cell boundary ``q`` jumps by ``(u − l)(1 − tanh(k (u − l)/2))`` (0.013/Δτ at k = 50, Δτ = 10;
+* At a cell boundary ``q`` jumps up (it stays non-decreasing) by ``(u − l)(1 − tanh(k (u − l)/2))`` (0.013/Δτ at k = 50, Δτ = 10;
   ``u − l`` at k = 0). An input exactly on a level belongs to the cell above it (the top level 1 to
   the last cell); for large k it maps to itself either way.
 * Outside [0, 1] the first and last cells extend to ±∞: ``q`` stays in [0, 1] and tends to 0 below

@@ -12,9 +12,12 @@ seed whatever the chunk size or the number of threads, with no random state to c
 from __future__ import annotations
 
 import math
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
@@ -50,12 +53,6 @@ def _mix(z):
 def _uniform(key, index):
     """Uniform float64 in [0, 1) for a counter ``index`` (uint64) under ``key`` (uint64)."""
     return np.float64(_mix(key + index * _GOLDEN) >> _S11) * _INV53
-
-
-@njit(cache=True)
-def derive_key(seed, stream):
-    """A uint64 key for one named random stream of a seed (both non-negative ints)."""
-    return _mix(_mix(np.uint64(seed) + _GOLDEN) + np.uint64(stream) * _GOLDEN)
 
 
 def normal_table(bits: int = 12) -> tuple[np.ndarray, np.ndarray]:
@@ -134,10 +131,13 @@ def _if_row(y, planes, ia, ib, wts, tick0, drive, dark, cap_ratio, theta, volt, 
             volt[y, x] = min(v - th * s, th)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def integrate_fire(planes, ia, ib, wts, tick0, drive, dark, cap_ratio, theta, volt, fired, out,
-                   key_noise, key_knuth, ne0, shot, jitter_std, reset_factor, table, step):
-    """Advance every photosite by ``n = len(ia)`` ticks of integrate-and-fire (one thread).
+                   key_noise, key_knuth, ne0, shot, jitter_std, reset_factor, table, step, y0, y1):
+    """Advance the photosites of rows ``[y0, y1)`` by ``n = len(ia)`` ticks of integrate-and-fire.
+
+    Releases the GIL: :func:`run_rows` runs bands of rows in threads (rows are independent, and
+    the random numbers depend only on (seed, tick, pixel), so results are bit-identical).
 
     Args:
         planes: (K, H, W) float32 mosaicked linear intensity key planes (the channel each
@@ -159,18 +159,45 @@ def integrate_fire(planes, ia, ib, wts, tick0, drive, dark, cap_ratio, theta, vo
         reset_factor: integration factor of the tick right after a reset (1 = off).
         table, step: :func:`normal_table` (4096 cells: the bit layout above assumes 12 bits).
     """
-    for y in range(drive.shape[0]):
+    for y in range(y0, y1):
         _if_row(y, planes, ia, ib, wts, tick0, drive, dark, cap_ratio, theta, volt, fired, out,
                 key_noise, key_knuth, ne0, shot, jitter_std, reset_factor, table, step)
 
 
-@njit(cache=True, parallel=True)
-def integrate_fire_parallel(planes, ia, ib, wts, tick0, drive, dark, cap_ratio, theta, volt, fired, out,
-                            key_noise, key_knuth, ne0, shot, jitter_std, reset_factor, table, step):
-    """:func:`integrate_fire` over rows in parallel threads (bit-identical results)."""
-    for y in prange(drive.shape[0]):
-        _if_row(y, planes, ia, ib, wts, tick0, drive, dark, cap_ratio, theta, volt, fired, out,
-                key_noise, key_knuth, ne0, shot, jitter_std, reset_factor, table, step)
+def run_rows(kernel, height: int, n_threads: int, *args) -> None:
+    """Call ``kernel(*args, y0, y1)`` over bands of rows, in ``n_threads`` threads when > 1."""
+    if n_threads <= 1 or height < 2 * n_threads:
+        kernel(*args, 0, height)
+        return
+    pool = _pool(n_threads)
+    edges = np.linspace(0, height, n_threads + 1).round().astype(int)
+    futures = [pool.submit(kernel, *args, int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+    for f in futures:
+        f.result()
+
+
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+_POOL_LOCK = threading.Lock()
+
+
+def _pool(n: int) -> ThreadPoolExecutor:
+    with _POOL_LOCK:
+        pool = _POOLS.get(n)
+        if pool is None:
+            pool = _POOLS[n] = ThreadPoolExecutor(max_workers=n, thread_name_prefix="spikeview-sim")
+        return pool
+
+
+def default_threads() -> int:
+    """Threads for large frames: ``$SPIKEVIEW_THREADS`` or the usable CPUs (at most 8)."""
+    env = os.environ.get("SPIKEVIEW_THREADS", "")
+    if env.isdigit() and int(env) > 0:
+        return int(env)
+    try:
+        n = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        n = os.cpu_count() or 1
+    return max(1, min(8, n))
 
 
 @njit(cache=True, inline="always")
@@ -211,24 +238,18 @@ def _warp_row(y, src, out, m00, m01, m10, m11, tx, ty):
             out[y, x, c] = (1.0 - fy) * top + fy * bot
 
 
-@njit(cache=True)
-def warp_affine(src, out, m00, m01, m10, m11, tx, ty):
-    """Bilinear resampling with mirrored borders: ``out[y, x] = src(M · (x, y) + t)`` (one thread).
+@njit(cache=True, nogil=True)
+def warp_affine(src, out, m00, m01, m10, m11, tx, ty, y0, y1):
+    """Bilinear resampling with mirrored borders: ``out[y, x] = src(M · (x, y) + t)`` for rows ``[y0, y1)``.
 
     Args:
         src: (h, w, 3) float32 source image.
         out: (H, W, 3) float32 destination (written).
         m00, m01, m10, m11, tx, ty: source x = m00·x + m01·y + tx, source y = m10·x + m11·y + ty
             (pixel-centre coordinates).
+        y0, y1: the rows to render (see :func:`run_rows`).
     """
-    for y in range(out.shape[0]):
-        _warp_row(y, src, out, m00, m01, m10, m11, tx, ty)
-
-
-@njit(cache=True, parallel=True)
-def warp_affine_parallel(src, out, m00, m01, m10, m11, tx, ty):
-    """:func:`warp_affine` over rows in parallel threads."""
-    for y in prange(out.shape[0]):
+    for y in range(y0, y1):
         _warp_row(y, src, out, m00, m01, m10, m11, tx, ty)
 
 

@@ -625,8 +625,8 @@ class MotionScene(Scene):
         tx = self._src_center[0] - (m00 * ox + m01 * oy)
         ty = self._src_center[1] - (m10 * ox + m11 * oy)
         out = np.empty((self.height, self.width, 3), dtype=np.float32)
-        warp = _kernels.warp_affine_parallel if self.height * self.width >= PARALLEL_MIN_PIXELS else _kernels.warp_affine
-        warp(self._src, out, m00, m01, m10, m11, tx, ty)
+        threads = _kernels.default_threads() if self.height * self.width >= PARALLEL_MIN_PIXELS else 1
+        _kernels.run_rows(_kernels.warp_affine, self.height, threads, self._src, out, m00, m01, m10, m11, tx, ty)
         for fan in self.fans:
             fan.draw(out, t)
         np.clip(out, 0.0, 1.0, out=out)

@@ -42,7 +42,8 @@ _STREAM_DARK, _STREAM_PRNU, _STREAM_CAP, _STREAM_OFFSET, _STREAM_V0 = 1, 2, 3, 4
 # streams of the counter-based temporal noise
 _STREAM_NOISE, _STREAM_KNUTH = 101, 102
 _MASK64 = (1 << 64) - 1
-#: frames of at least this many photosites use the multi-threaded kernel
+#: frames of at least this many photosites are simulated by several threads (bands of rows; see
+#: ``SPIKEVIEW_THREADS``); below it one thread is faster than the hand-over
 PARALLEL_MIN_PIXELS = 1 << 18
 #: memory budget (bytes) of the key planes of one chunk
 CHUNK_PLANE_BYTES = 64 << 20
@@ -253,8 +254,7 @@ class SpikeSimulator:
         if self._table is None:
             self._table, self._step = _kernels.normal_table(12)
         cfg = self.config
-        kernel = (_kernels.integrate_fire_parallel if self.height * self.width >= PARALLEL_MIN_PIXELS
-                  else _kernels.integrate_fire)
+        threads = _kernels.default_threads() if self.height * self.width >= PARALLEL_MIN_PIXELS else 1
         s = self.sensor
         jitter = cfg.jitter_std_v / cfg.threshold_v if cfg.threshold_jitter else 0.0
         reset = cfg.reset_factor if cfg.reset_slowdown else 1.0
@@ -272,9 +272,10 @@ class SpikeSimulator:
                 ib[k] = index.setdefault(kb, len(index))
                 wts[k] = w
             planes = np.stack([self._plane(key) for key in index])
-            kernel(planes, ia, ib, wts, self.tick, s.drive, s.dark, s.cap_ratio, s.theta, self._volt, self._fired,
-                   out[a:a + m], self._key_noise, self._key_knuth, float(cfg.electrons_per_threshold),
-                   bool(cfg.shot_noise), float(jitter), float(reset), self._table, self._step)
+            _kernels.run_rows(_kernels.integrate_fire, self.height, threads, planes, ia, ib, wts, self.tick, s.drive,
+                              s.dark, s.cap_ratio, s.theta, self._volt, self._fired, out[a:a + m], self._key_noise,
+                              self._key_knuth, float(cfg.electrons_per_threshold), bool(cfg.shot_noise), float(jitter),
+                              float(reset), self._table, self._step)
             self.tick += m
         return out
 

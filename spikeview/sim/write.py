@@ -29,18 +29,13 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from spikeview.cfa import cfa_to_str
 from spikeview.errors import Cancelled, InputFileError, OutputFileError, ParameterError
+from spikeview.io.plain import PlainDatWriter
+from spikeview.io.sidecar import sidecar_path, write_sidecar
 from spikeview.io.source import StreamInfo
 from spikeview.sim.config import SimConfig
 from spikeview.sim.scenes import Scene
 from spikeview.sim.simulator import CancelCheck, ProgressCallback, SpikeSimulator
-
-
-def sidecar_path(dat_path: str | Path) -> Path:
-    """The sidecar of a spike file: ``capture.dat`` → ``capture.dat.toml``."""
-    p = Path(dat_path)
-    return p.with_name(p.name + ".toml")
 
 
 def ground_truth_path(dat_path: str | Path) -> Path:
@@ -97,18 +92,6 @@ class _GroundTruthWriter:
             pass
 
 
-def _stream_table(info: StreamInfo) -> dict[str, Any]:
-    return {"format": info.format, "width": info.width, "height": info.height, "n_frames": info.n_frames,
-            "tick_rate": info.tick_rate, "cfa": cfa_to_str(info.cfa), "flip_vertical": info.flip_vertical,
-            "flip_horizontal": info.flip_horizontal}
-
-
-def _write_sidecar(path: Path, tables: dict[str, Any]) -> None:
-    import tomli_w
-
-    path.write_text(tomli_w.dumps(tables), encoding="utf-8")
-
-
 def _temp(path: Path) -> Path:
     return path.with_name(f".{path.name}.tmp{os.getpid()}")
 
@@ -156,54 +139,68 @@ def simulate_to_file(scene: Scene | str | Path, config: SimConfig, out_path: str
             "set width/height (or crop) so that width·height divides by 8."
         )
     gt_ticks = np.arange(0, config.n_ticks, config.gt_every, dtype=np.int64)
-    temps = [_temp(t) for t in targets]
+    dat, side, gt_path = targets
+    tmp_dat, tmp_gt = _temp(dat), _temp(gt_path)
     gt_writer: _GroundTruthWriter | None = None
+    writer: PlainDatWriter | None = None
+    fgt: BinaryIO | None = None
     try:
-        with open(temps[0], "wb") as fdat, open(temps[2], "wb") as fgt:
-            gt_writer = _GroundTruthWriter(fgt, len(gt_ticks), h, w)
-            buf = np.empty((sim.chunk_ticks, h, w), dtype=np.uint8)
-            next_gt = 0
-            total = config.n_ticks
-            while sim.tick < total:
-                if cancel is not None and cancel():
-                    raise Cancelled(f"Simulation cancelled at tick {sim.tick} of {total}.")
-                a = sim.tick
-                end = min(total, a + sim.chunk_ticks)
-                k = 0
-                # run up to each ground-truth tick, then render it: the scene is only ever asked
-                # for later times, so videos decode forward without rewinding
-                while sim.tick < end:
-                    if next_gt < len(gt_ticks) and gt_ticks[next_gt] == sim.tick:
-                        gt_writer.append(sim.gt_at(sim.tick))
-                        next_gt += 1
-                    stop = end if next_gt >= len(gt_ticks) else min(end, int(gt_ticks[next_gt]))
-                    stop = max(stop, sim.tick + 1)
-                    n = stop - sim.tick
-                    sim.run(n, out=buf[k:k + n])
-                    k += n
-                chunk = buf[:k]
-                if config.flip_vertical:
-                    chunk = chunk[:, ::-1]
-                fdat.write(np.packbits(chunk.reshape(k, h * w), axis=1, bitorder="little").tobytes())
-                if progress is not None:
-                    progress(sim.tick, total)
-            gt_writer.finish(gt_ticks, config.tick_rate)
-        info = StreamInfo(width=w, height=h, n_frames=config.n_ticks, tick_rate=config.tick_rate, cfa=config.cfa_or_none,
-                          format="plain", flip_vertical=config.flip_vertical, path=out_path)
+        writer = PlainDatWriter(tmp_dat, w, h, flip_vertical=config.flip_vertical, cfa=config.cfa_or_none,
+                                tick_rate=config.tick_rate, sidecar=False)
+        fgt = open(tmp_gt, "wb")
+        gt_writer = _GroundTruthWriter(fgt, len(gt_ticks), h, w)
+        buf = np.empty((sim.chunk_ticks, h, w), dtype=np.uint8)
+        next_gt = 0
+        total = config.n_ticks
+        while sim.tick < total:
+            if cancel is not None and cancel():
+                raise Cancelled(f"Simulation cancelled at tick {sim.tick} of {total}.")
+            end = min(total, sim.tick + sim.chunk_ticks)
+            k = 0
+            # run up to each ground-truth tick, then render it: the scene is only ever asked
+            # for later times, so videos decode forward without rewinding
+            while sim.tick < end:
+                if next_gt < len(gt_ticks) and gt_ticks[next_gt] == sim.tick:
+                    gt_writer.append(sim.gt_at(sim.tick))
+                    next_gt += 1
+                stop = end if next_gt >= len(gt_ticks) else min(end, int(gt_ticks[next_gt]))
+                n = max(stop, sim.tick + 1) - sim.tick
+                sim.run(n, out=buf[k:k + n])
+                k += n
+            writer.write(buf[:k])
+            if progress is not None:
+                progress(sim.tick, total)
+        gt_writer.finish(gt_ticks, config.tick_rate)
+        gt_writer = None
+        fgt.close()
+        writer.close()
+        info = writer.info.replace(path=dat)
         tables: dict[str, Any] = {
-            "stream": _stream_table(info),
             "simulation": config.to_dict(),
             "scene": sim.scene.describe(),
-            "ground_truth": {"file": targets[2].name, "n_frames": int(len(gt_ticks)), "every_ticks": config.gt_every,
+            "ground_truth": {"file": gt_path.name, "n_frames": int(len(gt_ticks)), "every_ticks": config.gt_every,
                              "first_tick": 0},
         }
-        _write_sidecar(temps[1], tables)
-        for tmp, final in zip(temps, targets):
-            os.replace(tmp, final)
+        os.replace(tmp_dat, dat)
+        os.replace(tmp_gt, gt_path)
+        try:
+            write_sidecar(dat, info, tables)
+        except BaseException:
+            # a .dat without its sidecar cannot be read back correctly: leave nothing half-done
+            dat.unlink(missing_ok=True)
+            gt_path.unlink(missing_ok=True)
+            raise
     except BaseException as e:
         if gt_writer is not None:
             gt_writer.abort()
-        for tmp in temps:
+        if fgt is not None:
+            fgt.close()
+        if writer is not None:
+            try:
+                writer.close()
+            except OutputFileError:  # already failing; the partial file is removed below
+                pass
+        for tmp in (tmp_dat, tmp_gt):
             tmp.unlink(missing_ok=True)
         if isinstance(e, OSError):
             raise OutputFileError(f"{out_path}: could not write the simulation ({e.strerror or e}); check the folder and free space.") from None
@@ -211,8 +208,8 @@ def simulate_to_file(scene: Scene | str | Path, config: SimConfig, out_path: str
     finally:
         if not isinstance(scene, Scene):
             sim.close()
-    info.extra = {"simulation": tables["simulation"], "scene": tables["scene"]}
-    return SimulationFiles(dat=out_path, sidecar=targets[1], ground_truth=targets[2], info=info)
+    info.extra = tables
+    return SimulationFiles(dat=dat, sidecar=side, ground_truth=gt_path, info=info)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,8 +1,7 @@
-"""Shared pieces of the demosaicking kernels: input checks, CFA codes, mirror padding."""
+"""Shared pieces of the demosaicking kernels: input checks and CFA codes."""
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from spikeview.cfa import CHANNEL_INDEX, parse_cfa
@@ -25,29 +24,3 @@ def check_cfa_image(image: np.ndarray, min_size: int, method: str, dtype: type =
     if min(arr.shape) < min_size:
         raise ParameterError(f"cfa_image of shape {arr.shape} is too small for {method!r} demosaicking; it needs at least {min_size}x{min_size} pixels.")
     return np.ascontiguousarray(arr, dtype=dtype)
-
-
-@numba.njit(cache=True, nogil=True)
-def pad_mirror(img: np.ndarray, p: int) -> np.ndarray:  # pragma: no cover - compiled
-    """Pad ``(H, W)`` by ``p`` pixels with whole-sample symmetry (``c b | a b c``).
-
-    This is scipy.ndimage's ``"mirror"`` and numpy.pad's ``"reflect"`` mode. Mirroring about the
-    edge pixel keeps the Bayer phase (pixel -1 copies pixel 1, same colour), unlike half-sample
-    symmetry (``b a | a b``), which puts the wrong colour outside the border. Needs ``p < H, W``.
-    """
-    h, w = img.shape
-    out = np.empty((h + 2 * p, w + 2 * p), dtype=img.dtype)
-    for yy in range(h + 2 * p):
-        y = yy - p
-        if y < 0:
-            y = -y
-        elif y >= h:
-            y = 2 * (h - 1) - y
-        for xx in range(w + 2 * p):
-            x = xx - p
-            if x < 0:
-                x = -x
-            elif x >= w:
-                x = 2 * (w - 1) - x
-            out[yy, xx] = img[y, x]
-    return out

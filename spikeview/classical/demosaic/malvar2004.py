@@ -16,7 +16,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from spikeview.classical.demosaic._common import check_cfa_image, pad_mirror, quad_codes
+from spikeview.classical.demosaic._common import check_cfa_image, quad_codes
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -90,5 +90,6 @@ def demosaic_malvar2004(cfa_image: np.ndarray, cfa: str) -> np.ndarray:
     img = check_cfa_image(cfa_image, 3, "malvar2004")
     quad = quad_codes(cfa)
     out = np.empty(img.shape + (3,), dtype=np.float32)
-    _malvar_padded(pad_mirror(img, 2), quad, out)
+    # numpy's "reflect" mirrors about the edge pixel (c b | a b c), which keeps the Bayer phase
+    _malvar_padded(np.pad(img, 2, mode="reflect"), quad, out)
     return out

@@ -1,0 +1,113 @@
+"""The ``spikeview`` command line, driven in-process (and once as a real subprocess)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from spikeview.cli.main import main
+from spikeview.io.plain import write_plain
+
+
+@pytest.fixture
+def capture(tmp_path):
+    """A 64×96 Bayer capture of 400 ticks with a left-to-right brightness ramp, no sidecar."""
+    rng = np.random.default_rng(7)
+    ramp = np.linspace(0.05, 0.9, 96, dtype=np.float32)[None, None, :]
+    spikes = (rng.random((400, 64, 96)) < ramp).astype(np.uint8)
+    path = tmp_path / "cap.dat"
+    write_plain(path, spikes)
+    return path, spikes
+
+
+GEOM = ["--width", "96", "--height", "64", "--cfa", "RGGB"]
+
+
+def test_info_reports_geometry_and_rates(capture, capsys):
+    path, spikes = capture
+    assert main(["info", str(path), *GEOM]) == 0
+    out = capsys.readouterr().out
+    assert "96 x 64" in out and "RGGB" in out and "400 ticks" in out and "20.000 ms" in out
+    # overall rate printed with 4 decimals; sampled windows cover the whole stream here
+    overall = float(out.split("all ")[1].split()[0])
+    assert overall == pytest.approx(spikes.mean(), abs=2e-3)
+
+
+def test_info_without_geometry_lists_candidates(capture, capsys):
+    path, _ = capture
+    path.with_name(path.name + ".toml").unlink(missing_ok=True)
+    assert main(["info", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("spikeview: error:") and "--width" in err
+    assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("bad, needle", [
+    (["info", "does-not-exist.dat"], "not found"),
+    (["info", "{cap}", "--width", "96", "--height", "64", "--cfa", "RGBG"], "CFA"),
+    (["reconstruct", "{cap}", *GEOM, "--at", "5000", "--out", "{tmp}/x.npy"], "outside"),
+    (["reconstruct", "{cap}", *GEOM, "--range", "10:5", "--out", "{tmp}/x.npy"], "--range"),
+    (["reconstruct", "{cap}", *GEOM, "--range", "0:100", "--out", "{tmp}/x.gif"], ".gif"),
+    (["reconstruct", "{cap}", *GEOM, "--range", "0:100", "--out", "{tmp}/x.exr"], "%04d"),
+])
+def test_bad_input_gets_one_clear_sentence(capture, tmp_path, capsys, bad, needle):
+    path, _ = capture
+    argv = [a.format(cap=path, tmp=tmp_path) for a in bad]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("spikeview: error:") and needle in err, err
+    assert "\n" not in err and "Traceback" not in err
+    assert not list(tmp_path.glob("x*")), "no output may be left behind by a failed run"
+
+
+def test_reconstruct_npy_matches_library_and_preset_reproduces(capture, tmp_path, capsys):
+    from spikeview.classical.reconstruct import ClassicalConfig, reconstruct_frames
+    from spikeview.io import open_source
+
+    path, _ = capture
+    out = tmp_path / "frames.npy"
+    assert main(["reconstruct", str(path), *GEOM, "--range", "0:400:50", "--window", "10",
+                 "--demosaic", "bilinear", "--out", str(out)]) == 0
+    frames = np.load(out)
+    assert frames.shape == (8, 64, 96, 3) and frames.dtype == np.float32
+    assert 0.0 <= frames.min() and frames.max() <= 1.0
+    with open_source(path, width=96, height=64, cfa="RGGB") as src:
+        ref = np.stack(list(reconstruct_frames(src, range(0, 400, 50), ClassicalConfig(window=10, demosaic="bilinear"))))
+    np.testing.assert_array_equal(frames, ref)
+    # the preset beside the output re-runs the same reconstruction exactly
+    preset = tmp_path / "frames.npy.preset.toml"
+    assert preset.exists()
+    again = tmp_path / "again.npy"
+    assert main(["reconstruct", str(path), "--preset", str(preset), "--out", str(again)]) == 0
+    np.testing.assert_array_equal(np.load(again), frames)
+
+
+def test_reconstruct_tfi_png_sequence_and_mp4(capture, tmp_path, capsys):
+    import av
+
+    path, _ = capture
+    assert main(["reconstruct", str(path), *GEOM, "--method", "tfi", "--range", "32:368:48",
+                 "--out", str(tmp_path / "png" / "f_%03d.png")]) == 1  # folder does not exist: clear error
+    (tmp_path / "png").mkdir()
+    assert main(["reconstruct", str(path), *GEOM, "--method", "tfi", "--range", "32:368:48",
+                 "--out", str(tmp_path / "png" / "f_%03d.png")]) == 0
+    assert sorted(p.name for p in (tmp_path / "png").glob("*.png")) == [f"f_{i:03d}.png" for i in range(7)]
+    mp4 = tmp_path / "clip.mp4"
+    assert main(["reconstruct", str(path), *GEOM, "--range", "0:400:10", "--fps", "25", "--out", str(mp4)]) == 0
+    err = capsys.readouterr().err
+    assert "80× slow motion" in err  # 20000 / (10 * 25)
+    with av.open(str(mp4)) as c:
+        s = c.streams.video[0]
+        assert (s.codec_context.width, s.codec_context.height) == (96, 64)
+        assert s.average_rate == 25
+        assert sum(1 for _ in c.decode(s)) == 40
+
+
+def test_cli_subprocess_no_traceback(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "spikeview", "info", str(tmp_path / "nope.dat")],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 1
+    assert "Traceback" not in out.stderr and "nope.dat" in out.stderr

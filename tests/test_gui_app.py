@@ -1,0 +1,444 @@
+"""The desktop app, offscreen (pytest-qt): open, scrub, sliders, guided runs, export, errors.
+
+Every test here fails on a Qt warning (``qt_log_level_fail``). The one message ignored is the
+offscreen platform plugin's "does not support propagateSizeHints()", which the plugin prints for any
+dock widget and which does not exist on a real display (X11, Wayland, Windows, macOS).
+"""
+
+from __future__ import annotations
+
+import functools
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pytestqt")
+from PySide6 import QtCore, QtGui, QtWidgets  # noqa: E402
+
+from spikeview.gui import core  # noqa: E402
+from spikeview.gui.app import configure_pyqtgraph  # noqa: E402
+from spikeview.gui.main_window import MainWindow  # noqa: E402
+from spikeview.gui.model import SPECS  # noqa: E402
+from spikeview.gui.widgets import ParamSlider  # noqa: E402
+
+OFFSCREEN_NOISE = r"This plugin does not support propagateSizeHints"
+pytestmark = [pytest.mark.gui, pytest.mark.qt_log_level_fail("WARNING"), pytest.mark.qt_log_ignore(OFFSCREEN_NOISE)]
+
+WAIT_MS = 60_000  # generous: the test machine is shared; nothing here measures speed
+
+
+@functools.cache
+def _demo():
+    from spikeview.sim.demo import demo_capture
+
+    return demo_capture(size=64, n_ticks=240, seed=1)
+
+
+def demo_stream() -> core.OpenedStream:
+    """A tiny simulated capture (64×64, 240 ticks, RGGB, ground truth known)."""
+    cap = _demo()
+    return core.memory_stream(cap, "test capture", cap.gt_at)
+
+
+@pytest.fixture
+def settings(tmp_path):
+    return QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat)
+
+
+@pytest.fixture
+def window(qtbot, settings):
+    configure_pyqtgraph()
+    w = MainWindow(settings=settings)
+    qtbot.addWidget(w)
+    w.resize(1400, 900)
+    w.show()
+    yield w
+    w.close()
+
+
+def frames_at(window, tick: int):
+    f = window.controller.last_frames
+    return f is not None and f.tick == tick and window.stream_panel.tfp.image() is not None
+
+
+@pytest.fixture
+def opened(window, qtbot):
+    """The window with the tiny capture open and its first previews shown."""
+    window.set_stream(demo_stream())
+    qtbot.waitUntil(lambda: frames_at(window, window.session.tick), timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: window.rates_panel.last is not None, timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: window.degradation_panel.last is not None, timeout=WAIT_MS)
+    return window
+
+
+def write_plain_dat(path: Path, spikes: np.ndarray) -> None:
+    """The ecosystem's plain format: rows flipped, LSB-first packed, no header."""
+    t = spikes.shape[0]
+    flipped = spikes[:, ::-1].reshape(t, -1)
+    np.packbits(flipped, axis=1, bitorder="little").tofile(path)
+
+
+# ------------------------------------------------------------------------------------ opening
+def test_no_argument_opens_the_demo_capture(window, qtbot):
+    window.open_demo(size=32, n_ticks=120)
+    qtbot.waitUntil(lambda: window.session.stream is not None, timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: frames_at(window, window.session.tick), timeout=WAIT_MS)
+    st = window.session.stream
+    assert st.label == "demo capture" and st.is_simulated and st.source.cfa == "RGGB"
+    assert window.windowTitle() == "demo capture — spikeview"
+    tfp = window.stream_panel.tfp.image()
+    assert tfp.shape == (32, 32, 3) and tfp.dtype == np.uint8 and tfp.std() > 0  # a real picture
+    assert window.controller.errors == []
+
+
+def test_open_a_plain_file_asks_geometry_with_a_live_preview(window, qtbot, tmp_path):
+    spikes = _demo().read(0, 120)
+    path = tmp_path / "capture.dat"
+    write_plain_dat(path, spikes)
+    window.open_path(path)
+    qtbot.waitUntil(lambda: window.settings_dialog is not None, timeout=WAIT_MS)
+    dlg = window.settings_dialog
+    dlg.width_spin.setValue(64)
+    dlg.height_spin.setValue(64)
+    dlg.cfa.setCurrentIndex(dlg.cfa.findData("RGGB"))
+    dlg.flip.setChecked(True)
+    dlg.update_preview()
+    assert dlg.error.text() == "" and dlg.preview.image().shape == (64, 64, 3)
+    right = dlg.preview.image().astype(float)
+    dlg.flip.setChecked(False)  # a wrong flip on an even height is a wrong CFA phase: colours change
+    dlg.update_preview()
+    assert np.abs(dlg.preview.image().astype(float) - right).mean() > 10
+    dlg.flip.setChecked(True)
+    dlg.update_preview()
+    dlg.accept()
+    qtbot.waitUntil(lambda: window.session.stream is not None and window.session.stream.path == path, timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: frames_at(window, window.session.tick), timeout=WAIT_MS)
+    src = window.session.source
+    assert (src.width, src.height, src.n_frames, src.cfa) == (64, 64, 120, "RGGB")
+    np.testing.assert_array_equal(src.read(10, 12), spikes[10:12])  # decoded the right way up
+    assert window.recent_files()[0]["path"] == str(path)
+
+
+def test_open_npy_and_drop_a_file(window, qtbot, tmp_path):
+    spikes = _demo().read(0, 100)
+    path = tmp_path / "spikes.npy"
+    np.save(path, spikes)
+    mime = QtCore.QMimeData()
+    mime.setUrls([QtCore.QUrl.fromLocalFile(str(path))])
+    ev = QtGui.QDropEvent(QtCore.QPointF(10, 10), QtCore.Qt.DropAction.CopyAction, mime,
+                          QtCore.Qt.MouseButton.LeftButton, QtCore.Qt.KeyboardModifier.NoModifier)
+    window.dropEvent(ev)
+    qtbot.waitUntil(lambda: window.session.stream is not None, timeout=WAIT_MS)
+    assert window.session.source.shape == (100, 64, 64)
+
+
+@pytest.mark.parametrize("content", [None, b"", b"not numpy at all"])
+def test_a_bad_file_is_an_error_message_not_a_crash(window, qtbot, tmp_path, content):
+    path = tmp_path / ("missing.npy" if content is None else "bad.npy")
+    if content is not None:
+        path.write_bytes(content)
+    window.open_path(path)
+    qtbot.waitUntil(lambda: window.notice.isVisible(), timeout=WAIT_MS)
+    assert window.notice.kind == "error" and path.name in window.notice.text()
+    assert window.session.stream is None and window.isVisible()
+
+
+# ------------------------------------------------------------------------------------ stream
+def test_scrub_step_and_keyboard(opened, qtbot):
+    w, s = opened, opened.session
+    w.stream_panel.scrub.setValue(37)
+    assert s.tick == 37
+    qtbot.waitUntil(lambda: frames_at(w, 37), timeout=WAIT_MS)
+    assert "tick 37" in w.stream_panel.time_label.text() and "1\u2009850 µs" in w.stream_panel.time_label.text()
+    qtbot.mouseClick(w.stream_panel.fwd_btn, QtCore.Qt.MouseButton.LeftButton)
+    assert s.tick == 38
+    w.activateWindow()
+    w.setFocus()
+    for key, expect in ((QtCore.Qt.Key.Key_Left, 37), (QtCore.Qt.Key.Key_End, 239), (QtCore.Qt.Key.Key_Home, 0)):
+        w.findChild(QtGui.QAction, {"Left": "act_back", "End": "act_end", "Home": "act_home"}[key.name[4:]]).trigger()
+        assert s.tick == expect
+    qtbot.waitUntil(lambda: frames_at(w, 0), timeout=WAIT_MS)
+    f = w.controller.last_frames
+    assert (f.a, f.b) == core.window_range(0, s.get("window"), 240)
+    assert "tick 0" in w.time_status.text()
+
+
+def test_play_every_window_with_loop_and_marks(opened, qtbot):
+    w, s = opened, opened.session
+    s.set("speed", "window")
+    s.set_tick(100)
+    s.set_mark_in()
+    s.set_tick(140)
+    s.set_mark_out()
+    assert "range 100–140" in w.stream_panel.marks_label.text()
+    s.set_tick(100)
+    seen: set[int] = set()
+    w.controller.frames_ready.connect(lambda f: seen.add(f.tick))
+    w.act_play.trigger()  # Space
+    assert s.playing
+    qtbot.waitUntil(lambda: {100, 110, 120, 130, 140} <= seen, timeout=WAIT_MS)
+    assert seen <= {100, 110, 120, 130, 140}  # every window, looping inside the marks
+    qtbot.waitUntil(lambda: w.controller.display_fps() > 0, timeout=WAIT_MS)
+    w.act_play.trigger()
+    assert not s.playing
+    qtbot.waitUntil(lambda: "paused" in w.fps_status.text(), timeout=WAIT_MS)
+
+
+def test_roi_restricts_the_rates(opened, qtbot):
+    w, s = opened, opened.session
+    qtbot.mouseClick(w.stream_panel.roi_btn, QtCore.Qt.MouseButton.LeftButton)
+    assert s.roi == (16, 16, 32, 32) and w.stream_panel.roi_item is not None
+    w.stream_panel.roi_item.setPos((8, 8))  # drag: the model follows the handle
+    assert s.roi == (8, 8, 32, 32)
+    qtbot.waitUntil(lambda: "ROI" in w.rates_panel.summary.text(), timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: w.degradation_panel.last.shape == (32, 32), timeout=WAIT_MS)
+
+
+# ------------------------------------------------------------------------------------ sliders
+def test_every_slider_changes_its_parameter_and_undoes(opened, qtbot):
+    w, s = opened, opened.session
+    sliders = w.findChildren(ParamSlider)
+    names = {sl.name for sl in sliders}
+    assert {"k", "eta", "levels", "s", "t_start", "black", "white"} <= names
+    for sl in sliders:
+        spec = SPECS[sl.name]
+        before = s.get(sl.name)
+        target = spec.minimum if before != spec.minimum else spec.maximum
+        if sl.name == "white":
+            target = 0.8
+        sl.slider.setSliderDown(True)  # a drag: press, move through values, release
+        for frac in (0.3, 0.6, 1.0):
+            sl.slider.setValue(round(sl._to_pos(before) + frac * (sl._to_pos(target) - sl._to_pos(before))))
+        sl.slider.setSliderDown(False)
+        assert s.get(sl.name) == pytest.approx(target), sl.name
+        assert sl.spin.value() == pytest.approx(target)
+        s.undo()  # the whole drag is one step
+        assert s.get(sl.name) == pytest.approx(before), sl.name
+        assert sl.slider.value() == sl._to_pos(before)
+    assert w.controller.errors == []
+
+
+def test_k_and_window_update_the_degradation_preview(opened, qtbot):
+    w, s = opened, opened.session
+    panel = w.degradation_panel
+    n = panel.updates
+    s.set("k", 5.0)
+    qtbot.waitUntil(lambda: panel.updates > n and "k = 5" in panel.info.text(), timeout=WAIT_MS)
+    before = panel.panes["qcmx"].image().copy()
+    s.set("window", 20)
+    qtbot.waitUntil(lambda: "Δτ = 20" in panel.info.text(), timeout=WAIT_MS)
+    assert not np.array_equal(before, panel.panes["qcmx"].image())
+    s.set("show_pyramid", True)
+    qtbot.waitUntil(lambda: panel.band_box.isVisible() and panel.bands[1].image() is not None, timeout=WAIT_MS)
+    assert panel.bands[1].image().shape == (32, 32)  # level 1 of a 64×64 residual
+
+
+# ------------------------------------------------------------------------------------ guided
+def test_guided_run_to_the_end_plots_quality(opened, qtbot):
+    w, s = opened, opened.session
+    s.set("steps", 3)
+    w.findChild(QtGui.QAction, "act_run").trigger()
+    qtbot.waitUntil(lambda: w.controller.guided_result is not None, timeout=WAIT_MS * 3)
+    g = w.guided_panel
+    r = w.controller.guided_result
+    assert r.image.shape == (64, 64, 3) and np.isfinite(r.image).all()
+    assert "mosaic" in g.plan.toPlainText() and "levels" in g.plan.toPlainText()
+    assert g.progress.value() == g.progress.maximum() == 3
+    pc, sc, ts, ps, ss = g.curves[r.run]
+    assert len(ts) == 3 and ts == sorted(ts) and all(np.isfinite(ps)) and 0 < ss[-1] <= 1
+    assert "finished" in g.status.text()
+    # the degradation preview now starts from the guided result
+    qtbot.waitUntil(lambda: "guided run" in w.degradation_panel.panes["x"].title.text(), timeout=WAIT_MS)
+    # a second run keeps the first run's curve
+    w.controller.run_guided()
+    qtbot.waitUntil(lambda: w.controller.guided_result.run == r.run + 1, timeout=WAIT_MS * 3)
+    assert set(g.curves) == {r.run, r.run + 1}
+
+
+def test_cancel_a_guided_run_midway(opened, qtbot):
+    w, s = opened, opened.session
+    s.set("steps", 400)
+    qtbot.mouseClick(w.guided_panel.run_btn, QtCore.Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: w.guided_panel.progress.value() >= 1, timeout=WAIT_MS * 3)
+    assert w.guided_panel.cancel_btn.isEnabled()
+    qtbot.mouseClick(w.guided_panel.cancel_btn, QtCore.Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: not w.controller.guided.is_active(), timeout=WAIT_MS)
+    assert w.controller.guided_result is None
+    assert "cancelled" in w.guided_panel.status.text() and not w.guided_panel.cancel_btn.isEnabled()
+    assert w.guided_panel.progress.value() < 400
+    assert w.controller.errors == []
+
+
+def test_slider_change_restarts_a_running_job_and_drops_stale_results(opened, qtbot):
+    w, s = opened, opened.session
+    s.set("steps", 400)
+    first = w.controller.run_guided()
+    qtbot.waitUntil(lambda: w.guided_panel.progress.value() >= 1, timeout=WAIT_MS * 3)
+    w.guided_panel.s.set_value(0.5)  # debounced restart
+    qtbot.waitUntil(lambda: w.controller.guided_run == first + 1, timeout=WAIT_MS)
+    runs: list[int] = []
+    w.controller.guided_update.connect(lambda u: runs.append(u.run))
+    qtbot.waitUntil(lambda: len(runs) >= 2, timeout=WAIT_MS * 3)
+    assert set(runs) == {first + 1}  # nothing from the cancelled run reaches the view
+    w.controller.cancel_guided()
+    qtbot.waitUntil(lambda: not w.controller.guided.is_active(), timeout=WAIT_MS)
+
+
+def test_window_keeps_ticking_while_a_guided_run_works(opened, qtbot):
+    """The UI-stall test: the largest gap between ticks of a 10 ms QTimer while the sampler runs."""
+    w, s = opened, opened.session
+    s.set("steps", 2)  # warm-up: torch and the prior load once per session, before measuring
+    w.controller.run_guided()
+    qtbot.waitUntil(lambda: w.controller.guided_result is not None, timeout=WAIT_MS * 3)
+    s.set("steps", 40)
+    stamps: list[float] = []
+    timer = QtCore.QTimer()
+    timer.setTimerType(QtCore.Qt.TimerType.PreciseTimer)
+    timer.setInterval(10)
+    timer.timeout.connect(lambda: stamps.append(time.perf_counter()))
+    run = w.controller.run_guided()
+    timer.start()
+    qtbot.waitUntil(lambda: w.guided_panel.progress.value() >= 10 or w.controller.guided_result.run == run,
+                    timeout=WAIT_MS * 3)
+    timer.stop()
+    w.controller.cancel_guided()
+    gaps = np.diff(stamps)
+    assert len(gaps) > 20
+    assert gaps.max() < 0.050, f"largest gap {1000 * gaps.max():.0f} ms over {len(gaps)} ticks"
+
+
+# ------------------------------------------------------------------------------------ export
+def test_export_the_current_frame_and_open_it_from_the_notification(opened, qtbot, tmp_path):
+    w, s = opened, opened.session
+    s.set("export_format", "png")
+    out = tmp_path / "frame.png"
+    w.export_panel.path.setText(str(out))
+    w.findChild(QtGui.QAction, "act_export").trigger()  # Ctrl+E
+    qtbot.waitUntil(lambda: w.notice.kind == "success", timeout=WAIT_MS)
+    assert out.exists()
+    from spikeview.export import read_export_metadata
+
+    rec = read_export_metadata(out)
+    assert rec["centre_tick"] == s.tick and rec["method"] == "tfp" and rec["params"]["classical"]["window"] == 10
+    opened_urls: list[str] = []
+    QtGui.QDesktopServices.setUrlHandler("file", lambda url: opened_urls.append(url.toLocalFile()))
+    try:
+        buttons = [b for b in w.notice.findChildren(QtWidgets.QPushButton) if b.text() == "Open"]
+        qtbot.mouseClick(buttons[0], QtCore.Qt.MouseButton.LeftButton)
+    finally:
+        QtGui.QDesktopServices.unsetUrlHandler("file")
+    assert opened_urls == [str(out)]
+
+
+def test_export_the_marked_range_as_mp4_shows_slow_motion(opened, qtbot, tmp_path):
+    w, s = opened, opened.session
+    s.set_tick(20)
+    s.set_mark_in()
+    s.set_tick(79)
+    s.set_mark_out()
+    s.set("export_range", "marked")
+    s.set("export_format", "mp4")
+    s.set("export_fps", 25.0)
+    assert "80× slow motion" in w.export_panel.slowmo.text()  # 20 kHz / (10 ticks · 25 fps)
+    assert "6 frame(s)" in w.export_panel.count.text()
+    out = tmp_path / "clip.mp4"
+    w.export_panel.path.setText(str(out))
+    w.export_panel.export_btn.click()
+    qtbot.waitUntil(lambda: w.notice.kind == "success", timeout=WAIT_MS)
+    assert out.exists() and w.export_panel.progress.value() == 6
+
+
+def test_cancel_an_export_and_a_failed_export(opened, qtbot, tmp_path):
+    w, s = opened, opened.session
+    s.set("export_range", "marked")
+    s.set("export_method", "guided")
+    s.set("steps", 400)
+    s.set("export_format", "png")
+    out = tmp_path / "g_%04d.png"
+    w.export_panel.path.setText(str(out))
+    w.export_panel.export_btn.click()
+    assert w.export_panel.cancel_btn.isEnabled()
+    qtbot.wait(200)
+    w.export_panel.cancel_btn.click()
+    qtbot.waitUntil(lambda: "cancelled" in w.export_panel.status.text(), timeout=WAIT_MS * 3)
+    assert w.export_panel.export_btn.isEnabled()
+    s.set("export_method", "tfp")
+    w.export_panel.path.setText(str(tmp_path / "missing" / "f_%04d.png"))
+    w.export_panel.export_btn.click()
+    qtbot.waitUntil(lambda: w.notice.kind == "error", timeout=WAIT_MS)
+    assert "Export failed" in w.notice.text() and "missing" in w.notice.text()
+
+
+# ------------------------------------------------------------------------------------ comfort
+def test_presets_save_and_load_and_a_bad_one_keeps_parameters(opened, tmp_path):
+    w, s = opened, opened.session
+    s.set("k", 77.0)
+    assert w.save_preset(tmp_path / "p.toml")
+    s.set("k", 12.0)
+    assert w.load_preset(tmp_path / "p.toml") and s.get("k") == 77.0
+    (tmp_path / "bad.toml").write_text("[guided]\nk = -3\n")
+    assert not w.load_preset(tmp_path / "bad.toml")
+    assert s.get("k") == 77.0 and "bad.toml" in w.notice.text()
+
+
+def test_parameters_and_layout_survive_a_restart(qtbot, settings):
+    configure_pyqtgraph()
+    a = MainWindow(settings=settings)
+    qtbot.addWidget(a)
+    a.show()
+    a.session.set("k", 33.0)
+    a.session.set("speed", "realtime")
+    a.docks["rates"].hide()
+    a.close()
+    b = MainWindow(settings=settings)
+    qtbot.addWidget(b)
+    b.show()
+    assert b.session.get("k") == 33.0 and b.session.get("speed") == "realtime"
+    assert not b.docks["rates"].isVisible()
+    assert b.guided_panel.k.spin.value() == 33.0
+    b.close()
+
+
+def test_undo_shortcut_and_help(opened, qtbot):
+    w, s = opened, opened.session
+    s.set("eta", 3.0)
+    assert w.act_undo.isEnabled() and "Colour range" in w.act_undo.text()
+    w.act_undo.trigger()
+    assert s.get("eta") == 2.0
+    dlg = w.show_help()
+    qtbot.waitUntil(dlg.isVisible)
+    table = dlg.findChild(QtWidgets.QTableWidget)
+    keys = {table.item(i, 0).text() for i in range(table.rowCount())}
+    assert {"Space", "Ctrl+O", "Ctrl+E", "F1", "Home / End"} <= keys
+    dlg.close()
+
+
+def test_stream_settings_reinterpret_the_cfa(opened, qtbot):
+    w, s = opened, opened.session
+    dlg = w.stream_settings()
+    dlg.cfa.setCurrentIndex(dlg.cfa.findData("BGGR"))
+    dlg.update_preview()
+    assert dlg.hint.text()  # a wrong CFA is pointed out
+    dlg.accept()
+    assert s.source.cfa == "BGGR"
+    qtbot.waitUntil(lambda: "CFA" in w.rates_panel.hint.text() or "green" in w.rates_panel.hint.text(), timeout=WAIT_MS)
+
+
+# ------------------------------------------------------------------------------------ meta
+def test_a_qt_warning_fails_a_test(tmp_path):
+    """The strictness above is real: a test that makes Qt warn fails under these markers."""
+    test = tmp_path / "test_warns.py"
+    test.write_text(
+        "import pytest\nfrom PySide6 import QtCore\n"
+        "pytestmark = [pytest.mark.qt_log_level_fail('WARNING')]\n"
+        "def test_warns(qtbot):\n    QtCore.qWarning('boom')\n"
+    )
+    out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(test)],
+                         capture_output=True, text=True, timeout=300, cwd=tmp_path,
+                         env={**__import__("os").environ, "QT_QPA_PLATFORM": "offscreen"})
+    assert out.returncode == 1, out.stdout[-2000:]
+    assert "boom" in out.stdout
