@@ -8,6 +8,7 @@ from spikeview.sim.config import SimConfig
 from spikeview.sim.demo import demo_capture, demo_scene
 from spikeview.sim.scenes import (
     ArrayScene,
+    Fan,
     ImageSequenceScene,
     MotionScene,
     ResizedScene,
@@ -208,6 +209,17 @@ def test_motion_scene_zoom_and_rotation_keep_the_centre_fixed():
     np.testing.assert_allclose(scene.frame_at(1.0)[16, 20], img[14, 16], atol=1e-5)
     with pytest.raises(ParameterError, match="zoom"):
         MotionScene(img, zoom=0.0)
+
+
+def test_fan_defaults_to_the_frame_centre():
+    grey = np.full((40, 60, 3), 0.5, np.float32)
+    frame = MotionScene(grey, fans=[Fan(rev_per_s=2.0)], scale=1.0).frame_at(0.0)
+    assert Fan().geometry(40, 60) == (29.5, 19.5, 12.0)
+    # the hub region changed, the corners did not
+    assert np.abs(frame[20, 30] - 0.5).max() > 0.05 or np.abs(frame[16, 36] - 0.5).max() > 0.05
+    np.testing.assert_array_equal(frame[:5, :5], grey[:5, :5])
+    with pytest.raises(ParameterError, match="Fan"):
+        Fan(radius=-1.0)
 
 
 def test_motion_scene_key_frames_at_a_render_rate_blend_in_between():

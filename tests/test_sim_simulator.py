@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
-from skimage.registration import phase_cross_correlation
 
 from spikeview.cfa import channel_map
 from spikeview.errors import Cancelled, ParameterError
@@ -111,6 +110,7 @@ def test_chunking_and_threads_do_not_change_the_stream(monkeypatch):
     parts = [sim.run(n) for n in (1, 100, 56, 100)]
     assert np.array_equal(np.concatenate(parts), whole)
     monkeypatch.setattr(simulator_module, "PARALLEL_MIN_PIXELS", 0)
+    monkeypatch.setenv("SPIKEVIEW_THREADS", "3")  # bands of 8 rows in three threads
     assert np.array_equal(simulate(StaticScene(img), cfg).read(0, 257), whole)
 
 

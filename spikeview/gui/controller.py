@@ -20,6 +20,7 @@ the window never waits for a computation.
 
 from __future__ import annotations
 
+import os
 import time
 from collections import deque
 from pathlib import Path
@@ -63,7 +64,8 @@ class Controller(QtCore.QObject):
         super().__init__(parent)
         self.session = session
         self.preview = Worker("spikeview-preview", priority=("frames", "degradation", "rates", "alpha"), parent=self)
-        self.guided = Worker("spikeview-guided", parent=self)
+        # the sampler leaves one core to the window: a single torch thread, at a lower priority
+        self.guided = Worker("spikeview-guided", parent=self, nice=10, torch_threads=max(1, (os.cpu_count() or 2) - 1))
         self.exporter = Worker("spikeview-export", parent=self)
         for w in (self.preview, self.guided, self.exporter):
             w.finished.connect(self._on_finished)

@@ -84,6 +84,9 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def __init__(self, settings: QtCore.QSettings | None = None, session: Session | None = None):
         super().__init__()
+        from spikeview.gui.app import configure_runtime
+
+        configure_runtime()
         self.setObjectName("spikeview_main")
         self.setWindowTitle("spikeview")
         self.setWindowIcon(app_icon())

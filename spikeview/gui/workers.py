@@ -20,6 +20,7 @@ else becomes a one-line "unexpected …" message (with the traceback on stderr f
 from __future__ import annotations
 
 import itertools
+import os
 import sys
 import threading
 import traceback
@@ -75,10 +76,13 @@ class Worker(QtCore.QThread):
     cancelled = QtCore.Signal(str, int)
     busy = QtCore.Signal(bool)
 
-    def __init__(self, name: str, priority: tuple[str, ...] = (), parent: QtCore.QObject | None = None):
+    def __init__(self, name: str, priority: tuple[str, ...] = (), parent: QtCore.QObject | None = None,
+                 *, nice: int = 0, torch_threads: int | None = None):
         super().__init__(parent)
         self.setObjectName(name)
         self.priority = priority
+        self.nice = nice
+        self.torch_threads = torch_threads
         self.state: dict[str, Any] = {}
         self._cond = threading.Condition()
         self._pending: dict[str, _Job] = {}
@@ -150,7 +154,20 @@ class Worker(QtCore.QThread):
             self._running = job
             return job
 
+    def _lower_priority(self) -> None:
+        """Make this thread yield the CPU to the GUI thread (Linux: a per-thread nice value)."""
+        if self.nice and hasattr(os, "setpriority") and sys.platform.startswith("linux"):
+            try:
+                os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), self.nice)
+            except OSError:  # not permitted: run at normal priority
+                pass
+        if self.torch_threads is not None:
+            import torch
+
+            torch.set_num_threads(self.torch_threads)
+
     def run(self) -> None:  # noqa: D401 - QThread entry point
+        self._lower_priority()
         while True:
             job = self._next_job()
             if job is None:

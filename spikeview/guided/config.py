@@ -71,6 +71,8 @@ class GuidedConfig(Config):
             forward model is linear and single-scale).
         zeta: re-noising mix in [0, 1]: 0 = deterministic (DDIM/DPIR: predicted noise only),
             1 = fresh noise only (DiffPIR's ζ).
+        renoise: HQS only: re-noise x̂₀ to σ_{t-1} between steps (DiffPIR); ``False`` hands the
+            data-corrected x̂₀ itself to the next prior call, told σ_{t-1} (DPIR).
         k: soft-quantisation sharpness of Q (tanh slope, >= 0; METHOD.md: 50 best; ``k = 0`` is a
             flat staircase that gives no gradient, use ``quantise=False`` for no Q).
         quantise: include Q in the forward model.
@@ -118,6 +120,7 @@ class GuidedConfig(Config):
     lam: float = 1.0
     data_steps: int = 1
     zeta: float = 0.0
+    renoise: bool = True
     k: float = 50.0
     quantise: bool = True
     levels: int = 2

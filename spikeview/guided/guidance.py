@@ -103,9 +103,10 @@ class HQSGuidance:
 
     needs_grad = False
 
-    def __init__(self, lam: float = 1.0, data_steps: int = 1):
+    def __init__(self, lam: float = 1.0, data_steps: int = 1, renoise: bool = True):
         self.lam = float(lam)
         self.data_steps = int(data_steps)
+        self.renoise = bool(renoise)
 
     def step(self, prior, schedule, data, x_t, index, sigma, *, zeta=0.0, generator=None, transform=None):
         with torch.no_grad():
@@ -115,6 +116,8 @@ class HQSGuidance:
         sig = sigma.mean(dim=(2, 3), keepdim=True) if sigma.shape[-2:] != (1, 1) else sigma
         rho = self.lam * data.sigma_n2 / sig.clamp_min(1e-6) ** 2
         x0 = data.prox(x0, rho, self.data_steps)
+        if not self.renoise:  # DPIR: hand x̂₀ itself to the next, lower noise level
+            return x0, x0
         prev = schedule.step(x0, index, x_t.detach(), zeta=zeta, generator=generator).prev_sample
         return prev.detach(), x0
 

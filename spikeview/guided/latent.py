@@ -273,8 +273,10 @@ class LatentGuidedSampler:
     """DPS posterior sampling in the latent space of an SD 2.x-family model (see the module docstring).
 
     Args:
-        prior: the model; ``None`` loads ``params.model_path`` on the first :meth:`run` (and keeps
-            it while path, device and dtype stay the same).
+        prior: the model (a :class:`~spikeview.guided.priors.sd.LatentDiffusionPrior`); when given,
+            the config's ``model_path``, ``device`` and ``dtype`` are not used. ``None`` loads
+            ``params.model_path`` on the first :meth:`run` and keeps it while path, device and
+            dtype stay the same.
     """
 
     def __init__(self, prior: Any = None):

@@ -134,7 +134,7 @@ class GuidedSampler:
     def guidance_for(params: GuidedConfig) -> GuidanceRule:
         if params.guidance == "dps":
             return DPSGuidance(params.s)
-        return HQSGuidance(params.lam, params.data_steps)
+        return HQSGuidance(params.lam, params.data_steps, params.renoise)
 
     @staticmethod
     def forward_model(obs: Observation, plan: Plan, params: GuidedConfig) -> ForwardModel:

@@ -16,9 +16,10 @@ How it counts without unpacking every frame:
    operations per plane on 32 bytes at a time (AVX2), i.e. 256 pixels per instruction.
    P = 4 covers windows up to 15 frames, P = 8 up to 255; longer windows run several passes.
 2. **Extraction** (once per window, not per frame): each 64-bit plane word is spread into byte
-   lanes (one count per byte), an 8×8 byte transpose puts the counts in pixel order, and each
-   byte is widened to uint16 with shift-and-mask (SWAR, no tables, vectorisable).
-3. **Copy-out** of whole rows into the output, applying the flips and the column segments.
+   lanes (one count per byte), and an 8×8 byte transpose (three delta swaps) puts the uint8
+   counts in pixel order (SWAR: no tables, vectorisable).
+3. **Copy-out** of whole rows into the output, widening to uint16 and applying the flips and the
+   column segments (contiguous loops, vectorised).
 
 Work is split across a small thread pool (``nogil`` kernels): by windows when there are several,
 otherwise by rows. The pool is safe to use from several threads at once.
@@ -52,14 +53,6 @@ def _swap(a, b, s, mask):
     # delta swap: exchanges the bits of ``a >> s`` and ``b`` selected by ``mask``
     t = ((a >> s) ^ b) & mask
     return a ^ (t << s), b ^ t
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _widen_lo(a):
-    # bytes 0..3 of ``a`` -> four uint16 lanes
-    x = a & _K32
-    x = (x | (x << _S[16])) & _K16
-    return (x | (x << _S[8])) & _K8
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -108,7 +101,7 @@ def _count_kernel(buf, offsets, f0, f1, w0, w1, r0, r1, row_bytes, chunk_rows, s
     q5 = p5.view(np.uint64)
     q6 = p6.view(np.uint64)
     q7 = p7.view(np.uint64)
-    cnt = np.zeros(nwords * 64, np.uint16)
+    cnt = np.zeros(nwords * 64, np.uint8)  # one count per pixel (< 256 per pass); widened on copy-out
     cnt64 = cnt.view(np.uint64)
     n_segs = segs.shape[0]
     for w in range(w0, w1):
@@ -169,7 +162,7 @@ def _count_kernel(buf, offsets, f0, f1, w0, w1, r0, r1, row_bytes, chunk_rows, s
                         p2[i] = a ^ x
                         x = a & x
                         p3[i] = p3[i] | x
-            # 2. planes -> uint16 counts in pixel order
+            # 2. planes -> uint8 counts in pixel order
             for q in range(nw):
                 z = np.uint64(0)
                 c0, c1, c2, c3, c4, c5, c6, c7 = _add_plane(q0[q], _S[0], z, z, z, z, z, z, z, z)
@@ -194,23 +187,15 @@ def _count_kernel(buf, offsets, f0, f1, w0, w1, r0, r1, row_bytes, chunk_rows, s
                 c2, c3 = _swap(c2, c3, _S[8], _K8)
                 c4, c5 = _swap(c4, c5, _S[8], _K8)
                 c6, c7 = _swap(c6, c7, _S[8], _K8)
-                b = 16 * q
-                cnt64[b] = _widen_lo(c0)
-                cnt64[b + 1] = _widen_lo(c0 >> _S[32])
-                cnt64[b + 2] = _widen_lo(c1)
-                cnt64[b + 3] = _widen_lo(c1 >> _S[32])
-                cnt64[b + 4] = _widen_lo(c2)
-                cnt64[b + 5] = _widen_lo(c2 >> _S[32])
-                cnt64[b + 6] = _widen_lo(c3)
-                cnt64[b + 7] = _widen_lo(c3 >> _S[32])
-                cnt64[b + 8] = _widen_lo(c4)
-                cnt64[b + 9] = _widen_lo(c4 >> _S[32])
-                cnt64[b + 10] = _widen_lo(c5)
-                cnt64[b + 11] = _widen_lo(c5 >> _S[32])
-                cnt64[b + 12] = _widen_lo(c6)
-                cnt64[b + 13] = _widen_lo(c6 >> _S[32])
-                cnt64[b + 14] = _widen_lo(c7)
-                cnt64[b + 15] = _widen_lo(c7 >> _S[32])
+                b = 8 * q
+                cnt64[b] = c0
+                cnt64[b + 1] = c1
+                cnt64[b + 2] = c2
+                cnt64[b + 3] = c3
+                cnt64[b + 4] = c4
+                cnt64[b + 5] = c5
+                cnt64[b + 6] = c6
+                cnt64[b + 7] = c7
             # 3. rows -> output, with flips and column segments (explicit loops vectorise; slices do not)
             for r in range(rs, re):
                 orow = n_out_rows - 1 - r if flip_v else r

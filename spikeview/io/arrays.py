@@ -19,7 +19,6 @@ Whenever the rule (not an explicit setting) decided, ``info.warnings`` says whic
 from __future__ import annotations
 
 import os
-import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -47,14 +46,18 @@ def _load_array(path: Path, key: str | None) -> tuple[np.ndarray, str | None]:
         raise InputFileError(f"{path}: is a folder, not a .npy/.npz file; point to the file inside it.")
     if path.stat().st_size == 0:
         raise InputFileError(f"{path}: the file is empty (0 bytes); check that it finished writing.")
-    is_zip = zipfile.is_zipfile(path)
+    with open(path, "rb") as fh:
+        magic = fh.read(4)
+    # numpy's own test (a zip local-file or end-of-archive header first), not zipfile.is_zipfile's
+    is_zip = magic in (b"PK\x03\x04", b"PK\x05\x06")
     try:
         if not is_zip:
             arr = np.load(path, mmap_mode="r", allow_pickle=False)
             if not isinstance(arr, np.ndarray):
                 raise ValueError("not an array")
             return arr, None
-        with np.load(path, allow_pickle=False) as npz:
+        # our own file handle: numpy leaks the one it opens when the zip turns out to be damaged
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as npz:
             names = list(npz.files)
             if key is None:
                 if len(names) == 1:

@@ -119,7 +119,8 @@ def open_source(path: str | os.PathLike[str], *, format: str | None = None, widt
     src: SpikeSource
     if fmt == "plain":
         if w is None or h is None:
-            raise _unknown_plain_geometry(path, w, h)
+            _, w, h, note = _detect(path, width=w, height=h, only="plain")
+            notes.append(note)
         from spikeview.io.plain import PlainDatSource
 
         src = PlainDatSource(path, w, h, flip_vertical=fv, flip_horizontal=fh, cfa=cfa_v, tick_rate=tr)
@@ -174,23 +175,28 @@ def _check_format(format: str) -> str:
     return fmt
 
 
-def _detect(path: Path, *, width: int | None, height: int | None) -> tuple[str, int, int, str]:
-    """Format and geometry of a file without suffix or sidecar hints; ``(format, w, h, note)``."""
+def _detect(path: Path, *, width: int | None, height: int | None,
+            only: str | None = None) -> tuple[str, int, int, str]:
+    """Format and geometry of a file without suffix or sidecar hints; ``(format, w, h, note)``.
+
+    ``only="plain"``: the format is known to be plain, only the geometry is detected.
+    """
     from spikeview.io import raw
 
     _, buf = open_bytes(path, "spike")
     size = int(buf.size)
-    if width in (None, raw.RAW1M_WIDTH) and height in (None, raw.RAW1M_HEIGHT) and raw.looks_like_raw1m(buf):
+    if only is None and width in (None, raw.RAW1M_WIDTH) and height in (None, raw.RAW1M_HEIGHT) \
+            and raw.looks_like_raw1m(buf):
         return "raw1m", raw.RAW1M_WIDTH, raw.RAW1M_HEIGHT, (
             f"{path.name}: detected a raw 1000x1000 stream from its block tags; pass --format to be explicit.")
     del buf
-    if width is not None and height is not None:
+    if only is None and width is not None and height is not None:
         if (width, height) == (raw.RAW400_WIDTH, raw.RAW400_HEIGHT) and size % raw.RAW400_FRAME_BYTES == 0 \
                 and size % (width * height // 8) != 0:
             return "raw400", width, height, (f"{path.name}: read as a raw 400x250 stream (its size is whole "
                                              f"416-bit-row frames); pass --format to be explicit.")
         return "plain", width, height, ""
-    cands = _size_candidates(size)
+    cands = [c for c in _size_candidates(size) if only is None or c[0] == only]
     if width is not None or height is not None:
         cands = [c for c in cands if (width is None or c[1] == width) and (height is None or c[2] == height)]
     if len(cands) == 1:
@@ -201,7 +207,7 @@ def _detect(path: Path, *, width: int | None, height: int | None) -> tuple[str, 
     if len(cands) > 1:
         listed = "; ".join(f"--format {f} --width {w} --height {h}" for f, w, h in cands)
         geoms = list(dict.fromkeys((w, h) for _, w, h in cands))
-        raise GeometryError(f"{path}: its size ({size} bytes) fits several formats, so pass one of: {listed}.", geoms)
+        raise GeometryError(f"{path}: its size ({size} bytes) fits several known formats or sizes, so pass one of: {listed}.", geoms)
     raise _unknown_plain_geometry(path, width, height, size)
 
 
@@ -224,7 +230,7 @@ def plain_geometry_candidates(size: int, limit: int = 8) -> list[tuple[int, int]
     out: list[tuple[int, int]] = [(w, h) for (w, h) in KNOWN_PLAIN_GEOMETRIES if size % (w * h // 8) == 0]
     if size <= 0:
         return out
-    r = int(math.isqrt(size))
+    r = math.isqrt(size)
     small = np.arange(1, r + 1, dtype=np.int64)
     small = small[size % small == 0]
     divisors = np.unique(np.concatenate([small, size // small]))

@@ -267,7 +267,7 @@ class PlainDatWriter:
         if self._sidecar:
             self._write_sidecar()
 
-    def __enter__(self) -> "PlainDatWriter":
+    def __enter__(self) -> PlainDatWriter:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -253,6 +253,8 @@ def _frame_status(buf: np.ndarray, p: int, end: int, checker: _TagChecker) -> in
 
 
 _SEARCH_CHUNK = 1 << 22
+#: an incremental decoder waiting on a plausible frame start re-checks it after this many new bytes
+_RECHECK_BYTES = 4096
 
 
 def _find_start(buf: np.ndarray, lo: int, end: int, checker: _TagChecker) -> tuple[int | None, int]:
@@ -473,6 +475,7 @@ class Raw1MDecoder:
         self._buf = bytearray()
         self._synced = False
         self._pending_gap = 0
+        self._recheck_at = 0
         self._stats = SyncStats()
         self.bytes_in = 0
 
@@ -493,6 +496,9 @@ class Raw1MDecoder:
         self.bytes_in += len(chunk)
         self._buf += chunk
         out: list[bytes] = []
+        if len(self._buf) < self._recheck_at:
+            return out  # still filling the frame of a plausible start: check again with more data
+        self._recheck_at = 0
         arr = np.frombuffer(self._buf, dtype=np.uint8)
         n = arr.size
         pos = 0
@@ -516,7 +522,9 @@ class Raw1MDecoder:
                 self._pending_gap += p - pos
                 pos = p
                 if st != 1:
-                    break  # plausible start, frame not complete yet
+                    # plausible start, frame not complete yet: recheck after a few more KiB
+                    self._recheck_at = min(RAW1M_FRAME_BYTES, n - pos + _RECHECK_BYTES)
+                    break
                 if self._stats.frames:
                     self._stats.add_gap(self._pending_gap)
                 else:
@@ -544,6 +552,7 @@ class Raw1MDecoder:
         else:
             self._stats.leading_bytes += rest
         self._pending_gap = 0
+        self._recheck_at = 0
         self._buf = bytearray()
         self._synced = False
         return self.stats

@@ -66,7 +66,7 @@ class StreamSettings(Config):
         self.cfa = cfa_to_str(parse_cfa(self.cfa))
 
     @classmethod
-    def from_info(cls, info: StreamInfo) -> "StreamSettings":
+    def from_info(cls, info: StreamInfo) -> StreamSettings:
         """The settings that reproduce ``info`` when the file is opened again."""
         return cls(format=info.format, width=int(info.width), height=int(info.height), cfa=cfa_to_str(info.cfa),
                    flip_vertical=bool(info.flip_vertical), flip_horizontal=bool(info.flip_horizontal),
@@ -112,8 +112,7 @@ def read_sidecar(path: str | os.PathLike[str]) -> Sidecar | None:
 
 
 def _strip_where(msg: str, side: Path) -> str:
-    prefix = f"{side}: "
-    return msg[len(prefix):] if msg.startswith(prefix) else msg
+    return msg.removeprefix(f"{side}: ")
 
 
 def write_sidecar(path: str | os.PathLike[str], info: StreamInfo | StreamSettings,

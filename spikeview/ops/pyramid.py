@@ -74,6 +74,13 @@ def _coarse_size(size: tuple[int, int]) -> tuple[int, int]:
     return ((size[0] + 1) // 2, (size[1] + 1) // 2)
 
 
+def _check_coarse(c: torch.Tensor, size: tuple[int, int]) -> None:
+    check_image(c, None, "c")
+    want = _coarse_size((int(size[0]), int(size[1])))
+    if tuple(c.shape[-2:]) != want:
+        raise ParameterError(f"c must have spatial size {want} (ceil-half of {tuple(size)}), got {tuple(c.shape[-2:])}.")
+
+
 def pyr_down(x: torch.Tensor) -> torch.Tensor:
     """D: blur (normalised at the borders) and keep even rows/columns.
 
@@ -83,12 +90,14 @@ def pyr_down(x: torch.Tensor) -> torch.Tensor:
     Returns:
         ``(N, C, ceil(H/2), ceil(W/2))``.
     """
+    check_image(x, None)
     h, w = x.shape[-2:]
     return (_blur(x) / _blur(_ones(h, w, x)))[..., ::2, ::2]
 
 
 def pyr_down_adjoint(c: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
     """Dᵀ: the adjoint of :func:`pyr_down` from ``(N, C, ceil(H/2), ceil(W/2))`` back to ``size = (H, W)``."""
+    _check_coarse(c, size)
     return _blur(_zero_insert(c, size) / _blur(_ones(size[0], size[1], c)))
 
 
@@ -97,11 +106,13 @@ def pyr_up(c: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
 
     Coarse sample ``(i, j)`` sits at fine position ``(2i, 2j)``, matching :func:`pyr_down`.
     """
+    _check_coarse(c, size)
     return _blur(_zero_insert(c, size)) / _blur(_zero_insert(_ones(c.shape[-2], c.shape[-1], c), size))
 
 
 def pyr_up_adjoint(r: torch.Tensor) -> torch.Tensor:
     """Uᵀ: the adjoint of :func:`pyr_up`, from ``(N, C, H, W)`` to ``(N, C, ceil(H/2), ceil(W/2))``."""
+    check_image(r, None, "r")
     size = (r.shape[-2], r.shape[-1])
     coarse = _coarse_size(size)
     m = _blur(_zero_insert(_ones(coarse[0], coarse[1], r), size))

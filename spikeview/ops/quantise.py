@@ -50,7 +50,9 @@ def soft_quantise(x: torch.Tensor, levels: int = 10, k: float = 50.0) -> torch.T
     n = check_positive_int(levels, "levels")
     k = _check_k(k)
     if not isinstance(x, torch.Tensor) or not x.is_floating_point():
-        raise ParameterError(f"x must be a floating-point torch.Tensor, got {type(x).__name__}; convert it with torch.as_tensor(..., dtype=torch.float32).")
+        raise ParameterError(
+            f"x must be a floating-point torch.Tensor, got {type(x).__name__}; convert it with torch.as_tensor(..., dtype=torch.float32)."
+        )
     step = 1.0 / n
     with torch.no_grad():
         cell = torch.floor(x * n).clamp_(0, n - 1)

@@ -45,7 +45,7 @@ _EXPORTS = {
     "demo_capture": "spikeview.sim.demo",
 }
 
-__all__ = sorted(_EXPORTS)
+__all__ = list(_EXPORTS)
 
 
 def __getattr__(name: str) -> Any:

@@ -79,6 +79,7 @@ def _if_row(y, planes, ia, ib, wts, tick0, drive, dark, cap_ratio, theta, volt, 
     wd = drive.shape[1]
     npix = np.uint64(drive.shape[0] * wd)
     use_rng = shot or jitter_std > 0.0
+    inv_ne0 = 1.0 / ne0
     qbuf = np.empty(wd, dtype=np.float64)
     zbuf = np.zeros(wd, dtype=np.float64)
     for t in range(ia.shape[0]):
@@ -87,25 +88,34 @@ def _if_row(y, planes, ia, ib, wts, tick0, drive, dark, cap_ratio, theta, volt, 
         w = wts[t]
         base = (np.uint64(tick0) + np.uint64(t)) * npix + np.uint64(y * wd)
         # pass 1: expected charge of the tick in threshold units (photo-current + dark current)
+        qmin = np.inf
         for x in range(wd):
-            qbuf[x] = max(drive[y, x] * ((1.0 - w) * pa[x] + w * pb[x]) + dark[y, x], 0.0)
+            q = max(drive[y, x] * ((1.0 - w) * pa[x] + w * pb[x]) + dark[y, x], 0.0)
+            qbuf[x] = q
+            qmin = min(qmin, q)
         if use_rng:
             # pass 2 (vectorised): two normals from one 64-bit hash of (seed, tick, pixel): bits
             # 52-63 pick a table cell and bits 20-51 place within it for the jitter; bits 8-19
             # and 0-7 likewise for the shot noise (normal approximation of Poisson(λ = q·ne0))
-            for x in range(wd):
-                bits = _mix(key_noise + (base + np.uint64(x)) * _GOLDEN)
-                j1 = np.int64(bits >> _S52)
-                f1 = np.float64(np.int64((bits >> _S20) & _MASK32)) * _INV32
-                zbuf[x] = table[j1] + f1 * step[j1]
-                if shot:
+            if shot:
+                for x in range(wd):
+                    bits = _mix(key_noise + (base + np.uint64(x)) * _GOLDEN)
+                    j1 = np.int64(bits >> _S52)
+                    f1 = np.float64(np.int64((bits >> _S20) & _MASK32)) * _INV32
+                    zbuf[x] = table[j1] + f1 * step[j1]
                     j2 = np.int64((bits >> _S8) & _MASK12)
                     f2 = np.float64(np.int64(bits & _MASK8)) * _INV8
                     q = qbuf[x]
-                    qbuf[x] = max(q + math.sqrt(q / ne0) * (table[j2] + f2 * step[j2]), 0.0)
-            if shot:
-                # pass 3 (rare): exact Poisson draws, by Knuth's product of uniforms, where the
-                # mean electron count is too small for the normal approximation
+                    qbuf[x] = max(q + math.sqrt(q * inv_ne0) * (table[j2] + f2 * step[j2]), 0.0)
+            else:
+                for x in range(wd):
+                    bits = _mix(key_noise + (base + np.uint64(x)) * _GOLDEN)
+                    j1 = np.int64(bits >> _S52)
+                    f1 = np.float64(np.int64((bits >> _S20) & _MASK32)) * _INV32
+                    zbuf[x] = table[j1] + f1 * step[j1]
+            if shot and qmin * ne0 < POISSON_EXACT_BELOW:
+                # pass 3 (rare: dark pixels only): exact Poisson draws, by Knuth's product of
+                # uniforms, where the mean electron count is too small for the normal approximation
                 for x in range(wd):
                     lam = ne0 * max(drive[y, x] * ((1.0 - w) * pa[x] + w * pb[x]) + dark[y, x], 0.0)
                     if lam < POISSON_EXACT_BELOW:
@@ -118,7 +128,7 @@ def _if_row(y, planes, ia, ib, wts, tick0, drive, dark, cap_ratio, theta, volt, 
                             p *= _uniform(key_knuth, idx + np.uint64(j))
                             if p <= limit:
                                 break
-                        qbuf[x] = n / ne0
+                        qbuf[x] = n * inv_ne0
         # pass 4: integrate and fire, branch-free (spikes are unpredictable; branches cost ~5x)
         for x in range(wd):
             dv = qbuf[x] * cap_ratio[y, x] * (1.0 - (1.0 - reset_factor) * fired[y, x])
@@ -215,13 +225,13 @@ def _mirror(i, n):
 @njit(cache=True, inline="always")
 def _warp_row(y, src, out, m00, m01, m10, m11, tx, ty):
     h, w = src.shape[0], src.shape[1]
+    sx = m01 * y + tx
+    sy = m11 * y + ty
     for x in range(out.shape[1]):
-        sx = m00 * x + m01 * y + tx
-        sy = m10 * x + m11 * y + ty
         x0f = math.floor(sx)
         y0f = math.floor(sy)
-        fx = sx - x0f
-        fy = sy - y0f
+        fx = np.float32(sx - x0f)
+        fy = np.float32(sy - y0f)
         x0 = np.int64(x0f)
         y0 = np.int64(y0f)
         if 0 <= x0 and x0 + 1 < w and 0 <= y0 and y0 + 1 < h:
@@ -232,10 +242,14 @@ def _warp_row(y, src, out, m00, m01, m10, m11, tx, ty):
             y1 = _mirror(y0 + 1, h)
             x0 = _mirror(x0, w)
             y0 = _mirror(y0, h)
+        gx = np.float32(1.0) - fx
+        gy = np.float32(1.0) - fy
         for c in range(3):
-            top = (1.0 - fx) * src[y0, x0, c] + fx * src[y0, x1, c]
-            bot = (1.0 - fx) * src[y1, x0, c] + fx * src[y1, x1, c]
-            out[y, x, c] = (1.0 - fy) * top + fy * bot
+            top = gx * src[y0, x0, c] + fx * src[y0, x1, c]
+            bot = gx * src[y1, x0, c] + fx * src[y1, x1, c]
+            out[y, x, c] = gy * top + fy * bot
+        sx += m00
+        sy += m10
 
 
 @njit(cache=True, nogil=True)

@@ -480,8 +480,8 @@ class Fan:
     """A fan in front of the scene (fixed on screen), drawn anti-aliased.
 
     Attributes:
-        center: ``(x, y)`` of the hub in output pixels.
-        radius: blade tip radius in output pixels.
+        center: ``(x, y)`` of the hub in output pixels; ``None`` for the frame centre.
+        radius: blade tip radius in output pixels; ``None`` for 0.3 × the frame's smaller side.
         rev_per_s: revolutions per second; positive turns clockwise on screen.
         n_blades: number of blades.
         blade_fraction: fraction of the disc the blades cover (0–1).
@@ -491,8 +491,8 @@ class Fan:
         phase_deg: blade angle at t = 0, degrees clockwise from the +x axis.
     """
 
-    center: tuple[float, float]
-    radius: float
+    center: tuple[float, float] | None = None
+    radius: float | None = None
     rev_per_s: float = 5.0
     n_blades: int = 3
     blade_fraction: float = 0.45
@@ -502,28 +502,41 @@ class Fan:
     phase_deg: float = 0.0
 
     def __post_init__(self) -> None:
-        if not (self.radius > 0 and self.n_blades >= 1 and 0 < self.blade_fraction <= 1 and len(self.colours) >= 1):
+        if not ((self.radius is None or self.radius > 0) and self.n_blades >= 1 and 0 < self.blade_fraction <= 1
+                and len(self.colours) >= 1 and math.isfinite(self.rev_per_s)):
             raise ParameterError(
-                f"Fan(radius={self.radius}, n_blades={self.n_blades}, blade_fraction={self.blade_fraction}) is invalid: "
-                "use a positive radius, at least one blade and a blade fraction in (0, 1]."
+                f"Fan(radius={self.radius}, n_blades={self.n_blades}, blade_fraction={self.blade_fraction}, "
+                f"rev_per_s={self.rev_per_s}) is invalid: use a positive radius, at least one blade, a blade fraction "
+                "in (0, 1] and a finite speed."
             )
 
     def phase_at(self, t: float) -> float:
         """Blade angle at time ``t`` (s) in radians, clockwise on screen."""
         return math.radians(self.phase_deg) + 2.0 * math.pi * self.rev_per_s * t
 
+    def geometry(self, height: int, width: int) -> tuple[float, float, float]:
+        """``(cx, cy, radius)`` in a ``height × width`` frame (filling in the defaults)."""
+        cx, cy = self.center if self.center is not None else ((width - 1) / 2.0, (height - 1) / 2.0)
+        radius = self.radius if self.radius is not None else 0.3 * min(height, width)
+        return float(cx), float(cy), float(radius)
+
     def draw(self, frame: np.ndarray, t: float) -> None:
         """Draw the fan at time ``t`` (seconds) over ``frame`` (H, W, 3) float32, in place."""
         from spikeview.sim import _kernels
 
+        cx, cy, radius = self.geometry(frame.shape[0], frame.shape[1])
         colours = np.array([self.colours[k % len(self.colours)] for k in range(self.n_blades)], dtype=np.float32)
-        _kernels.draw_fan(frame, float(self.center[0]), float(self.center[1]), float(self.radius), float(self.hub_radius),
-                          int(self.n_blades), float(self.blade_fraction), self.phase_at(t), colours,
-                          np.asarray(self.hub_colour, dtype=np.float32))
+        _kernels.draw_fan(frame, cx, cy, radius, float(self.hub_radius), int(self.n_blades), float(self.blade_fraction),
+                          self.phase_at(t), colours, np.asarray(self.hub_colour, dtype=np.float32))
 
     def describe(self) -> dict[str, Any]:
-        return {"center": list(self.center), "radius": self.radius, "rev_per_s": self.rev_per_s, "n_blades": self.n_blades,
-                "blade_fraction": self.blade_fraction, "hub_radius": self.hub_radius, "phase_deg": self.phase_deg}
+        d: dict[str, Any] = {"rev_per_s": self.rev_per_s, "n_blades": self.n_blades, "blade_fraction": self.blade_fraction,
+                             "hub_radius": self.hub_radius, "phase_deg": self.phase_deg}
+        if self.center is not None:
+            d["center"] = list(self.center)
+        if self.radius is not None:
+            d["radius"] = self.radius
+        return d
 
 
 class MotionScene(Scene):

@@ -24,8 +24,9 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+
 import numpy as np
 
 from spikeview.cfa import channel_map
@@ -85,6 +86,7 @@ class SensorPattern:
     cap_ratio: np.ndarray
     theta: np.ndarray
     v0: np.ndarray
+    _flat_index: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def build(cls, config: SimConfig, height: int, width: int) -> "SensorPattern":
@@ -132,9 +134,13 @@ class SensorPattern:
 
     def mosaic(self, frame: np.ndarray) -> np.ndarray:
         """The intensity each photosite sees: ``(H, W)`` float32 from a linear ``(H, W, 3)`` frame."""
+        frame = np.ascontiguousarray(frame, dtype=np.float32)
         if self.channel[0, 0] < 0:
-            return (np.asarray(frame, dtype=np.float32) @ np.asarray(LUMINANCE_WEIGHTS, dtype=np.float32)).astype(np.float32)
-        return np.take_along_axis(frame, self.channel[..., None].astype(np.intp), axis=2)[..., 0].astype(np.float32)
+            return (frame @ np.asarray(LUMINANCE_WEIGHTS, dtype=np.float32)).astype(np.float32)
+        if self._flat_index is None:
+            h, w = self.channel.shape
+            self._flat_index = np.arange(h * w, dtype=np.intp) * 3 + self.channel.reshape(-1)
+        return frame.reshape(-1)[self._flat_index].reshape(self.channel.shape)
 
     def expected_rate(self, frame: np.ndarray) -> np.ndarray:
         """Mean spikes per tick of each photosite under a constant ``frame``, (H, W) float64.
@@ -365,8 +371,9 @@ class SimulatedCapture(SpikeSource):
     def count(self, a: int, b: int) -> np.ndarray:
         a, b = self.check_range(a, b)
         total = np.zeros((self.height, self.width), dtype=np.uint16)
-        for s in range(a, b, 256):
-            total += self._read(s, min(b, s + 256)).sum(axis=0, dtype=np.uint16)
+        step = max(1, (16 << 20) // (self.height * self.width))  # unpack ≈ 16 MiB at a time
+        for s in range(a, b, step):
+            total += self._read(s, min(b, s + step)).sum(axis=0, dtype=np.uint16)
         return total
 
     @property

@@ -88,7 +88,7 @@ class _GroundTruthWriter:
         try:
             self._entry.close()
             self._zip.close()
-        except Exception:  # the temporary file is removed anyway
+        except (OSError, ValueError, RuntimeError):  # the temporary file is removed anyway
             pass
 
 

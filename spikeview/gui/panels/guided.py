@@ -10,6 +10,8 @@ from PySide6 import QtCore, QtGui, QtWidgets
 from spikeview.gui.model import Session
 from spikeview.gui.widgets import ImagePane, ParamCombo, ParamSlider, ParamSpin, form, subscribe
 
+#: the live preview and the curves are redrawn at most this often during a run (ms)
+DRAW_INTERVAL_MS = 100
 RUN_COLOURS = [(255, 170, 0), (0, 190, 255), (255, 90, 160), (120, 220, 90), (200, 140, 255), (255, 230, 80)]
 
 
@@ -128,6 +130,9 @@ class GuidedPanel(QtWidgets.QWidget):
         lay.addLayout(live, 1)
 
         self.curves: dict[int, tuple[Any, Any, list[float], list[float], list[float]]] = {}
+        self._pending: list[Any] = []
+        self._draw_timer = QtCore.QTimer(self, singleShot=True, interval=DRAW_INTERVAL_MS)
+        self._draw_timer.timeout.connect(self._flush)
         subscribe(self, session.events.param_changed, self._on_param)
         subscribe(self, session.events.source_changed, self._on_source)
         self._on_param("t_start", session.get("t_start"))
@@ -159,6 +164,8 @@ class GuidedPanel(QtWidgets.QWidget):
     # ------------------------------------------------------------------------------ results
     def set_state(self, state: str, message: str) -> None:
         running = state == "running"
+        if not running:
+            self._flush()
         self.cancel_btn.setEnabled(running)
         self.run_btn.setText("Restart" if running else "Run")
         self.status.setText(message)
@@ -170,26 +177,42 @@ class GuidedPanel(QtWidgets.QWidget):
             self.progress.setValue(0)
 
     def show_update(self, u: Any) -> None:
-        """Show a :class:`~spikeview.gui.jobs.GuidedUpdate` (plan text or a step)."""
+        """Show a :class:`~spikeview.gui.jobs.GuidedUpdate` (plan text or a step).
+
+        Steps are drawn at most every :data:`DRAW_INTERVAL_MS` (the latest preview, every metric
+        point), so a fast sampler cannot keep the window busy redrawing.
+        """
         if u.kind == "plan":
+            self._flush()
             self.plan.setPlainText(u.text)
             self.progress.setRange(0, max(u.total, 1))
             self.progress.setValue(0)
             return
+        self._pending.append(u)
+        if not self._draw_timer.isActive():
+            self._draw_timer.start()
+
+    def _flush(self) -> None:
+        pending, self._pending = self._pending, []
+        if not pending:
+            return
+        u = pending[-1]
         self.progress.setRange(0, max(u.total, 1))
         self.progress.setValue(u.step)
         if u.preview is not None:
             self.preview.set_image(u.preview)
             self.preview.set_title(f"x̂₀ run {u.run}, step {u.step}/{u.total}")
-        if u.psnr is not None:
-            self._add_point(u.run, u.elapsed, u.psnr, u.ssim)
+        for p in pending:
+            if p.psnr is not None:
+                self._add_point(p.run, p.elapsed, p.psnr, p.ssim, redraw=p is pending[-1] or p.run != pending[-1].run)
 
     def show_result(self, r: Any) -> None:
+        self._flush()
         self.preview.set_image(r.preview)
         self.preview.set_title(f"result of run {r.run} (tick {r.tick})")
         self.progress.setValue(self.progress.maximum())
 
-    def _add_point(self, run: int, t: float, psnr: float, ssim: float | None) -> None:
+    def _add_point(self, run: int, t: float, psnr: float, ssim: float | None, redraw: bool = True) -> None:
         entry = self.curves.get(run)
         if entry is None:
             for old_run, (pc, sc, *_rest) in self.curves.items():  # earlier runs fade
@@ -206,8 +229,9 @@ class GuidedPanel(QtWidgets.QWidget):
         ts.append(t)
         ps.append(psnr)
         ss.append(ssim if ssim is not None else float("nan"))
-        pc.setData(ts, ps)
-        sc.setData(ts, ss)
+        if redraw:
+            pc.setData(ts, ps)
+            sc.setData(ts, ss)
 
     def clear_curves(self) -> None:
         for pc, sc, *_ in self.curves.values():

