@@ -364,10 +364,10 @@ def main(argv: list[str] | None = None) -> int:
         "| what | Δτ (ticks) | frames | median ms | p90 ms | target |",
         "|---|---|---|---|---|---|",
         f"| fast path, page cache warm | 64 | {len(timing['fast_64'])} | {f64:.2f} | {_ms(timing['fast_64'], 90):.2f} | ≤ 10 ms |",
-        f"| of which `source.count` alone | 64 | {len(timing['count_64'])} | {_ms(timing['count_64']):.2f} | {_ms(timing['count_64'], 90):.2f} | |",
-        f"| of which the classical stages alone (counts given) | 64 | {len(timing['stages'])} | {_ms(timing['stages']):.2f} | {_ms(timing['stages'], 90):.2f} | |",
+        f"| `source.count` alone (same windows, separate call) | 64 | {len(timing['count_64'])} | {_ms(timing['count_64']):.2f} | {_ms(timing['count_64'], 90):.2f} | |",
+        f"| classical stages alone (counts already in memory) | 64 | {len(timing['stages'])} | {_ms(timing['stages']):.2f} | {_ms(timing['stages'], 90):.2f} | |",
         f"| fast path, page cache warm | 10 | {len(timing['fast_10'])} | {f10:.2f} | {_ms(timing['fast_10'], 90):.2f} | ≤ 10 ms |",
-        f"| of which `source.count` alone | 10 | {len(timing['count_10'])} | {_ms(timing['count_10']):.2f} | {_ms(timing['count_10'], 90):.2f} | |",
+        f"| `source.count` alone (same windows, separate call) | 10 | {len(timing['count_10'])} | {_ms(timing['count_10']):.2f} | {_ms(timing['count_10'], 90):.2f} | |",
         f"| fast path, file evicted from cache (cold reads) | 64 | {len(timing['cold'])} | {cold:.2f} | {_ms(timing['cold'], 90):.2f} | (disk-bound) |",
         f"| baseline (unpackbits + scipy) | 64 | {len(timing['baseline'])} | {base:.2f} | {_ms(timing['baseline'], 90):.2f} | |",
         f"| fast path, paired with baseline | 64 | {len(timing['fast_paired'])} | {paired:.2f} | {_ms(timing['fast_paired'], 90):.2f} | |",
@@ -392,7 +392,23 @@ def main(argv: list[str] | None = None) -> int:
             f"{_mb(en['RssAnon'] - st['RssAnon'])} | {_mb(pk['RssFile'] - st['RssFile'])} | {_mb(pk['rss'] - st['rss'])} | "
             f"{_mb(en['uss'] - st['uss'])} |"
         )
-    lines.append("")
+    anon = [m["peak"]["RssAnon"] - m["start"]["RssAnon"] for m in (mem_small, mem_big)]
+    filed = [m["peak"]["RssFile"] - m["start"]["RssFile"] for m in (mem_small, mem_big)]
+    lines += [
+        "",
+        "## Reading the numbers",
+        "",
+        f"- Time target (≤ 10 ms median at Δτ = 64, page cache warm): **{'met' if f64 <= 10 else 'not met'}** "
+        f"({f64:.2f} ms; {f10:.2f} ms at Δτ = 10). The classical stages after counting take {_ms(timing['stages']):.2f} ms; "
+        "the rest is the reader's packed-bit count. p90 values reflect the shared, loaded machine.",
+        f"- Anonymous memory growth: {_mb(anon[0])} MiB (small file) vs {_mb(anon[1])} MiB (long file): "
+        f"**{'independent of file length' if abs(anon[1] - anon[0]) < 2**21 else 'NOT independent of file length'}** "
+        "(the per-frame buffers: counts and the RGB frame).",
+        f"- File-backed RSS grows by {_mb(filed[0])} vs {_mb(filed[1])} MiB: the reader memory-maps the file, and every "
+        "page a window touched stays mapped (reclaimable page cache, not allocations). It grows with the data touched, "
+        "capped by the file size, so psutil's RSS alone looks larger for the longer file after the same number of reads.",
+        "",
+    ]
     text = "\n".join(lines)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(text, encoding="utf-8")

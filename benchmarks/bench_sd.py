@@ -183,7 +183,7 @@ def time_sampler(prior: LatentDiffusionPrior, obs: dict, cfg: LatentConfig, repe
     if dev.type == "cuda":
         torch.cuda.reset_peak_memory_stats(dev)
     sec = _median_time(frame, dev, repeats)
-    peak = torch.cuda.max_memory_allocated(dev) / 2**30 if dev.type == "cuda" else float("nan")
+    peak = torch.cuda.max_memory_allocated(dev) / 2**30 if dev.type == "cuda" else None
     return {"s_per_frame": sec, "ms_per_step": 1000 * sec / cfg.steps, "peak_gib": peak, "finite": out.get("finite"),
             "error": out.get("error"), "x": out.get("x")}
 

@@ -90,7 +90,7 @@ def _observation(h: int = H, w: int = W, cfa: str | None = "RGGB", seed: int = 1
 # ------------------------------------------------------------------------------------- loading
 @needs_diffusers
 def test_loader_reads_saved_model(prior, model_dir):
-    unet, vae, _ = _tiny_modules()  # same seed: the weights that were saved
+    unet, _, _ = _tiny_modules()  # same seed: the weights that were saved
     assert prior.prediction_type == "v_prediction"
     assert prior.scaling_factor == pytest.approx(0.18215)  # AutoencoderKL's default = SD's latent scale
     assert prior.vae_factor == 8
@@ -339,6 +339,30 @@ def test_guidance_strength_changes_the_result(prior):
     assert sampler.losses == []
     guided = sampler.run(obs, LatentConfig(**FAST | {"s": 5.0}))
     assert np.abs(guided - unguided).max() > 1e-4
+
+
+@needs_diffusers
+def test_start_latent_is_the_noised_encoding_of_y0(prior):
+    seen = []
+
+    class Spy:
+        """The prior, recording what the UNet is asked at each step."""
+
+        def __getattr__(self, name):
+            return getattr(prior, name)
+
+        def predict(self, z_t, t):
+            seen.append((z_t.detach().clone(), t))
+            return prior.predict(z_t, t)
+
+    y0 = np.full((16, 24, 3), 0.3, np.float32)
+    LatentGuidedSampler(Spy()).run(_observation(16, 24), LatentConfig(steps=2, t_start=0.4, s=0.0, seed=5), y0=y0)
+    assert [t for _, t in seen] == [400, 200]  # t_s = round(0.4 * 999), then evenly down
+    with torch.no_grad():
+        z_enc = prior.encode(torch.from_numpy(y0).permute(2, 0, 1)[None])
+    noise = torch.randn(z_enc.shape, generator=torch.Generator().manual_seed(5))
+    a = prior.alpha_bar(400)
+    torch.testing.assert_close(seen[0][0], a**0.5 * z_enc + (1 - a) ** 0.5 * noise)
 
 
 @needs_diffusers

@@ -166,7 +166,7 @@ class LatentConfig(Config):
         abar = torch.as_tensor(alphas_cumprod, dtype=torch.float64)
         n = int(abar.numel())
         if self.sigma_start is None:
-            return int(round(self.t_start * (n - 1)))
+            return round(self.t_start * (n - 1))
         target = 1.0 / (1.0 + (2.0 * self.sigma_start) ** 2)  # ᾱ with √((1−ᾱ)/ᾱ) = 2σ
         below = torch.nonzero(abar <= target)
         return int(below[0]) if below.numel() else n - 1

@@ -139,11 +139,12 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 
 def _load_prompt_embeds(path: Path) -> torch.Tensor:
+    from safetensors import SafetensorError
     from safetensors.torch import load_file
 
     try:
         tensors = load_file(str(path))
-    except Exception as e:  # safetensors raises its own error types for damaged files
+    except (OSError, SafetensorError) as e:
         raise InputFileError(f"{path}: not a readable safetensors file ({e}); delete it to use zero conditioning.") from None
     if "prompt_embeds" not in tensors:
         raise InputFileError(f"{path}: has no tensor named 'prompt_embeds' (found {', '.join(tensors) or 'none'}).")
