@@ -482,3 +482,14 @@ def test_forward_model_from_observation_and_initial_estimate():
     torch.testing.assert_close(y0, ops.colour_cast_inverse(ops.demosaic_bilinear(y.float(), "BGGR"), fm.alpha, 2.0))
     torch.testing.assert_close(fm.effective_sigma(y.float()), ops.effective_sigma(y.float(), "BGGR", 10, fm.alpha, 2.0))
     assert ops.ForwardModel.from_observation(y, None).alpha is None
+
+
+def test_cached_constants_survive_inference_mode():
+    """Masks and pyramid normalisers first built under inference_mode must still work with autograd."""
+    size = (11, 13)  # a size no other test uses, so the caches are cold
+    with torch.inference_mode():
+        ops.ForwardModel("GBRG", 10, levels=3).loss(torch.rand((1, 3) + size), torch.rand((1, 1) + size))
+    x = torch.rand((1, 3) + size, requires_grad=True)
+    loss = ops.ForwardModel("GBRG", 10, levels=3).loss(x, torch.rand((1, 1) + size))
+    (g,) = torch.autograd.grad(loss, x)
+    assert torch.isfinite(g).all()

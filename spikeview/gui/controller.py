@@ -20,6 +20,7 @@ the window never waits for a computation.
 
 from __future__ import annotations
 
+import gc
 import os
 import time
 from collections import deque
@@ -87,6 +88,7 @@ class Controller(QtCore.QObject):
         self._shown_times: deque[float] = deque(maxlen=120)
         self._last_advance = time.perf_counter()
         self._last_rates = 0.0
+        self._heap_settled_after_model = False
 
         self.play_timer = QtCore.QTimer(self)
         self.play_timer.setInterval(PLAY_INTERVAL_MS)
@@ -123,8 +125,26 @@ class Controller(QtCore.QObject):
         if changed and on:
             {"tfi": self.request_frames, "rates": self.request_rates, "degradation": self.request_degradation}[what]()
 
+    # ------------------------------------------------------------------------------ memory
+    @staticmethod
+    def settle_heap(collect: bool = True) -> None:
+        """Move everything alive now out of reach of the cyclic garbage collector.
+
+        A full collection walks every object; with torch, numba and pyqtgraph loaded that is
+        millions and takes 100–300 ms, and it runs in whichever thread happens to allocate, with
+        the interpreter lock held — a frozen window in the middle of playback or a guided run.
+        Freezing the long-lived objects (the modules, the loaded prior, the open stream) after
+        they are created keeps later collections short. Called after a stream opens (with a
+        collection first, a moment the user is waiting anyway) and after the guided worker has
+        loaded its model (no collection).
+        """
+        if collect:
+            gc.collect()
+        gc.freeze()
+
     # ------------------------------------------------------------------------------ session events
     def _on_source(self) -> None:
+        QtCore.QTimer.singleShot(0, self.settle_heap)
         self.guided.cancel("guided")
         self.guided_result = None
         self._guided_key = None
@@ -328,6 +348,9 @@ class Controller(QtCore.QObject):
         elif channel == "degradation":
             self.degradation_ready.emit(result)
         elif channel == "guided":
+            if not self._heap_settled_after_model:
+                self._heap_settled_after_model = True
+                self.settle_heap(collect=False)
             self.guided_result = result
             self._guided_key = getattr(self, "_guided_pending_key", None)
             self.guided_done.emit(result)

@@ -73,6 +73,8 @@ class GuidedConfig(Config):
             1 = fresh noise only (DiffPIR's ζ).
         renoise: HQS only: re-noise x̂₀ to σ_{t-1} between steps (DiffPIR); ``False`` hands the
             data-corrected x̂₀ itself to the next prior call, told σ_{t-1} (DPIR).
+        noise_weights: weigh photosites by their modelled inverse variance (signal-dependent TFP
+            noise); ``False`` weighs them equally (same mean noise level).
         k: soft-quantisation sharpness of Q (tanh slope, >= 0; METHOD.md: 50 best; ``k = 0`` is a
             flat staircase that gives no gradient, use ``quantise=False`` for no Q).
         quantise: include Q in the forward model.
@@ -115,22 +117,23 @@ class GuidedConfig(Config):
     steps: int = 8
     t_start: float = 50.0 / 255.0
     top_up: bool = True
-    sigma_end: float = 2.0 / 255.0
+    sigma_end: float = 5.0 / 255.0
     s: float = 1.0
     lam: float = 1.0
     data_steps: int = 1
     zeta: float = 0.0
-    renoise: bool = True
+    renoise: bool = False
+    noise_weights: bool = True
     k: float = 50.0
-    quantise: bool = True
-    levels: int = 2
+    quantise: bool = False
+    levels: int = 0
     dense_gradient: bool = True
     eta: float = 2.0
     alpha: list[float] | None = None
     alpha_max_windows: int = 64
     window: int = 10
     demosaic: str = "bilinear"
-    sigma_scale: float = 1.0
+    sigma_scale: float = 1.5
     self_ensemble: bool = True
     seed: int = 0
     warm_start: bool = False

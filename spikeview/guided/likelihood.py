@@ -62,25 +62,21 @@ class DataTerm:
         return 0.5 * self._loss(x, "l2sq")
 
     def _curvature(self, x: torch.Tensor) -> torch.Tensor:
-        """Gauss–Newton diagonal of :meth:`squared` at ``x``, spread like M's backward pass.
+        """Diagonal preconditioner of :meth:`squared`, spread like M's backward pass.
 
-        ``w̃_p (∂A_p/∂u_p)²`` with ``u = C·M·x`` (Q's slope times the cast gain), put back on the
-        image grid with the mosaic's adjoint (exact M) or its bilinear spread (dense gradient).
-        The pyramid is treated as energy preserving (``‖P r‖ ≈ ‖r‖``).
+        ``w̃_p g_c²`` with ``g_c`` the cast gain of the photosite's channel, put back on the image
+        grid with the mosaic's adjoint (exact M) or its bilinear spread (dense gradient). Q is
+        taken with its mean slope 1 (its local slope swings between ~0 on a level and ``k/(2Δτ)``
+        between levels, which would make Gauss–Newton steps jump), and the pyramid as energy
+        preserving (``‖P r‖ ≈ ‖r‖``).
         """
         fm = self.forward
-        with torch.enable_grad():
-            xs = x.detach().clone().requires_grad_(True)
-            pred = fm(xs)
-            # ∂A_p/∂x_{c(p),p} for every photosite: d(Σ A)/dx restricted to the observed channel
-            (g,) = torch.autograd.grad(pred.sum(), xs)
         if fm.cfa is None:
-            return self.w * g * g
-        # recover the per-photosite slope on the mosaic (exact adjoint puts it on one channel;
-        # the dense variant spreads it, so take the mosaic of g, which keeps the photosite's own)
+            return self.w
+        gain = torch.ones(1, 3, 1, 1, dtype=x.dtype) if fm.cast is None else (fm.cast.eta / fm.cast.alpha.to(x.dtype)).view(1, 3, 1, 1)
         from spikeview.ops.mosaic import mosaic
 
-        slope = mosaic(g, fm.cfa)
+        slope = mosaic(gain.expand_as(x), fm.cfa)
         curv = self.w * slope * slope
         if fm.mosaic is not None and fm.mosaic.dense_grad:
             return demosaic_bilinear(curv, fm.cfa)

@@ -61,16 +61,16 @@ def _load_ffdnet(color: bool, path: str | None) -> DenoiserPrior:
 
 
 def load_prior(params: GuidedConfig, channels: int) -> DenoiserPrior:
-    """The prior named by ``params.prior`` for ``channels`` (3 RGB, 1 gray); loaded once and cached.
+    """The pixel-space denoiser for ``channels`` (3 RGB, 1 gray); loaded once and cached.
+
+    ``params.model_path`` replaces the packaged FFDNet weights when ``params.prior == "ffdnet"``;
+    with ``prior="sd"`` the denoiser is only used for the one-pass fallback, with the packaged
+    weights (the latent model itself is run by :class:`spikeview.guided.latent.LatentGuidedSampler`).
 
     Raises:
-        PriorUnavailableError: weights missing, or ``prior="sd"`` without a usable ``model_path``.
+        PriorUnavailableError: the weights are missing.
     """
-    if params.prior == "ffdnet":
-        return _load_ffdnet(channels == 3, params.model_path)
-    from spikeview.guided.latent import load_latent_prior
-
-    return load_latent_prior(params.model_path, channels)
+    return _load_ffdnet(channels == 3, params.model_path if params.prior == "ffdnet" else None)
 
 
 def _cancelled(cancel: Any) -> bool:
@@ -117,6 +117,7 @@ class GuidedSampler:
         self.params = params if params is not None else GuidedConfig()
         self._prior = prior
         self._guidance = guidance
+        self._latent: Any = None
         self.info = RunInfo()
 
     # -------------------------------------------------------------------------------- parts
@@ -136,13 +137,23 @@ class GuidedSampler:
             return DPSGuidance(params.s)
         return HQSGuidance(params.lam, params.data_steps, params.renoise)
 
-    @staticmethod
-    def forward_model(obs: Observation, plan: Plan, params: GuidedConfig) -> ForwardModel:
+    @classmethod
+    def forward_model(cls, obs: Observation, plan: Plan, params: GuidedConfig) -> ForwardModel:
         """A = Q∘C∘M for the plan (M off = gray frame, C off = no cast)."""
         alpha = obs.alpha if (plan.cast and obs.alpha is not None) else None
         return ForwardModel(obs.cfa if plan.mosaic else None, obs.window, alpha=alpha,
                             eta=obs.eta if alpha is not None else 1.0, k=params.k if params.quantise else None,
                             dense_grad=params.dense_gradient, cast=alpha is not None, levels=plan.levels + 1, norm="l2")
+
+    @classmethod
+    def data_term(cls, obs: Observation, plan: Plan, params: GuidedConfig) -> DataTerm:
+        """The weighted multiscale data term of one window (forward model, noise weights, pyramid)."""
+        fm = cls.forward_model(obs, plan, params)
+        y = torch.from_numpy(obs.y)[None, None]
+        var = obs.variance()
+        if not params.noise_weights:
+            var = np.full(obs.shape, float(var.mean()), dtype=np.float32)
+        return DataTerm(fm, y, torch.from_numpy(var)[None, None], plan.levels)
 
     # ---------------------------------------------------------------------------------- run
     def run(self, observation: Observation, params: GuidedConfig | None = None, callback: Callback | None = None,
@@ -190,8 +201,26 @@ class GuidedSampler:
             if callback is not None:
                 callback(1, 1, out)
             return out
-        out = self._sample(observation, p, plan, channels, callback, cancel, init)
+        if p.prior == "sd":
+            out = self._sample_latent(observation, p, plan, callback, cancel, init)
+        else:
+            out = self._sample(observation, p, plan, channels, callback, cancel, init)
         info.mode, info.seconds = "diffusion", time.perf_counter() - t0
+        return out
+
+    def _sample_latent(self, obs: Observation, p: GuidedConfig, plan: Plan, callback: Callback | None, cancel: Any,
+                       init: np.ndarray | None) -> np.ndarray:
+        """``prior="sd"``: the latent-diffusion DPS sampler (optional extra ``spikeview[sd]``)."""
+        from spikeview.guided.latent import LatentGuidedSampler
+
+        if not plan.mosaic:
+            raise ParameterError("prior = 'sd' needs a Bayer stream (a 3-channel frame); use prior = 'ffdnet' for monochrome.")
+        if self._latent is None:
+            self._latent = LatentGuidedSampler(self._prior if getattr(self._prior, "vae_factor", None) else None)
+        y0 = init if init is not None else start_estimate(obs, plan.mosaic, plan.cast, p.demosaic)
+        fm = self.forward_model(obs, plan, p)
+        out = self._latent.run(obs, p, callback, cancel, y0=y0, forward=fm)
+        self.info.steps = p.steps
         return out
 
     def _sample(self, obs: Observation, p: GuidedConfig, plan: Plan, channels: int, callback: Callback | None,
@@ -199,9 +228,7 @@ class GuidedSampler:
         prior = self.prior_for(channels, p)
         rule = self._guidance if self._guidance is not None else self.guidance_for(p)
         gen = torch.Generator().manual_seed(int(p.seed))
-        fm = self.forward_model(obs, plan, p)
-        y = torch.from_numpy(obs.y)[None, None]
-        data = DataTerm(fm, y, torch.from_numpy(obs.variance())[None, None], plan.levels)
+        data = self.data_term(obs, plan, p)
 
         sigma_obs = np.asarray(plan.sigma, dtype=np.float64) * p.sigma_scale
         if sigma_obs.size != channels:

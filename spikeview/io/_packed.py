@@ -15,9 +15,10 @@ How it counts without unpacking every frame:
    of each plane). Adding a frame is a ripple-carry add of its bytes into the planes: two bitwise
    operations per plane on 32 bytes at a time (AVX2), i.e. 256 pixels per instruction.
    P = 4 covers windows up to 15 frames, P = 8 up to 255; longer windows run several passes.
-2. **Extraction** (once per window, not per frame): each 64-bit plane word is spread into byte
-   lanes (one count per byte), and an 8×8 byte transpose (three delta swaps) puts the uint8
-   counts in pixel order (SWAR: no tables, vectorisable).
+2. **Extraction** (once per window, not per frame): for each 64-bit word of the planes, masks and
+   shifts merge the planes into 2-bit, 4-bit and (P = 8) 8-bit count fields, giving eight words
+   ``c_j`` whose byte ``m`` is the count of pixel ``8m + j``; an 8×8 byte transpose (three delta
+   swaps) then puts the uint8 counts in pixel order (SWAR: no tables, vectorisable).
 3. **Copy-out** of whole rows into the output, widening to uint16 and applying the flips and the
    column segments (contiguous loops, vectorised).
 
@@ -41,7 +42,12 @@ _MAX_UINT16_FRAMES = 65535
 #: target size of the per-thread working chunk (bytes of one frame); keeps the planes in L1
 _CHUNK_BYTES = 1024
 
-_M1 = np.uint64(0x0101010101010101)
+_M55 = np.uint64(0x5555555555555555)
+_MAA = np.uint64(0xAAAAAAAAAAAAAAAA)
+_M33 = np.uint64(0x3333333333333333)
+_MCC = np.uint64(0xCCCCCCCCCCCCCCCC)
+_M0F = np.uint64(0x0F0F0F0F0F0F0F0F)
+_MF0 = np.uint64(0xF0F0F0F0F0F0F0F0)
 _K32 = np.uint64(0x00000000FFFFFFFF)
 _K16 = np.uint64(0x0000FFFF0000FFFF)
 _K8 = np.uint64(0x00FF00FF00FF00FF)
@@ -56,17 +62,17 @@ def _swap(a, b, s, mask):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _add_plane(x, k, c0, c1, c2, c3, c4, c5, c6, c7):
-    # adds bit-plane word ``x`` (weight 2**k) to the byte-lane counters c_j (bit j of each byte)
-    c0 += (x & _M1) << k
-    c1 += ((x >> _S[1]) & _M1) << k
-    c2 += ((x >> _S[2]) & _M1) << k
-    c3 += ((x >> _S[3]) & _M1) << k
-    c4 += ((x >> _S[4]) & _M1) << k
-    c5 += ((x >> _S[5]) & _M1) << k
-    c6 += ((x >> _S[6]) & _M1) << k
-    c7 += ((x >> _S[7]) & _M1) << k
-    return c0, c1, c2, c3, c4, c5, c6, c7
+def _nibbles(a, b, c, d):
+    # bit planes of weight 1, 2, 4, 8 (bit p = pixel p) -> n_r with nibble t = count of pixel 4t + r
+    e = (a & _M55) | ((b & _M55) << _S[1])  # 2-bit fields at 2s: A + 2B of pixel 2s
+    o = ((a >> _S[1]) & _M55) | (b & _MAA)  # ... of pixel 2s + 1
+    e2 = (c & _M55) | ((d & _M55) << _S[1])
+    o2 = ((c >> _S[1]) & _M55) | (d & _MAA)
+    n0 = (e & _M33) | ((e2 & _M33) << _S[2])
+    n1 = (o & _M33) | ((o2 & _M33) << _S[2])
+    n2 = ((e >> _S[2]) & _M33) | (e2 & _MCC)
+    n3 = ((o >> _S[2]) & _M33) | (o2 & _MCC)
+    return n0, n1, n2, n3
 
 
 @njit(cache=True, nogil=True)
@@ -164,16 +170,26 @@ def _count_kernel(buf, offsets, f0, f1, w0, w1, r0, r1, row_bytes, chunk_rows, s
                         p3[i] = p3[i] | x
             # 2. planes -> uint8 counts in pixel order
             for q in range(nw):
-                z = np.uint64(0)
-                c0, c1, c2, c3, c4, c5, c6, c7 = _add_plane(q0[q], _S[0], z, z, z, z, z, z, z, z)
-                c0, c1, c2, c3, c4, c5, c6, c7 = _add_plane(q1[q], _S[1], c0, c1, c2, c3, c4, c5, c6, c7)
-                c0, c1, c2, c3, c4, c5, c6, c7 = _add_plane(q2[q], _S[2], c0, c1, c2, c3, c4, c5, c6, c7)
-                c0, c1, c2, c3, c4, c5, c6, c7 = _add_plane(q3[q], _S[3], c0, c1, c2, c3, c4, c5, c6, c7)
+                n0, n1, n2, n3 = _nibbles(q0[q], q1[q], q2[q], q3[q])
                 if eight:
-                    c0, c1, c2, c3, c4, c5, c6, c7 = _add_plane(q4[q], _S[4], c0, c1, c2, c3, c4, c5, c6, c7)
-                    c0, c1, c2, c3, c4, c5, c6, c7 = _add_plane(q5[q], _S[5], c0, c1, c2, c3, c4, c5, c6, c7)
-                    c0, c1, c2, c3, c4, c5, c6, c7 = _add_plane(q6[q], _S[6], c0, c1, c2, c3, c4, c5, c6, c7)
-                    c0, c1, c2, c3, c4, c5, c6, c7 = _add_plane(q7[q], _S[7], c0, c1, c2, c3, c4, c5, c6, c7)
+                    m0, m1, m2, m3 = _nibbles(q4[q], q5[q], q6[q], q7[q])
+                    c0 = (n0 & _M0F) | ((m0 & _M0F) << _S[4])
+                    c1 = (n1 & _M0F) | ((m1 & _M0F) << _S[4])
+                    c2 = (n2 & _M0F) | ((m2 & _M0F) << _S[4])
+                    c3 = (n3 & _M0F) | ((m3 & _M0F) << _S[4])
+                    c4 = ((n0 >> _S[4]) & _M0F) | (m0 & _MF0)
+                    c5 = ((n1 >> _S[4]) & _M0F) | (m1 & _MF0)
+                    c6 = ((n2 >> _S[4]) & _M0F) | (m2 & _MF0)
+                    c7 = ((n3 >> _S[4]) & _M0F) | (m3 & _MF0)
+                else:
+                    c0 = n0 & _M0F
+                    c1 = n1 & _M0F
+                    c2 = n2 & _M0F
+                    c3 = n3 & _M0F
+                    c4 = (n0 >> _S[4]) & _M0F
+                    c5 = (n1 >> _S[4]) & _M0F
+                    c6 = (n2 >> _S[4]) & _M0F
+                    c7 = (n3 >> _S[4]) & _M0F
                 # c_j byte m = count of pixel 64q + 8m + j; transpose so that word m byte j holds it
                 c0, c4 = _swap(c0, c4, _S[32], _K32)
                 c1, c5 = _swap(c1, c5, _S[32], _K32)

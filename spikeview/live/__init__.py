@@ -1,0 +1,65 @@
+"""Live capture: USB and simulated cameras, the ring buffer between acquisition and display, recording.
+
+Quick start::
+
+    from spikeview.live import CameraConfig, UsbCamera, SimCamera
+
+    cam = UsbCamera(CameraConfig(vid=0x1234, pid=0x5678)).start()   # or SimCamera.demo().start()
+    cam.start_recording("capture.dat")        # plain .dat + sidecar, written by its own thread
+    frames = cam.latest(41)                   # the newest 41 ticks, (41, H, W) uint8 0/1
+    print(cam.status, cam.status_message)     # a LiveStatus and one sentence (with the fix)
+    cam.close()                               # stops, finalises the recording, releases the device
+
+* :mod:`spikeview.live.source` — :class:`LiveSource` (a growing :class:`~spikeview.io.source.SpikeSource`),
+  :class:`LiveStatus`;
+* :mod:`spikeview.live.usb` — :class:`UsbCamera`, :class:`CameraConfig`, :func:`list_usb_devices`;
+* :mod:`spikeview.live.simcam` — :class:`SimCamera` (a simulated scene or a spike file, paced);
+* :mod:`spikeview.live.ring` — :class:`FrameRing`;
+* :mod:`spikeview.live.recorder` — :class:`Recorder`;
+* :mod:`spikeview.live.decode` — stream decoders, ROI/decimation (:class:`FrameShaper`);
+* :mod:`spikeview.live.mockusb` — :class:`MockBackend`, a scripted pyusb backend for tests and demos.
+
+Names are imported lazily (pyusb and the simulator load on first use). Nothing here imports Qt.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "LiveSource": "spikeview.live.source",
+    "LiveStatus": "spikeview.live.source",
+    "close_all": "spikeview.live.source",
+    "FrameRing": "spikeview.live.ring",
+    "RingOverrun": "spikeview.live.ring",
+    "Recorder": "spikeview.live.recorder",
+    "RecordingSummary": "spikeview.live.recorder",
+    "FrameShaper": "spikeview.live.decode",
+    "Raw1MStream": "spikeview.live.decode",
+    "PlainStream": "spikeview.live.decode",
+    "raw1m_to_packed": "spikeview.live.decode",
+    "CameraConfig": "spikeview.live.usb",
+    "UsbCamera": "spikeview.live.usb",
+    "UsbDeviceInfo": "spikeview.live.usb",
+    "list_usb_devices": "spikeview.live.usb",
+    "udev_rule": "spikeview.live.usb",
+    "SimCamera": "spikeview.live.simcam",
+    "MockBackend": "spikeview.live.mockusb",
+    "Fault": "spikeview.live.mockusb",
+}
+
+__all__ = list(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'spikeview.live' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

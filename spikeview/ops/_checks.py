@@ -42,10 +42,17 @@ def _masks_np(cfa: str, height: int, width: int) -> np.ndarray:
     return np.ascontiguousarray(channel_masks(cfa, height, width).transpose(2, 0, 1))
 
 
+@functools.lru_cache(maxsize=32)
+def _masks_tensor(cfa: str, height: int, width: int, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    # cached so that a sampler on a GPU does not copy the masks to the device at every step; a normal
+    # tensor even when first asked for under inference_mode, so autograd can save it later
+    with torch.inference_mode(False):
+        return torch.from_numpy(_masks_np(cfa, height, width)).to(device=device, dtype=dtype).unsqueeze(0)
+
+
 def cfa_masks(cfa: str, height: int, width: int, like: torch.Tensor) -> torch.Tensor:
-    """``(1, 3, H, W)`` 0/1 masks of the CFA channels (0 R, 1 G, 2 B) in ``like``'s dtype and device."""
-    m = torch.from_numpy(_masks_np(cfa, height, width))
-    return m.to(device=like.device, dtype=like.dtype).unsqueeze(0)
+    """``(1, 3, H, W)`` 0/1 masks of the CFA channels (0 R, 1 G, 2 B) in ``like``'s dtype and device (read-only)."""
+    return _masks_tensor(cfa, int(height), int(width), like.device, like.dtype)
 
 
 def check_positive_int(value: int, name: str, minimum: int = 1) -> int:

@@ -17,6 +17,7 @@ adjoint of :func:`laplacian_pyramid` (``⟨P x, b⟩ = ⟨x, Pᵀ b⟩``).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import torch
@@ -60,8 +61,22 @@ def _blur(x: torch.Tensor) -> torch.Tensor:
     return F.conv2d(F.conv2d(x, kh, padding=(0, 2), groups=c), kv, padding=(2, 0), groups=c)
 
 
-def _ones(h: int, w: int, like: torch.Tensor) -> torch.Tensor:
-    return torch.ones(1, 1, h, w, dtype=like.dtype, device=like.device)
+@functools.lru_cache(maxsize=64)
+def _norm_maps(h: int, w: int, device: torch.device, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(B(1), B(Z 1))`` at size ``(h, w)``: the normalisers of D and U (cached: they depend on the size only)."""
+    # normal tensors even when first asked for under inference_mode, so autograd can save them later
+    with torch.inference_mode(False), torch.no_grad():
+        ones = torch.ones(1, 1, h, w, dtype=dtype, device=device)
+        coarse = _coarse_size((h, w))
+        return _blur(ones), _blur(_zero_insert(ones[..., : coarse[0], : coarse[1]], (h, w)))
+
+
+def _norm_down(h: int, w: int, like: torch.Tensor) -> torch.Tensor:
+    return _norm_maps(int(h), int(w), like.device, like.dtype)[0]
+
+
+def _norm_up(h: int, w: int, like: torch.Tensor) -> torch.Tensor:
+    return _norm_maps(int(h), int(w), like.device, like.dtype)[1]
 
 
 def _zero_insert(c: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
@@ -92,13 +107,13 @@ def pyr_down(x: torch.Tensor) -> torch.Tensor:
     """
     check_image(x, None)
     h, w = x.shape[-2:]
-    return (_blur(x) / _blur(_ones(h, w, x)))[..., ::2, ::2]
+    return (_blur(x) / _norm_down(h, w, x))[..., ::2, ::2]
 
 
 def pyr_down_adjoint(c: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
     """Dᵀ: the adjoint of :func:`pyr_down` from ``(N, C, ceil(H/2), ceil(W/2))`` back to ``size = (H, W)``."""
     _check_coarse(c, size)
-    return _blur(_zero_insert(c, size) / _blur(_ones(size[0], size[1], c)))
+    return _blur(_zero_insert(c, size) / _norm_down(size[0], size[1], c))
 
 
 def pyr_up(c: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
@@ -107,16 +122,13 @@ def pyr_up(c: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
     Coarse sample ``(i, j)`` sits at fine position ``(2i, 2j)``, matching :func:`pyr_down`.
     """
     _check_coarse(c, size)
-    return _blur(_zero_insert(c, size)) / _blur(_zero_insert(_ones(c.shape[-2], c.shape[-1], c), size))
+    return _blur(_zero_insert(c, size)) / _norm_up(size[0], size[1], c)
 
 
 def pyr_up_adjoint(r: torch.Tensor) -> torch.Tensor:
     """Uᵀ: the adjoint of :func:`pyr_up`, from ``(N, C, H, W)`` to ``(N, C, ceil(H/2), ceil(W/2))``."""
     check_image(r, None, "r")
-    size = (r.shape[-2], r.shape[-1])
-    coarse = _coarse_size(size)
-    m = _blur(_zero_insert(_ones(coarse[0], coarse[1], r), size))
-    return _blur(r / m)[..., ::2, ::2]
+    return _blur(r / _norm_up(r.shape[-2], r.shape[-1], r))[..., ::2, ::2]
 
 
 def laplacian_pyramid(x: torch.Tensor, levels: int) -> list[torch.Tensor]:

@@ -221,9 +221,9 @@ class GuidedPanel(QtWidgets.QWidget):
                 pc.setPen(pg.mkPen(c, width=1))
                 sc.setPen(pg.mkPen(c, width=1))
             col = RUN_COLOURS[run % len(RUN_COLOURS)]
-            pc = self.psnr_plot.plot([], [], pen=pg.mkPen(col, width=2), symbol="o", symbolSize=4, symbolBrush=col,
-                                     symbolPen=None, name=f"run {run}")
-            sc = self.ssim_plot.plot([], [], pen=pg.mkPen(col, width=2), symbol="o", symbolSize=4, symbolBrush=col, symbolPen=None)
+            # lines only: symbols are re-rendered on every update and cost the window time while a run goes on
+            pc = self.psnr_plot.plot([], [], pen=pg.mkPen(col, width=2), name=f"run {run}")
+            sc = self.ssim_plot.plot([], [], pen=pg.mkPen(col, width=2))
             entry = self.curves[run] = (pc, sc, [], [], [])
         pc, sc, ts, ps, ss = entry
         ts.append(t)
