@@ -27,7 +27,7 @@ SCENES: dict[str, tuple[tuple[float, float], float, float]] = {
     "coins_rgb": ((1500.0, 0.0), 0.0, 1.0),
 }
 #: scenes used to tune the sampler; the others are held out for reporting
-TUNE_SCENES = ("astronaut", "coffee")
+TUNE_SCENES = ("astronaut", "coffee", "chelsea")
 
 
 @dataclass

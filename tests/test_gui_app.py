@@ -114,6 +114,8 @@ def test_open_a_plain_file_asks_geometry_with_a_live_preview(window, qtbot, tmp_
     assert np.abs(dlg.preview.image().astype(float) - right).mean() > 10
     dlg.flip.setChecked(True)
     dlg.update_preview()
+    assert dlg.remember.isVisible()
+    dlg.remember.setChecked(True)
     dlg.accept()
     qtbot.waitUntil(lambda: window.session.stream is not None and window.session.stream.path == path, timeout=WAIT_MS)
     qtbot.waitUntil(lambda: frames_at(window, window.session.tick), timeout=WAIT_MS)
@@ -121,6 +123,12 @@ def test_open_a_plain_file_asks_geometry_with_a_live_preview(window, qtbot, tmp_
     assert (src.width, src.height, src.n_frames, src.cfa) == (64, 64, 120, "RGGB")
     np.testing.assert_array_equal(src.read(10, 12), spikes[10:12])  # decoded the right way up
     assert window.recent_files()[0]["path"] == str(path)
+    # the sidecar was written: the next open asks nothing
+    assert (tmp_path / "capture.dat.toml").exists()
+    window.session.set_tick(3)
+    window.open_path(path)
+    qtbot.waitUntil(lambda: window.session.tick == 60, timeout=WAIT_MS)  # re-opened: centre tick
+    assert window.settings_dialog is None and window.session.source.cfa == "RGGB"
 
 
 def test_open_npy_and_drop_a_file(window, qtbot, tmp_path):
@@ -132,8 +140,12 @@ def test_open_npy_and_drop_a_file(window, qtbot, tmp_path):
     ev = QtGui.QDropEvent(QtCore.QPointF(10, 10), QtCore.Qt.DropAction.CopyAction, mime,
                           QtCore.Qt.MouseButton.LeftButton, QtCore.Qt.KeyboardModifier.NoModifier)
     window.dropEvent(ev)
+    qtbot.waitUntil(lambda: window.settings_dialog is not None, timeout=WAIT_MS)  # no sidecar: CFA unknown
+    dlg = window.settings_dialog
+    assert "Detected npz, 64×64" in dlg.message.text() and dlg.cfa.currentData() == "RGGB"
+    dlg.accept()
     qtbot.waitUntil(lambda: window.session.stream is not None, timeout=WAIT_MS)
-    assert window.session.source.shape == (100, 64, 64)
+    assert window.session.source.shape == (100, 64, 64) and window.session.source.cfa == "RGGB"
 
 
 @pytest.mark.parametrize("content", [None, b"", b"not numpy at all"])
@@ -142,7 +154,7 @@ def test_a_bad_file_is_an_error_message_not_a_crash(window, qtbot, tmp_path, con
     if content is not None:
         path.write_bytes(content)
     window.open_path(path)
-    qtbot.waitUntil(lambda: window.notice.isVisible(), timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: window.notice.is_shown(), timeout=WAIT_MS)
     assert window.notice.kind == "error" and path.name in window.notice.text()
     assert window.session.stream is None and window.isVisible()
 
@@ -232,9 +244,11 @@ def test_k_and_window_update_the_degradation_preview(opened, qtbot):
     s.set("window", 20)
     qtbot.waitUntil(lambda: "Δτ = 20" in panel.info.text(), timeout=WAIT_MS)
     assert not np.array_equal(before, panel.panes["qcmx"].image())
+    s.set("levels", 2)
     s.set("show_pyramid", True)
-    qtbot.waitUntil(lambda: panel.band_box.isVisible() and panel.bands[1].image() is not None, timeout=WAIT_MS)
-    assert panel.bands[1].image().shape == (32, 32)  # level 1 of a 64×64 residual
+    qtbot.waitUntil(lambda: panel.band_box.isVisible() and panel.bands[2].image() is not None, timeout=WAIT_MS)
+    assert [panel.bands[i].image().shape for i in range(3)] == [(64, 64), (32, 32), (16, 16)]  # L = 2 + residual
+    assert not panel.bands[3].isVisible()
 
 
 # ------------------------------------------------------------------------------------ guided
@@ -324,14 +338,24 @@ def test_export_the_current_frame_and_open_it_from_the_notification(opened, qtbo
 
     rec = read_export_metadata(out)
     assert rec["centre_tick"] == s.tick and rec["method"] == "tfp" and rec["params"]["classical"]["window"] == 10
-    opened_urls: list[str] = []
-    QtGui.QDesktopServices.setUrlHandler("file", lambda url: opened_urls.append(url.toLocalFile()))
+    class Catcher(QtCore.QObject):
+        def __init__(self) -> None:
+            super().__init__()
+            self.urls: list[str] = []
+
+        @QtCore.Slot(QtCore.QUrl)
+        def open(self, url: QtCore.QUrl) -> None:
+            self.urls.append(url.toLocalFile())
+
+    catcher = Catcher()
+    QtGui.QDesktopServices.setUrlHandler("file", catcher, "open")
     try:
         buttons = [b for b in w.notice.findChildren(QtWidgets.QPushButton) if b.text() == "Open"]
+        assert buttons[0].isVisible() and w.notice.geometry().width() > 600  # laid out in its bar
         qtbot.mouseClick(buttons[0], QtCore.Qt.MouseButton.LeftButton)
     finally:
         QtGui.QDesktopServices.unsetUrlHandler("file")
-    assert opened_urls == [str(out)]
+    assert catcher.urls == [str(out)]
 
 
 def test_export_the_marked_range_as_mp4_shows_slow_motion(opened, qtbot, tmp_path):
@@ -420,12 +444,15 @@ def test_undo_shortcut_and_help(opened, qtbot):
 def test_stream_settings_reinterpret_the_cfa(opened, qtbot):
     w, s = opened, opened.session
     dlg = w.stream_settings()
-    dlg.cfa.setCurrentIndex(dlg.cfa.findData("BGGR"))
+    right = dlg.preview.image().astype(float)
+    assert "probably wrong" not in dlg.hint.text()
+    dlg.cfa.setCurrentIndex(dlg.cfa.findData("GRBG"))  # one column off: greens read as red/blue
     dlg.update_preview()
-    assert dlg.hint.text()  # a wrong CFA is pointed out
+    assert "probably wrong" in dlg.hint.text()
+    assert np.abs(dlg.preview.image().astype(float) - right).mean() > 10
     dlg.accept()
-    assert s.source.cfa == "BGGR"
-    qtbot.waitUntil(lambda: "CFA" in w.rates_panel.hint.text() or "green" in w.rates_panel.hint.text(), timeout=WAIT_MS)
+    assert s.source.cfa == "GRBG" and s.tick == 120
+    qtbot.waitUntil(lambda: "probably wrong" in w.rates_panel.hint.text(), timeout=WAIT_MS)
 
 
 # ------------------------------------------------------------------------------------ meta

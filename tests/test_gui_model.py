@@ -85,7 +85,7 @@ def test_defaults_match_the_core_configs():
     from spikeview.guided.config import GuidedConfig
 
     d, g, c = default_params(), GuidedConfig(), ClassicalConfig()
-    for name in ("steps", "s", "k", "levels", "t_start", "guidance", "prior", "seed", "window"):
+    for name in ("steps", "s", "k", "levels", "t_start", "guidance", "prior", "seed", "window", "eta"):
         assert d[name] == getattr(g, name), name
     for name in ("window", "tfi_half_window", "demosaic", "colour_cast", "eta"):
         assert d[name] == getattr(c, name), name
@@ -268,11 +268,11 @@ def test_degradation_chain_of_a_consistent_scene_has_a_small_residual():
 
     y = np.array([0.5, 0.25, 0.125], np.float32)[channel_map("RGGB", h, w)]
     p = default_params()
-    res = core.degradation_chain(x, y, "RGGB", 8, 500.0, 2.0, alpha, 2, True, p)
+    res = core.degradation_chain(x, y, "RGGB", 8, 500.0, 2.0, alpha, 1, True, p)
     assert res.rmse < 0.01
     assert set(res.images) == {"x", "mx", "cmx", "qcmx", "y", "residual"}
     assert all(im.dtype == np.uint8 for im in res.images.values())
-    assert len(res.bands) == 2
+    assert [b.shape for b in res.bands] == [(8, 8), (4, 4)]  # L = 1: one band-pass level + the coarse residual
     wrong = core.degradation_chain(x, y, "RGGB", 8, 500.0, 1.0, alpha, 0, False, p)  # η halves C M X
     assert wrong.rmse > 0.05
 

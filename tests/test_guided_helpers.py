@@ -49,7 +49,7 @@ def scene_rates(kind: str, h: int = 16, w: int = 16, cfa: str = "RGGB", seed: in
 
     ``texture``: smooth random colours; ``dark``: no spikes; ``saturated``: a spike every tick;
     ``no_blue``: texture with the blue photosites dark; ``constant``: 0.4 everywhere;
-    ``checker``: Nyquist checkerboard 0.1/0.9.
+    ``checker``: Nyquist checkerboard 0.1/0.9; ``ramp``: a smooth gradient 0.2…0.6.
     """
     rng = np.random.default_rng(seed)
     if kind == "dark":
@@ -58,6 +58,9 @@ def scene_rates(kind: str, h: int = 16, w: int = 16, cfa: str = "RGGB", seed: in
         return np.ones((h, w))
     if kind == "constant":
         return np.full((h, w), 0.4)
+    if kind == "ramp":  # smooth: no texture at the finest scale, so only noise shows there
+        yy, xx = np.mgrid[0:h, 0:w]
+        return 0.2 + 0.4 * (xx + 0.5 * yy) / (w + 0.5 * h)
     if kind == "checker":
         yy, xx = np.mgrid[0:h, 0:w]
         return np.where((yy + xx) % 2 == 0, 0.1, 0.9)

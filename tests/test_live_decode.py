@@ -91,3 +91,12 @@ def test_plain_stream_cuts_frames_and_reports_the_rest():
     got = np.concatenate([stream.feed(data[i:i + 50]) for i in range(0, len(data), 50)])
     np.testing.assert_array_equal(got, pack_frames(x, flip_vertical=True))
     assert stream.finish().trailing_bytes == 3
+
+
+@pytest.mark.parametrize("width", [24, 20])  # byte-aligned rows (only ROI rows unpacked) and not
+def test_plain_stream_with_roi(width):
+    rng = np.random.default_rng(width)
+    x = rng.integers(0, 2, (3, 10, width), dtype=np.uint8)
+    stream = PlainStream(FrameShaper(10, width, roi=[2, 4, 4, 12]))
+    got = unpack_frames(stream.feed(pack_frames(x, flip_vertical=False)), 4, 12)
+    np.testing.assert_array_equal(got, x[:, 2:6, 4:16])

@@ -20,7 +20,7 @@ def frames_for(ticks: range | np.ndarray) -> np.ndarray:
 
 def test_push_and_get_across_the_wrap():
     ring = FrameRing(FB, capacity=5)
-    ring.push(frames_for(range(0, 3)))
+    ring.push(frames_for(range(3)))
     ring.push(frames_for(range(3, 8)))  # wraps: holds ticks 3..7
     assert (ring.total, ring.oldest, len(ring)) == (8, 3, 5)
     np.testing.assert_array_equal(ring.get(3, 8), frames_for(range(3, 8)))

@@ -9,6 +9,8 @@ Workers:
 
 * ``preview`` — stream frames, firing rates (throttled), the sequence's colour cast, the
   degradation chain; newest-wins per channel, frames first;
+* ``tfi`` — the TFI pane (costly at full size: ±32 ticks per pixel), on its own thread so it never
+  holds up the raw/TFP frames, throttled during playback like the rates;
 * ``guided`` — the guided sampler; owns the prior model (loaded once, kept in the worker's state);
   parameter changes restart it after a debounce;
 * ``export`` — one export at a time, with progress and cancel.
@@ -38,6 +40,8 @@ from spikeview.gui.workers import Worker
 _FRAME_GROUPS = {"stream", "display", "classical"}
 #: rates are recomputed at most this often during playback (ms); paused changes are immediate
 RATES_INTERVAL_MS = 250
+#: the TFI pane is recomputed at most this often during playback (ms)
+TFI_INTERVAL_MS = 200
 #: guided parameter changes restart a running job after this quiet time (ms)
 GUIDED_DEBOUNCE_MS = 400
 #: playback timer period (ms): the display asks for a frame at most this often
@@ -48,6 +52,7 @@ class Controller(QtCore.QObject):
     """Session → jobs → views (see module docstring)."""
 
     frames_ready = QtCore.Signal(object)  # core.StreamFrames
+    tfi_ready = QtCore.Signal(int, object, object)  # tick, uint8 image, full (H, W)
     rates_ready = QtCore.Signal(object)  # core.RatesResult
     alpha_history = QtCore.Signal(object)  # (ticks, alphas (N, C)) sorted by tick
     degradation_ready = QtCore.Signal(object)  # jobs.DegradationView
@@ -68,7 +73,8 @@ class Controller(QtCore.QObject):
         # the sampler leaves one core to the window: a single torch thread, at a lower priority
         self.guided = Worker("spikeview-guided", parent=self, nice=10, torch_threads=max(1, (os.cpu_count() or 2) - 1))
         self.exporter = Worker("spikeview-export", parent=self)
-        for w in (self.preview, self.guided, self.exporter):
+        self.tfi = Worker("spikeview-tfi", parent=self)
+        for w in (self.preview, self.guided, self.exporter, self.tfi):
             w.finished.connect(self._on_finished)
             w.failed.connect(self._on_failed)
             w.cancelled.connect(self._on_cancelled)
@@ -76,6 +82,7 @@ class Controller(QtCore.QObject):
         self.alpha: np.ndarray | None = None
         self.alpha_note: str | None = None
         self.enabled = {"tfi": True, "rates": True, "degradation": True}
+        self.display_factor = 1  # stream images are downsampled by this for the screen
         self.errors: list[str] = []  # every error shown, for tests and the log
         self.last_frames = None
         self.guided_result: jobs.GuidedResult | None = None
@@ -95,6 +102,9 @@ class Controller(QtCore.QObject):
         self.play_timer.timeout.connect(self._play_tick)
         self.rates_timer = QtCore.QTimer(self, singleShot=True)
         self.rates_timer.timeout.connect(self._submit_rates)
+        self.tfi_timer = QtCore.QTimer(self, singleShot=True)
+        self.tfi_timer.timeout.connect(self._submit_tfi)
+        self._last_tfi = 0.0
         self.guided_timer = QtCore.QTimer(self, singleShot=True, interval=GUIDED_DEBOUNCE_MS)
         self.guided_timer.timeout.connect(self._guided_debounced)
 
@@ -110,20 +120,30 @@ class Controller(QtCore.QObject):
         """Stop playback and every worker (called when the window closes)."""
         self.play_timer.stop()
         self.rates_timer.stop()
+        self.tfi_timer.stop()
         self.guided_timer.stop()
         ev = self.session.events
         for e, cb in ((ev.source_changed, self._on_source), (ev.tick_changed, self._on_tick), (ev.param_changed, self._on_param),
                       (ev.roi_changed, self._on_roi), (ev.playback_changed, self._on_playback)):
             e.disconnect(cb)
-        for w in (self.preview, self.guided, self.exporter):
+        for w in (self.preview, self.guided, self.exporter, self.tfi):
             w.stop()
+        gc.unfreeze()  # let the interpreter's final cleanup see everything again
+
+    def set_display_factor(self, factor: int) -> None:
+        """Downsample the stream images by ``factor`` (the views ask when their zoom changes)."""
+        factor = max(1, int(factor))
+        if factor != self.display_factor:
+            self.display_factor = factor
+            if not self.session.playing:
+                self.request_frames()
 
     def set_enabled(self, what: str, on: bool) -> None:
         """Skip work for hidden views (``"tfi"``, ``"rates"``, ``"degradation"``)."""
         changed = self.enabled.get(what) != on
         self.enabled[what] = on
         if changed and on:
-            {"tfi": self.request_frames, "rates": self.request_rates, "degradation": self.request_degradation}[what]()
+            {"tfi": self.request_tfi, "rates": self.request_rates, "degradation": self.request_degradation}[what]()
 
     # ------------------------------------------------------------------------------ memory
     @staticmethod
@@ -208,7 +228,7 @@ class Controller(QtCore.QObject):
     def _request(self, **overrides: Any) -> jobs.PreviewRequest:
         s = self.session
         kw = dict(source=s.source, tick=s.tick, params=dict(s.params), alpha=self.alpha, roi=s.roi,
-                  want_tfi=self.enabled["tfi"])
+                  want_tfi=self.enabled["tfi"], factor=self.display_factor)
         kw.update(overrides)
         return jobs.PreviewRequest(**kw)
 
@@ -220,6 +240,29 @@ class Controller(QtCore.QObject):
             return
         req = self._request()
         self.preview.submit("frames", lambda ctx, r=req: jobs.frames_job(r, ctx))
+        self.request_tfi()
+
+    def request_tfi(self) -> None:
+        """The TFI pane: at once when paused, at most every TFI_INTERVAL_MS during playback."""
+        if self.session.source is None or not self.enabled["tfi"]:
+            return
+        if not self.session.playing:
+            self._submit_tfi()
+            return
+        if self.tfi.is_active("tfi"):
+            return  # still busy with the last one: playback moves on without it
+        wait = TFI_INTERVAL_MS - (time.perf_counter() - self._last_tfi) * 1000
+        if wait <= 0:
+            self._submit_tfi()
+        elif not self.tfi_timer.isActive():
+            self.tfi_timer.start(int(wait))
+
+    def _submit_tfi(self) -> None:
+        if self.session.source is None:
+            return
+        self._last_tfi = time.perf_counter()
+        req = self._request()
+        self.tfi.submit("tfi", lambda ctx, r=req: jobs.tfi_job(r, ctx))
 
     def request_rates(self) -> None:
         if self.last_frames is None or not self.enabled["rates"]:
@@ -330,6 +373,11 @@ class Controller(QtCore.QObject):
             self.frames_ready.emit(result)
             self.request_rates()
             self._after_frames()
+            if self.session.playing:
+                # pipeline: the worker computes the next window while this one is painted
+                self._play_tick()
+        elif channel == "tfi":
+            self.tfi_ready.emit(*result)
         elif channel == "rates":
             self._alpha_hist[int(result.tick)] = np.asarray(result.alpha, dtype=np.float64)
             if len(self._alpha_hist) > 4000:  # keep memory bounded on very long sessions
@@ -384,7 +432,7 @@ class Controller(QtCore.QObject):
             self.guided_state.emit("cancelled", "Guided run cancelled.")
 
     def _worker(self, channel: str) -> Worker:
-        return self.guided if channel == "guided" else self.exporter if channel == "export" else self.preview
+        return {"guided": self.guided, "export": self.exporter, "tfi": self.tfi}.get(channel, self.preview)
 
     def _error(self, message: str) -> None:
         self.errors.append(message)

@@ -109,10 +109,7 @@ DEMO_TICKS = 1000
 
 def demo_stream(size: int = DEMO_SIZE, n_ticks: int = DEMO_TICKS) -> OpenedStream:
     """The built-in demo capture (simulated, with motion and colour, ground truth known)."""
-    try:
-        from spikeview.sim.demo import demo_capture
-    except ImportError:  # the simulator is being written: a stand-in with the same interface
-        from spikeview.gui._fallback import demo_capture
+    from spikeview.sim.demo import demo_capture
 
     cap = demo_capture(size=size, n_ticks=n_ticks)
     return memory_stream(cap, "demo capture", cap.gt_at)
@@ -124,7 +121,8 @@ def open_file(path: str | Path, **kwargs: Any) -> OpenedStream:
     Raises :class:`~spikeview.errors.GeometryError` (with ``candidates``) when the geometry is
     unknown, and other :class:`~spikeview.errors.SpikeviewError` for bad files.
     """
-    open_source = _open_source()
+    from spikeview.io import open_source
+
     path = Path(path)
     kwargs = {k: v for k, v in kwargs.items() if v is not None}
     src = open_source(path, **kwargs)
@@ -144,25 +142,46 @@ def open_file(path: str | Path, **kwargs: Any) -> OpenedStream:
                         open_kwargs=open_kwargs)
 
 
-def _open_source() -> Callable[..., SpikeSource]:
-    try:
-        from spikeview.io import open_source
-    except ImportError:  # the readers are being written: a stand-in with the same interface
-        from spikeview.gui._fallback import open_source
-    return open_source
+def has_sidecar(path: str | Path) -> bool:
+    """Whether ``path`` has a sidecar that says how to read it (:func:`spikeview.io.read_sidecar`)."""
+    from spikeview.io import sidecar_path
+
+    return sidecar_path(path).exists()
 
 
-def geometry_candidates(path: str | Path) -> list[tuple[int, int]]:
-    """``(width, height)`` pairs that fit a plain file's size (known camera sizes first)."""
+def probe_file(path: str | Path) -> tuple[dict[str, Any], list[tuple[int, int]], str]:
+    """What the open dialog starts from for a file without a sidecar.
+
+    Returns the settings detection found (format, width, height; CFA and flip as the ecosystem
+    defaults: RGGB, rows flipped for plain files), the ``(width, height)`` candidates when the
+    geometry is ambiguous, and a sentence about it. Other errors (missing, empty file) raise.
+    """
     from spikeview.errors import GeometryError
+    from spikeview.io import open_source
 
+    path = Path(path)
+    initial: dict[str, Any] = {"cfa": "RGGB", "flip_vertical": True}
     try:
-        _open_source()(Path(path))
+        with open_source(path) as src:
+            info = src.info
+            initial.update(format=info.format, width=info.width, height=info.height,
+                           flip_vertical=info.flip_vertical)
+            return initial, [], f"Detected {info.format}, {info.width}×{info.height}, {info.n_frames} ticks."
     except GeometryError as e:
-        return list(e.candidates)
-    except SpikeviewError:
-        return []
-    return []
+        cands = list(e.candidates)
+        if cands:
+            initial.update(width=cands[0][0], height=cands[0][1])
+        return initial, cands, str(e)
+
+
+def write_stream_sidecar(stream: OpenedStream) -> Path:
+    """Remember how ``stream``'s file is read: write its sidecar (:func:`spikeview.io.write_sidecar`)."""
+    from spikeview.io import write_sidecar
+
+    if stream.path is None:
+        raise ParameterError("Only captures opened from a file can get a sidecar.")
+    info = stream.source.info
+    return write_sidecar(stream.path, info)
 
 
 # ------------------------------------------------------------------------------ classical
@@ -236,9 +255,30 @@ def sequence_alpha(source: SpikeSource, window: int = 10, max_windows: int = 64)
 # ----------------------------------------------------------------------------- stream frames
 
 
+def downsample(img: np.ndarray, factor: int) -> np.ndarray:
+    """Block mean of a uint8 image over ``factor × factor`` pixels (edges cropped to a multiple).
+
+    The display is downsampled here, in the worker, to about the screen's resolution: pyqtgraph's
+    own downsampling runs in the GUI thread and costs tens of ms per 1000×1000 frame. A block mean
+    (not decimation) keeps sparse spike frames readable as a spike density.
+    """
+    f = int(factor)
+    if f <= 1 or img.shape[0] < f or img.shape[1] < f:
+        return img
+    from spikeview.gui._kernels import block_mean_u8
+
+    arr = np.ascontiguousarray(img)
+    out = block_mean_u8(arr if arr.ndim == 3 else arr[..., None], f)
+    return out if img.ndim == 3 else out[..., 0]
+
+
 @dataclass
 class StreamFrames:
-    """The three Stream-panel images of one window (uint8, ready to show)."""
+    """The three Stream-panel images of one window (uint8, ready to show).
+
+    ``raw``, ``tfp`` and ``tfi`` are downsampled by ``factor`` for display (they still cover the
+    whole ``shape``); ``mosaic`` is always full resolution.
+    """
 
     tick: int
     a: int
@@ -248,10 +288,12 @@ class StreamFrames:
     tfi: np.ndarray | None  # (H, W, 3) uint8 TFI, None when not computed
     spike_rate: float  # mean SFR of the window (spikes per photosite per tick)
     mosaic: np.ndarray  # (H, W) float32 TFP SFR (what the rates panel and the physics see)
+    factor: int = 1
+    shape: tuple[int, int] = (0, 0)  # full frame (H, W)
 
 
 def stream_frames(source: SpikeSource, tick: int, params: dict[str, Any], alpha: np.ndarray | None,
-                  want_tfi: bool = True) -> StreamFrames:
+                  want_tfi: bool = True, factor: int = 1) -> StreamFrames:
     """Raw spikes at ``tick``, TFP and TFI previews of the window around it.
 
     One read covers the TFP window and the TFI search span, so a frame costs one source access;
@@ -280,8 +322,23 @@ def stream_frames(source: SpikeSource, tick: int, params: dict[str, Any], alpha:
     tfi_img = None
     if want_tfi:
         tfi_img = _colour_frame(tfi_array(block, tick - lo, hw), cfa, params, alpha if use_cast else None)
-    return StreamFrames(tick=tick, a=a, b=b, raw=raw, tfp=tfp_img, tfi=tfi_img,
-                        spike_rate=float(sfr.mean()), mosaic=sfr)
+    f = max(1, int(factor))
+    return StreamFrames(tick=tick, a=a, b=b, raw=downsample(raw, f), tfp=downsample(tfp_img, f),
+                        tfi=None if tfi_img is None else downsample(tfi_img, f),
+                        spike_rate=float(sfr.mean()), mosaic=sfr, factor=f, shape=(source.height, source.width))
+
+
+def tfi_frame(source: SpikeSource, tick: int, params: dict[str, Any], alpha: np.ndarray | None,
+              factor: int = 1) -> np.ndarray:
+    """The TFI preview at ``tick`` alone (uint8 RGB, downsampled by ``factor``), for its own worker."""
+    from spikeview.classical.tfi import tfi
+
+    cfa = source.cfa
+    use_cast = bool(params["colour_cast"]) and cfa is not None
+    img = tfi(source, int(tick), int(params["tfi_half_window"]))
+    if use_cast and alpha is None:
+        alpha = alpha_note(_channel_means(img[None], cfa))[0]
+    return downsample(_colour_frame(img, cfa, params, alpha if use_cast else None), factor)
 
 
 def _channel_means(block: np.ndarray, cfa: str | None) -> np.ndarray:
@@ -336,34 +393,44 @@ class RatesResult:
     alpha: np.ndarray  # (3,) gray-world α of this window (R, G, B), (1,) for monochrome
 
 
+def _site_offsets(cfa: str) -> dict[str, tuple[int, int]]:
+    """Row/column parity of each Bayer site (``R``, ``Gr``, ``Gb``, ``B``; Gr shares rows with R)."""
+    quad = {(0, 0): cfa[0], (0, 1): cfa[1], (1, 0): cfa[2], (1, 1): cfa[3]}
+    red_row = 0 if "R" in (cfa[0], cfa[1]) else 1
+    out = {}
+    for (py, px), ch in quad.items():
+        out[ch if ch != "G" else ("Gr" if py == red_row else "Gb")] = (py, px)
+    return {k: out[k] for k in SITE_NAMES}
+
+
 def site_rates(sfr: np.ndarray, cfa: str | None, window: int, roi: tuple[int, int, int, int] | None = None,
                tick: int = 0) -> RatesResult:
     """Histograms of the SFR per Bayer site (``R``, ``Gr``, ``Gb``, ``B``; ``all`` for mono).
 
-    The bins are the TFP levels ``{0, 1/Δτ, …, 1}`` (one bin per level) so a histogram shows the
-    quantisation exactly. An ROI keeps the CFA phase: site masks are taken on the full frame.
+    One bin per TFP level ``{0, 1/Δτ, …, 1}`` (for Δτ ≤ 64; longer windows use 65 bins), so the
+    histogram shows the quantisation exactly. The ROI is cut from the full frame and sites keep
+    their full-frame parity (the CFA phase does not depend on the ROI).
     """
-    n_levels = int(window) + 1 if window <= 64 else 65
-    edges = np.linspace(-0.5 / (n_levels - 1), 1 + 0.5 / (n_levels - 1), n_levels + 1)
-    if cfa is None:
-        masks = {"all": np.ones(sfr.shape, bool)}
-    else:
-        masks = site_masks(cfa, *sfr.shape)
+    n = int(min(max(window, 1), 64))
+    edges = np.linspace(-0.5 / n, 1 + 0.5 / n, n + 2)
+    x0 = y0 = 0
+    sub = sfr
     if roi is not None:
-        x, y, w, h = roi
-        sel = np.zeros(sfr.shape, bool)
-        sel[y:y + h, x:x + w] = True
-        masks = {k: m & sel for k, m in masks.items()}
-    hists, means = {}, {}
-    for name, m in masks.items():
-        vals = sfr[m]
-        hist, _ = np.histogram(vals, bins=edges)
-        hists[name] = hist.astype(np.float64) / max(vals.size, 1)
-        means[name] = float(vals.mean()) if vals.size else 0.0
+        x0, y0, w, h = roi
+        sub = sfr[y0:y0 + h, x0:x0 + w]
+    planes = {"all": sub} if cfa is None else {
+        name: sub[(py - y0) % 2::2, (px - x0) % 2::2] for name, (py, px) in _site_offsets(parse_cfa(cfa)).items()}
+    hists, means, sizes = {}, {}, {}
+    for name, plane in planes.items():
+        idx = np.rint(plane * np.float32(n)).astype(np.intp).ravel()
+        np.clip(idx, 0, n, out=idx)
+        sizes[name] = idx.size
+        hists[name] = np.bincount(idx, minlength=n + 1).astype(np.float64) / max(idx.size, 1)
+        means[name] = float(plane.mean(dtype=np.float64)) if plane.size else 0.0
     if cfa is None:
         ch = np.array([means["all"]])
     else:
-        ngr, ngb = int(masks["Gr"].sum()), int(masks["Gb"].sum())
+        ngr, ngb = sizes["Gr"], sizes["Gb"]
         g = (means["Gr"] * ngr + means["Gb"] * ngb) / max(ngr + ngb, 1)
         ch = np.array([means["R"], g, means["B"]])
     return RatesResult(tick=tick, edges=edges, hists=hists, means=means, alpha=alpha_note(ch)[0])
@@ -403,7 +470,8 @@ def degradation_chain(x_img: np.ndarray, y_mosaic: np.ndarray, cfa: str | None, 
         cfa: Bayer CFA of both; monochrome skips M and C (as the scene plan does).
         window: Δτ in ticks (the quantiser's levels ``{0, 1/Δτ, …, 1}``); k: Q's sharpness.
         eta, alpha: C scales channel c by ``η / α_c`` (``alpha`` ``None``: C skipped).
-        levels: Laplacian levels of the per-level residual (0 = none); ``show_pyramid`` computes them.
+        levels: band-pass levels L of the per-level residual (``L + 1`` bands with the coarse residual,
+            as :class:`spikeview.guided.GuidedConfig`; 0 = none); ``show_pyramid`` computes them.
         display: the session's display parameters for the scene-side images.
 
     Sensor-side images (M X onwards, Y, residual) are shown in gray, linear 0..1 through the sRGB
@@ -434,9 +502,10 @@ def degradation_chain(x_img: np.ndarray, y_mosaic: np.ndarray, cfa: str | None, 
         if show_pyramid and levels > 0:
             from spikeview.ops.pyramid import laplacian_pyramid, max_pyramid_levels
 
-            n_lev = min(int(levels), max_pyramid_levels(*y_mosaic.shape))
-            if n_lev > 0:
-                bands_np = [t[0, 0].numpy() for t in laplacian_pyramid(res, n_lev)]
+            # L band-pass levels + the coarse residual (GuidedConfig.levels), capped by the frame size
+            n_bands = min(int(levels) + 1, max_pyramid_levels(*y_mosaic.shape))
+            if n_bands > 1:
+                bands_np = [t[0, 0].numpy() for t in laplacian_pyramid(res, n_bands)]
     sensor = dict(black=0.0, white=1.0, gamma="srgb")
     images = {
         "x": show(x_img, display),

@@ -56,7 +56,7 @@ class StreamSettingsDialog(QtWidgets.QDialog):
 
     def __init__(self, title: str, opener: Callable[..., OpenedStream], initial: dict[str, Any],
                  candidates: list[tuple[int, int]] | None = None, message: str = "", *, geometry: bool = True,
-                 parent: QtWidgets.QWidget | None = None):
+                 remember: bool = False, parent: QtWidgets.QWidget | None = None):
         super().__init__(parent)
         self.setWindowTitle(title)
         self.setObjectName("stream_settings")
@@ -86,6 +86,9 @@ class StreamSettingsDialog(QtWidgets.QDialog):
         self.cfa.addItem("none (monochrome)", "none")
         self.flip = QtWidgets.QCheckBox("Rows stored upside down (vertical flip)", objectName="flip")
         self.flip.setToolTip("The .dat ecosystem stores rows bottom-up; simulator files often do not")
+        self.remember = QtWidgets.QCheckBox("Remember these settings next to the file (write a sidecar)", objectName="remember")
+        self.remember.setToolTip("Writes <file>.toml, which the app and the command line read next time")
+        self.remember.setVisible(remember)
         self.preview = ImagePane("colour preview (TFP, 32 ticks)", min_size=220)
         self.mosaic = ImagePane("raw mosaic", min_size=220)
         self.mosaic.link(self.preview)
@@ -123,6 +126,7 @@ class StreamSettingsDialog(QtWidgets.QDialog):
         lay.addWidget(self.desc)
         lay.addWidget(self.hint)
         lay.addWidget(self.error)
+        lay.addWidget(self.remember)
         lay.addWidget(self.buttons)
         self.resize(720, 560)
 

@@ -32,12 +32,19 @@ class PreviewRequest:
     alpha: np.ndarray | None
     roi: tuple[int, int, int, int] | None = None
     want_tfi: bool = True
+    factor: int = 1  # display downsampling of the stream images
     x_override: np.ndarray | None = None  # the guided result for this window, if any (ROI-cropped)
     x_label: str = "TFP"
 
 
 def frames_job(req: PreviewRequest, ctx: Any) -> core.StreamFrames:
-    return core.stream_frames(req.source, req.tick, req.params, req.alpha, want_tfi=req.want_tfi)
+    return core.stream_frames(req.source, req.tick, req.params, req.alpha, want_tfi=False, factor=req.factor)
+
+
+def tfi_job(req: PreviewRequest, ctx: Any) -> tuple[int, np.ndarray, tuple[int, int]]:
+    """``(tick, TFI image, full frame shape)`` for the Stream panel's TFI pane."""
+    img = core.tfi_frame(req.source, req.tick, req.params, req.alpha, req.factor)
+    return req.tick, img, (req.source.height, req.source.width)
 
 
 def rates_job(req: PreviewRequest, mosaic: np.ndarray, ctx: Any) -> core.RatesResult:

@@ -16,7 +16,7 @@ from typing import Any
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from spikeview.errors import GeometryError, SpikeviewError
+from spikeview.errors import SpikeviewError
 from spikeview.gui import core
 from spikeview.gui.controller import Controller
 from spikeview.gui.dialogs import ShortcutsDialog, StreamSettingsDialog, app_icon
@@ -49,13 +49,15 @@ class NotificationBar(QtWidgets.QFrame):
         close = QtWidgets.QToolButton(text="✕")
         close.setAutoRaise(True)
         close.setToolTip("Dismiss")
-        close.clicked.connect(self.hide)
+        close.clicked.connect(self.dismiss)
+        self.setSizePolicy(QtWidgets.QSizePolicy.Policy.Expanding, QtWidgets.QSizePolicy.Policy.Preferred)
+        #: the tool-bar action that holds this bar (visibility goes through it), set by the window
+        self.action: QtGui.QAction | None = None
         lay = QtWidgets.QHBoxLayout(self)
         lay.setContentsMargins(8, 3, 4, 3)
         lay.addWidget(self.label, 1)
         lay.addLayout(self.buttons)
         lay.addWidget(close)
-        self.hide()
         self.kind = ""
 
     def show_message(self, text: str, kind: str = "info", actions: list[tuple[str, Any]] | None = None) -> None:
@@ -71,10 +73,23 @@ class NotificationBar(QtWidgets.QFrame):
         self.setStyleSheet(f"#notification {{ background: {colour}; border-radius: 3px; }} QLabel {{ color: #f0f0f0; }}")
         self.label.setText(text)
         self.kind = kind
-        self.show()
+        self._set_shown(True)
+
+    def dismiss(self) -> None:
+        self.kind = ""
+        self._set_shown(False)
+
+    def _set_shown(self, on: bool) -> None:
+        if self.action is not None:
+            self.action.setVisible(on)
+        else:
+            self.setVisible(on)
+
+    def is_shown(self) -> bool:
+        return self.action.isVisible() if self.action is not None else self.isVisible()
 
     def text(self) -> str:
-        return self.label.text() if self.isVisible() else ""
+        return self.label.text() if self.is_shown() else ""
 
 
 class MainWindow(QtWidgets.QMainWindow):
@@ -130,7 +145,8 @@ class MainWindow(QtWidgets.QMainWindow):
         bar.setObjectName("notification_bar")
         bar.setMovable(False)
         bar.setFloatable(False)
-        bar.addWidget(self.notice)
+        self.notice.action = bar.addWidget(self.notice)
+        self.notice.action.setVisible(False)
         bar.toggleViewAction().setVisible(False)
         self.addToolBar(QtCore.Qt.ToolBarArea.BottomToolBarArea, bar)
 
@@ -255,6 +271,7 @@ class MainWindow(QtWidgets.QMainWindow):
     def _connect(self) -> None:
         c, s = self.controller, self.session
         c.frames_ready.connect(self._on_frames)
+        c.tfi_ready.connect(self.stream_panel.show_tfi)
         c.rates_ready.connect(self.rates_panel.show_rates)
         c.alpha_history.connect(self.rates_panel.show_alpha_history)
         c.alpha_ready.connect(self.rates_panel.show_sequence_alpha)
@@ -273,6 +290,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.export_panel.export_requested.connect(self.export_to)
         self.export_panel.cancel_requested.connect(c.cancel_export)
         self.stream_panel.tfi_check.toggled.connect(lambda v: c.set_enabled("tfi", v))
+        self.stream_panel.display_factor_changed.connect(c.set_display_factor)
         for key, what in (("rates", "rates"), ("degradation", "degradation")):
             self.docks[key].visibilityChanged.connect(lambda vis, w=what: c.set_enabled(w, vis) if not self._closing else None)
         ev = s.events
@@ -289,18 +307,22 @@ class MainWindow(QtWidgets.QMainWindow):
         self.loader.submit("open", lambda ctx: ("ok", core.demo_stream(size, n_ticks), None))
 
     def open_path(self, path: str | os.PathLike[str], **kwargs: Any) -> None:
-        """Open a capture: its sidecar/detection, the given settings, or ask with a live preview."""
+        """Open a capture (in the background).
+
+        With a sidecar, or with explicit settings (a recent file), the file opens directly;
+        otherwise the settings dialog asks for the geometry, CFA and flip with a live preview,
+        starting from what detection found. A ``.toml`` file is loaded as a preset.
+        """
         path = Path(path)
-        if path.suffix.lower() == ".toml":
+        if path.suffix.lower() == ".toml" and not path.name.endswith((".dat.toml", ".npy.toml", ".npz.toml")):
             self.load_preset(path)
             return
         self.statusBar().showMessage(f"Opening {path.name}…")
 
         def job(ctx: Any) -> tuple[str, Any, Any]:
-            try:
+            if kwargs or core.has_sidecar(path):
                 return ("ok", core.open_file(path, **kwargs), None)
-            except GeometryError as e:
-                return ("geometry", path, e)
+            return ("ask", path, core.probe_file(path))
 
         self.loader.submit("open", job)
 
@@ -309,9 +331,10 @@ class MainWindow(QtWidgets.QMainWindow):
             if isinstance(result, tuple) and result[0] == "ok" and result[1].path is not None:
                 result[1].source.close()
             return
-        kind, payload, err = result
-        if kind == "geometry":
-            self.ask_stream_settings(payload, err)
+        kind, payload, extra = result
+        if kind == "ask":
+            initial, candidates, note = extra
+            self.ask_stream_settings(payload, initial, candidates, note)
             return
         self.set_stream(payload)
 
@@ -335,23 +358,33 @@ class MainWindow(QtWidgets.QMainWindow):
             self.notice.show_message(f"{stream.label}: " + " ".join(warnings), "warning")
         self.stream_opened.emit(stream)
 
-    def ask_stream_settings(self, path: Path, err: GeometryError | None = None) -> StreamSettingsDialog:
-        """Show the settings dialog for a file that needs width/height/CFA (non-blocking)."""
-        initial = {"cfa": "RGGB", "flip_vertical": True}
-        cands = list(err.candidates) if err is not None else []
-        if cands:
-            initial.update(width=cands[0][0], height=cands[0][1])
-        msg = (f"{path.name} has no sidecar saying how to read it. Pick the size, the colour filter and the flip; "
-               "the preview updates as you go (wrong CFA or flip: wrong colours or unequal greens).")
-        if err is not None:
-            msg += f"\n{err}"
-        dlg = StreamSettingsDialog(f"Open {path.name}", lambda **kw: core.open_file(path, **kw), initial, cands, msg, parent=self)
-        dlg.accepted.connect(lambda: dlg.stream is not None and self.set_stream(dlg.stream))
+    def ask_stream_settings(self, path: Path, initial: dict[str, Any] | None = None,
+                            candidates: list[tuple[int, int]] | None = None, note: str = "") -> StreamSettingsDialog:
+        """Show the settings dialog for a file without a sidecar (non-blocking, live preview)."""
+        initial = dict(initial or {"cfa": "RGGB", "flip_vertical": True})
+        msg = (f"{path.name} has no sidecar saying how to read it. Check the size, the colour filter and the flip: "
+               "the preview updates as you go (a wrong CFA or flip shows as wrong colours and unequal greens).")
+        if note:
+            msg += f"\n{note}"
+        dlg = StreamSettingsDialog(f"Open {path.name}", lambda **kw: core.open_file(path, **kw), initial, candidates or [], msg,
+                                   remember=True, parent=self)
+        dlg.accepted.connect(lambda: self._accept_settings(dlg))
         dlg.finished.connect(lambda *_: setattr(self, "settings_dialog", None))
         self.settings_dialog = dlg
         self.statusBar().clearMessage()
         dlg.open()
         return dlg
+
+    def _accept_settings(self, dlg: StreamSettingsDialog) -> None:
+        if dlg.stream is None:
+            return
+        if dlg.remember.isChecked():
+            try:
+                side = core.write_stream_sidecar(dlg.stream)
+                self.statusBar().showMessage(f"Saved the settings in {side.name}.", 8000)
+            except (SpikeviewError, OSError) as e:
+                self.show_error(f"Could not write the sidecar: {e}")
+        self.set_stream(dlg.stream)
 
     def stream_settings(self) -> StreamSettingsDialog | None:
         """Re-interpret the open stream (CFA, flip) with a live preview."""

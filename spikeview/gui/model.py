@@ -156,10 +156,10 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     # forward model (shared by the degradation preview and the guided sampler; GuidedConfig names)
     ParamSpec("k", float, float(_G.k), "Quantiser sharpness k", "forward", 0.0, 500.0, 1.0,
               help="Sharpness of the soft quantiser Q (the paper's best: 50)."),
-    ParamSpec("eta", float, 2.0, "Colour range η", "forward", 0.1, 8.0, 0.05,
+    ParamSpec("eta", float, float(_G.eta), "Colour range η", "forward", 0.1, 8.0, 0.05,
               help="Range parameter of the colour cast: each channel's mean maps to 1/η (2 → 0.5)."),
     ParamSpec("levels", int, int(_G.levels), "Pyramid levels L", "forward", 0, 6, 1,
-              help="Laplacian pyramid levels of the multiscale loss (0 = plain residual)."),
+              help="Band-pass levels of the multiscale loss's Laplacian pyramid (0 = plain residual)."),
     ParamSpec("show_pyramid", bool, False, "Residual per pyramid level", "forward", undoable=False),
     # guided sampler (names and defaults of spikeview.guided.GuidedConfig)
     ParamSpec("s", float, float(_G.s), "Guidance step s", "guided", 0.0, 3.0, 0.05,

@@ -36,8 +36,9 @@ class ImagePane(QtWidgets.QWidget):
         self.view.setBackground(pg.mkColor(24, 24, 24))
         self.vb = pg.ViewBox(lockAspect=True, invertY=True, enableMenu=False)
         self.view.setCentralItem(self.vb)
+        # no pyqtgraph auto-downsampling (a numpy mean in the GUI thread, tens of ms per 1000×1000
+        # frame): big images arrive downsampled from the worker, see ``display_factor``
         self.item = pg.ImageItem(axisOrder="row-major")
-        self.item.setAutoDownsample(True)
         self.vb.addItem(self.item)
         self.view.setMinimumSize(min_size, min_size * 3 // 4)
         lay = QtWidgets.QVBoxLayout(self)
@@ -47,8 +48,12 @@ class ImagePane(QtWidgets.QWidget):
         lay.addWidget(self.view, 1)
         self._shape: tuple[int, ...] | None = None
 
-    def set_image(self, img: np.ndarray | None) -> None:
-        """Show ``img`` (uint8) with levels (0, 255); ``None`` clears the pane."""
+    def set_image(self, img: np.ndarray | None, extent: tuple[int, int] | None = None) -> None:
+        """Show ``img`` (uint8) with levels (0, 255); ``None`` clears the pane.
+
+        ``extent = (H, W)``: the image is a downsampled view of an ``H × W`` frame and is
+        stretched over it, so coordinates (zoom, ROI) stay in frame pixels.
+        """
         if img is None:
             self.item.clear()
             self._shape = None
@@ -56,11 +61,22 @@ class ImagePane(QtWidgets.QWidget):
         img = np.asarray(img)
         if img.dtype != np.uint8:
             raise ParameterError(f"ImagePane shows uint8 images, got {img.dtype}; convert with to_display first.")
-        first = self._shape != img.shape
+        h, w = extent if extent is not None else img.shape[:2]
         self.item.setImage(img, autoLevels=False, levels=(0, 255))
-        if first:
-            self._shape = img.shape
+        self.item.setRect(QtCore.QRectF(0, 0, w, h))
+        if self._shape != (h, w):
+            self._shape = (h, w)
             self.vb.autoRange(padding=0.01)
+
+    def display_factor(self) -> int:
+        """How many frame pixels share one screen pixel now (1 when zoomed in)."""
+        if self._shape is None or self.vb.width() <= 0:
+            return 1
+        try:
+            px = self.vb.viewPixelSize()
+        except Exception:  # no view geometry yet (hidden): full resolution
+            return 1
+        return max(1, int(min(px[0], px[1])))
 
     def image(self) -> np.ndarray | None:
         return self.item.image

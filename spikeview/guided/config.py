@@ -119,7 +119,7 @@ class GuidedConfig(Config):
     top_up: bool = True
     sigma_end: float = 5.0 / 255.0
     s: float = 1.0
-    lam: float = 1.0
+    lam: float = 1.5
     data_steps: int = 1
     zeta: float = 0.0
     renoise: bool = False
@@ -135,6 +135,7 @@ class GuidedConfig(Config):
     demosaic: str = "bilinear"
     sigma_scale: float = 1.5
     self_ensemble: bool = True
+    chains: int = 1
     seed: int = 0
     warm_start: bool = False
     use_mosaic: bool | None = None
@@ -154,7 +155,7 @@ class GuidedConfig(Config):
         _check_choice("demosaic", self.demosaic, DEMOSAICS)
         if self.fallback is not None:
             _check_choice("fallback", self.fallback, FALLBACKS)
-        for name in ("steps", "window", "levels", "data_steps", "seed", "alpha_max_windows"):
+        for name in ("steps", "window", "levels", "data_steps", "seed", "alpha_max_windows", "chains"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int):
                 raise ParameterError(f"GuidedConfig.{name} = {v!r} must be a whole number.")
@@ -163,6 +164,8 @@ class GuidedConfig(Config):
             if len(a) != 3 or not all(math.isfinite(v) and v > 0 for v in a):
                 raise ParameterError(f"GuidedConfig.alpha = {self.alpha!r} must be three finite positive gains [R, G, B], or unset.")
             self.alpha = a
+        if not 1 <= self.chains <= 16:
+            raise ParameterError(f"GuidedConfig.chains = {self.chains} is out of range: use 1 to 16 chains.")
         if self.alpha_max_windows < 1:
             raise ParameterError(f"GuidedConfig.alpha_max_windows = {self.alpha_max_windows} is out of range: use at least 1.")
         if self.steps < 1:

@@ -16,7 +16,7 @@ fires ``floor(pΔτ + U)`` times, whose variance is far below the binomial one, 
 (shot noise, jitter, fixed pattern) moves it back up. The scale ``κ_c`` per channel is the ratio
 of a robust noise estimate from the frame itself (trimmed mean square of the finest diagonal
 Haar detail of each Bayer plane, :func:`haar_noise_variance`) to the model's mean variance, clipped to
-``[1/64, 4]``. So the noise level handed to the prior is derived from the data, not set by hand.
+``[1e-4, 4]`` (a frame without any noise, e.g. saturated, gets almost none). So the noise level handed to the prior is derived from the data, not set by hand.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from spikeview.errors import ParameterError
 from spikeview.io.source import SpikeSource
 
 #: clip range of the data-derived scale of the binomial variance model
-KAPPA_RANGE = (1.0 / 64.0, 4.0)
+KAPPA_RANGE = (1e-4, 4.0)
 #: pseudo-count of the binomial model (Jeffreys), see :func:`spikeview.ops.noise.tfp_variance`
 PRIOR_COUNT = 0.5
 

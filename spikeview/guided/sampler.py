@@ -252,18 +252,25 @@ class GuidedSampler:
 
         schedule = VESchedule(tuple(sigma_first), p.sigma_end)
         schedule.set_timesteps(p.steps)
-        x0 = to_tensor(x_start)
-        add = torch.as_tensor(sigma_add, dtype=x0.dtype).view(1, -1, 1, 1)
-        x = schedule.add_noise(x0, add, gen)
-        for i in range(p.steps):
-            if _cancelled(cancel):
-                raise Cancelled(f"guided reconstruction cancelled at step {i + 1} of {p.steps}")
-            sigma = schedule.sigma(i, x)
-            transform = (i % 8) if p.self_ensemble else None
-            x, x0 = rule.step(prior, schedule, data, x, i, sigma, zeta=p.zeta, generator=gen, transform=transform)
-            self.info.steps = i + 1
-            if callback is not None:
-                callback(i + 1, p.steps, to_image(x0))
+        start = to_tensor(x_start)
+        add = torch.as_tensor(sigma_add, dtype=start.dtype).view(1, -1, 1, 1)
+        total = p.steps * p.chains
+        acc = torch.zeros_like(start)
+        for chain in range(p.chains):
+            # chains differ in their start noise and in the order of the dihedral transforms
+            x = schedule.add_noise(start, add, gen)
+            for i in range(p.steps):
+                done = chain * p.steps + i
+                if _cancelled(cancel):
+                    raise Cancelled(f"guided reconstruction cancelled at step {done + 1} of {total}")
+                sigma = schedule.sigma(i, x)
+                transform = ((i + 3 * chain) % 8) if p.self_ensemble else None
+                x, x0 = rule.step(prior, schedule, data, x, i, sigma, zeta=p.zeta, generator=gen, transform=transform)
+                self.info.steps = done + 1
+                if callback is not None:
+                    callback(done + 1, total, to_image((acc + x0) / (chain + 1)))
+            acc = acc + x0
+        x0 = acc / p.chains
         out = to_image(x0)
         if not np.all(np.isfinite(out)):  # pragma: no cover - guarded by clamps; never return NaN
             out = np.nan_to_num(out, nan=0.0)

@@ -37,19 +37,22 @@ class VESchedule:
     Attributes:
         sigma_start: noise level of the first prior call (fraction of 1), >= 0: one number, or one
             per channel.
-        sigma_end: last non-zero level, ``0 < sigma_end``; clipped to each channel's start.
+        sigma_end: last non-zero level, ``0 < sigma_end`` (one number or one per channel); clipped
+            to each channel's start.
     """
 
     sigma_start: float | tuple[float, ...] = 50.0 / 255.0
-    sigma_end: float = 2.0 / 255.0
+    sigma_end: float | tuple[float, ...] = 2.0 / 255.0
 
     def __post_init__(self) -> None:
         start = np.atleast_1d(np.asarray(self.sigma_start, dtype=np.float64))
         if start.ndim != 1 or start.size < 1 or not np.all(np.isfinite(start)) or np.any(start < 0):
             raise ParameterError(f"sigma_start = {self.sigma_start!r} must be finite noise levels >= 0 (fractions of 1).")
-        if not np.isfinite(self.sigma_end) or self.sigma_end <= 0:
-            raise ParameterError(f"sigma_end = {self.sigma_end!r} must be a finite noise level > 0 (fraction of 1).")
+        end = np.broadcast_to(np.atleast_1d(np.asarray(self.sigma_end, dtype=np.float64)), start.shape)
+        if not np.all(np.isfinite(end)) or np.any(end <= 0):
+            raise ParameterError(f"sigma_end = {self.sigma_end!r} must be finite noise levels > 0 (fractions of 1).")
         self._start = start
+        self._end = end
         self.sigmas = np.zeros((1, start.size))
         self.timesteps = np.zeros(0, dtype=np.int64)
 
@@ -63,8 +66,8 @@ class VESchedule:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise ParameterError(f"steps = {n!r} must be a whole number >= 1.")
         cols = []
-        for hi in self._start:
-            lo = min(float(self.sigma_end), hi)
+        for hi, end in zip(self._start, self._end):
+            lo = min(float(end), hi)
             cols.append(np.full(n, hi) if (n == 1 or hi <= 0) else np.geomspace(hi, lo, n))
         self.sigmas = np.concatenate([np.stack(cols, axis=1), np.zeros((1, len(cols)))], axis=0)
         self.timesteps = np.arange(n, dtype=np.int64)

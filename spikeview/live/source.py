@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from spikeview.errors import ParameterError
+from spikeview.errors import ParameterError, SpikeviewError
 from spikeview.io.source import DEFAULT_TICK_RATE, SpikeSource, StreamInfo
 from spikeview.live.decode import unpack_frames
 from spikeview.live.recorder import DEFAULT_MAX_QUEUE_BYTES, Recorder, RecordingSummary
@@ -199,8 +199,8 @@ class LiveSource(SpikeSource):
     # ================================================================================ lifecycle
     def start(self) -> "LiveSource":
         """Start the acquisition thread (once); returns ``self``."""
-        if self._closed:
-            raise ParameterError(f"{self.label} is closed; open the camera again to restart it.")
+        if self._closed or self._stop.is_set():
+            raise ParameterError(f"{self.label} was stopped; open the camera again to restart it.")
         if self._thread is None:
             self._set_status(LiveStatus.CONNECTING, f"{self.label}: connecting…")
             self._thread = threading.Thread(target=self._run, name=f"spikeview-live {self.label}", daemon=True)
@@ -269,6 +269,8 @@ class LiveSource(SpikeSource):
             final = (e.status, e.message)
         except StreamEnded:
             final = (LiveStatus.ENDED, f"{self.label}: the stream ended after {self.info.n_frames} frames.")
+        except SpikeviewError as e:  # e.g. the replayed file became unreadable: already a sentence for people
+            final = (LiveStatus.ERROR, f"{self.label}: {e}")
         except Exception as e:  # a bug: report it as a status, never crash the app
             final = (LiveStatus.ERROR, f"{self.label}: unexpected {type(e).__name__} ({e}); this is a bug, please report "
                                        f"it with the terminal output.")

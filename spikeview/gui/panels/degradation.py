@@ -23,7 +23,7 @@ TITLES = {
     "y": "Y (observed TFP)",
     "residual": f"Y − Q(C M X)  (±{RESIDUAL_RANGE:g})",
 }
-MAX_BANDS = 7
+MAX_BANDS = 7  # L ≤ 6 band-pass levels + the coarse residual
 
 
 class DegradationPanel(QtWidgets.QWidget):

@@ -38,6 +38,9 @@ class ScrubBar(QtWidgets.QSlider):
 class StreamPanel(QtWidgets.QWidget):
     """Three linked image panes and the transport (see module docstring)."""
 
+    #: frame pixels per screen pixel changed (zoom or resize): the images should be this coarse
+    display_factor_changed = QtCore.Signal(int)
+
     def __init__(self, session: Session, parent: QtWidgets.QWidget | None = None):
         super().__init__(parent)
         self.session = session
@@ -49,6 +52,11 @@ class StreamPanel(QtWidgets.QWidget):
         self.tfp.link(self.raw)
         self.tfi.link(self.raw)
         self.roi_item: pg.RectROI | None = None
+        self._factor = 1
+        self._factor_timer = QtCore.QTimer(self, singleShot=True, interval=150)
+        self._factor_timer.timeout.connect(self._check_factor)
+        self.raw.vb.sigRangeChanged.connect(lambda *_: self._factor_timer.start())
+        self.raw.vb.sigResized.connect(lambda *_: self._factor_timer.start())
         images = QtWidgets.QHBoxLayout()
         images.setSpacing(2)
         for pane in (self.raw, self.tfp, self.tfi):
@@ -184,17 +192,28 @@ class StreamPanel(QtWidgets.QWidget):
         self.window.note.setText(f"= {format_us(s.ticks_to_us(w))}")
         self.slowmo.setEnabled(s.get("speed") == "slowmo")
 
+    def _check_factor(self) -> None:
+        f = self.raw.display_factor()
+        if f != self._factor:
+            self._factor = f
+            self.display_factor_changed.emit(f)
+
     def show_frames(self, f: Any) -> None:
         """Show a :class:`~spikeview.gui.core.StreamFrames` (from the controller)."""
-        self.raw.set_image(f.raw)
-        self.tfp.set_image(f.tfp)
+        self.raw.set_image(f.raw, f.shape)
+        self.tfp.set_image(f.tfp, f.shape)
         if f.tfi is not None:
-            self.tfi.set_image(f.tfi)
+            self.show_tfi(f.tick, f.tfi, f.shape)
+        self._factor_timer.start()
         s = self.session
         w = f.b - f.a
         self.raw.set_title(f"Spikes at tick {f.tick}")
         self.tfp.set_title(f"TFP  Δτ = {w} ticks ({format_us(s.ticks_to_us(w))}), ticks [{f.a}, {f.b})")
-        self.tfi.set_title(f"TFI  ±{int(s.get('tfi_half_window'))} ticks")
+
+    def show_tfi(self, tick: int, img: Any, shape: tuple[int, int]) -> None:
+        """Show the TFI pane (computed on its own thread; during playback it may trail the others)."""
+        self.tfi.set_image(img, shape)
+        self.tfi.set_title(f"TFI at tick {tick}  (±{int(self.session.get('tfi_half_window'))} ticks)")
 
     # ------------------------------------------------------------------------------ ROI
     def _toggle_roi(self, on: bool) -> None:

@@ -1,0 +1,123 @@
+"""The scene plan: every rule on a scene made to trigger it and on one made not to, plus overrides."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from spikeview.guided.config import GuidedConfig
+from spikeview.guided.observation import Observation, haar_noise_variance
+from spikeview.guided.plan import make_plan, max_levels
+from spikeview.io.source import ArraySource
+from test_guided_helpers import make_source, scene_rates, spikes_from_rates
+
+CAST = np.array([1 / 0.6, 1.0, 1 / 0.5]) / 0.6  # the simulator's default green-heavy response, η = 1
+
+
+def _obs(kind="texture", h=32, w=32, window=10, cfa="RGGB", alpha=CAST, eta=1.0, previous=False, src=None, center=None):
+    src = src if src is not None else make_source(kind, h, w, ticks=max(4 * window, 40), cfa=cfa)
+    c = center if center is not None else src.n_frames // 2
+    return Observation.from_source(src, c, window, alpha=alpha if cfa else None, eta=eta, previous=previous)
+
+
+def test_mosaic_off_for_monochrome_on_for_bayer():
+    mono = make_plan(_obs(cfa=None))
+    assert not mono.mosaic and not mono.cast and "monochrome" in mono.reasons["mosaic"]
+    bayer = make_plan(_obs())
+    assert bayer.mosaic and "RGGB" in bayer.reasons["mosaic"]
+
+
+def test_cast_off_when_neutral_on_when_not():
+    neutral = make_plan(_obs(alpha=np.array([2.0, 2.02, 1.99]), eta=2.0))
+    assert not neutral.cast and "neutral" in neutral.reasons["cast"]
+    cast = make_plan(_obs())
+    assert cast.cast and "deviate" in cast.reasons["cast"]
+
+
+def test_levels_capped_by_frame_size():
+    small = make_plan(_obs(h=8, w=8), GuidedConfig(levels=6))
+    assert small.levels == max_levels(8, 8) == 3 and "capped" in small.reasons["levels"]
+    big = make_plan(_obs(h=32, w=32), GuidedConfig(levels=3))
+    assert big.levels == 3 and "capped" not in big.reasons["levels"]
+
+
+def test_no_diffusion_for_long_windows_diffusion_for_short():
+    # a 10-tick window of a mid-grey texture is far noisier than the target; a 400-tick window is not
+    src = make_source("ramp", 32, 32, ticks=800)
+    short = make_plan(_obs(src=src, window=10))
+    assert short.diffusion and "above the target" in short.reasons["diffusion"]
+    long = make_plan(_obs(src=src, window=400))
+    assert not long.diffusion and "meets the target" in long.reasons["diffusion"]
+    assert long.sigma.max() < short.sigma.max() / 10
+
+
+def test_no_diffusion_for_saturated_windows_with_tfp_fallback():
+    sat = make_plan(_obs("saturated"))
+    assert not sat.diffusion and sat.fallback == "tfp"
+    # a bright but textured window keeps the baseline fallback when forced off
+    forced = make_plan(_obs(), GuidedConfig(diffusion="never"))
+    assert not forced.diffusion and forced.fallback == "baseline" and "diffusion='never'" in forced.reasons["diffusion"]
+
+
+def test_reuse_when_the_window_did_not_change():
+    rates = scene_rates("texture", 32, 32)
+    static = ArraySource(spikes_from_rates(rates, 60, seed=3), cfa="RGGB")
+    plan = make_plan(_obs(src=static, previous=True, center=35))
+    assert plan.changed is not None and not plan.changed.any()
+    assert plan.reuse and "match" in plan.reasons["reuse"]
+
+
+def test_no_reuse_when_the_window_changed():
+    rates = scene_rates("texture", 32, 32)
+    spikes = spikes_from_rates(rates, 60, seed=3)
+    moved = spikes_from_rates(np.roll(rates, 4, axis=1)[:, :], 60, seed=4)
+    spikes[30:] = moved[30:]  # the scene jumps at tick 30: window [30, 40) differs from [20, 30)
+    plan = make_plan(_obs(src=ArraySource(spikes, cfa="RGGB"), previous=True, center=35))
+    assert not plan.reuse and plan.changed.any() and "changed" in plan.reasons["reuse"]
+
+
+def test_reuse_override_and_no_previous():
+    assert not make_plan(_obs()).reuse  # no previous window
+    rates = scene_rates("texture", 32, 32)
+    static = ArraySource(spikes_from_rates(rates, 60, seed=3), cfa="RGGB")
+    off = make_plan(_obs(src=static, previous=True, center=35), GuidedConfig(reuse=False))
+    assert not off.reuse and off.reasons["reuse"] == "set by reuse=False"
+
+
+@pytest.mark.parametrize("field,value,attr,expect", [
+    ("use_mosaic", False, "mosaic", False),
+    ("use_cast", False, "cast", False),
+    ("use_cast", True, "cast", True),
+    ("diffusion", "always", "diffusion", True),
+    ("fallback", "tfp", "fallback", "tfp"),
+])
+def test_overrides_win_and_say_so(field, value, attr, expect):
+    obs = _obs(alpha=np.array([2.0, 2.0, 2.0]), eta=2.0) if field == "use_cast" else _obs()
+    plan = make_plan(obs, GuidedConfig(**{field: value}))
+    assert getattr(plan, attr) == expect
+    if attr != "fallback":
+        assert "set by" in plan.reasons[attr]
+
+
+def test_str_lists_every_choice_with_its_reason():
+    text = str(make_plan(_obs()))
+    for key in ("mosaic", "cast", "levels", "diffusion", "reuse"):
+        assert key in text
+    assert "/255" in text and "deviate" in text
+
+
+def test_data_derived_noise_matches_the_measured_error():
+    # the noise level the plan hands the prior is within 25 % of the real error of the estimate
+    rates = np.full((64, 64), 0.35)  # 3.5 spikes per window: counts 3 or 4
+    src = ArraySource(spikes_from_rates(rates, 40, seed=1), cfa=None)
+    obs = Observation.from_source(src, 20, 10)
+    true_sigma = float(np.std(obs.y - 0.35))
+    est = float(make_plan(obs).sigma[0])
+    assert est == pytest.approx(true_sigma, rel=0.25)
+
+
+def test_haar_estimator_on_gaussian_noise():
+    rng = np.random.default_rng(0)
+    v = haar_noise_variance(rng.normal(0, 0.1, (128, 128)))
+    assert v == pytest.approx(0.01, rel=0.1)
+    assert haar_noise_variance(np.zeros((1, 5))) is None
