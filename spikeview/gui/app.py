@@ -75,6 +75,12 @@ def run_app(path: str | os.PathLike[str] | None = None) -> int:
     from spikeview.gui.main_window import MainWindow
 
     window = MainWindow()
+    try:  # live capture (USB and simulated cameras) when its pieces are installed
+        from spikeview.gui.live_panel import install_live
+
+        install_live(window)
+    except ImportError as e:  # pragma: no cover - pyusb missing: the rest of the app works
+        window.statusBar().showMessage(f"Live capture is unavailable ({e}).", 10000)
     sys.excepthook = _excepthook(window)
     window.show()
     if path is None:

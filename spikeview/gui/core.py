@@ -28,6 +28,32 @@ from spikeview.io.source import ArraySource, SpikeSource, StreamInfo
 
 from spikeview.gui.model import OpenedStream
 
+# ------------------------------------------------------------------------------------ imports
+
+#: modules the workers import lazily; :func:`preload` imports them on one thread first
+WORKER_MODULES = (
+    "spikeview.classical", "spikeview.classical.tfi", "spikeview.classical.reconstruct", "spikeview.classical.display",
+    "spikeview.classical.demosaic", "spikeview.classical.colour_cast", "spikeview.gui._kernels", "torch",
+    "spikeview.ops", "spikeview.guided.observation", "spikeview.guided.plan", "spikeview.guided.sampler",
+    "spikeview.guided.baseline", "spikeview.export",
+)
+
+
+def preload() -> None:
+    """Import every module the app's workers use, in the calling thread.
+
+    The workers import lazily, and two threads importing overlapping sets of modules at the same
+    moment can make Python's import locks raise ``_DeadlockError`` (seen with
+    ``spikeview.classical.tfi`` imported by the TFI worker while the preview worker imported
+    ``spikeview.classical.reconstruct``). The window calls this once, before any worker starts; it
+    costs about 3 s on first use (mostly torch) and nothing afterwards.
+    """
+    import importlib
+
+    for name in WORKER_MODULES:
+        importlib.import_module(name)
+
+
 # ------------------------------------------------------------------------------------ sources
 
 

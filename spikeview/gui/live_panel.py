@@ -430,6 +430,11 @@ class LivePanel(QtWidgets.QWidget):
     def attach(self, source: Any) -> None:
         """Make ``source`` (a :class:`~spikeview.live.source.LiveSource`) the panel's camera and start it."""
         self.close_camera()
+        # The preview workers import spikeview.classical on first use from several threads at once, which
+        # can deadlock on its circular imports; importing it once here, on the GUI thread, avoids that.
+        import spikeview.classical.reconstruct  # noqa: F401
+        import spikeview.classical.tfi  # noqa: F401
+
         self.source = source
         self._attached = False
         self._reported = None

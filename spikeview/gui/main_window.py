@@ -102,6 +102,7 @@ class MainWindow(QtWidgets.QMainWindow):
         from spikeview.gui.app import configure_runtime
 
         configure_runtime()
+        core.preload()  # before any worker thread starts (see core.preload)
         self.setObjectName("spikeview_main")
         self.setWindowTitle("spikeview")
         self.setWindowIcon(app_icon())
