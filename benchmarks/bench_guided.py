@@ -71,7 +71,7 @@ def _methods(quick: bool):
         cfg = GuidedConfig(eta=1.0, diffusion="always", **changes)
         m.append((name, group, lambda o, c, cfg=cfg: smp.run(o, cfg)))
 
-    steps = (2, 4) if quick else (4, 8, 12)
+    steps = (2, 4) if quick else (4, 6, 8, 12)
     for n in steps:
         for ts in (30, 50):
             guided(f"HQS {n} steps, t_s {ts}/255", "guided-hqs", steps=n, t_start=ts / 255)
@@ -160,7 +160,7 @@ def pareto(points: list[tuple[float, float]]) -> list[int]:
 
 
 def run_benchmark(out_dir: str | os.PathLike[str] | None = "benchmarks/results", *, size: int = 256, scenes=None,
-                  frames: int = 1, quick: bool = False, log=print) -> list[dict]:
+                  frames: int = 2, quick: bool = False, log=print) -> list[dict]:
     """Run the benchmark; write ``guided.md`` and ``guided_pareto.png`` to ``out_dir`` (``None``: don't write).
 
     Returns:
@@ -272,7 +272,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="64x64, 2 scenes, fewer steps (smoke run)")
     p.add_argument("--size", type=int, default=None)
-    p.add_argument("--frames", type=int, default=1, help="windows per scene")
+    p.add_argument("--frames", type=int, default=2, help="windows per scene")
     p.add_argument("--out", default=None, help="results folder (default benchmarks/results; none for --quick)")
     a = p.parse_args(argv)
     size = a.size or (64 if a.quick else 256)

@@ -10,6 +10,14 @@ the config that made it.
 Naming: ``eta`` is the colour-cast range parameter η of METHOD.md (the forward model scales channel
 c by ``eta / alpha_c``; the CLI's ``--eta``), **not** DDIM's stochasticity, which is ``zeta`` here
 (DiffPIR's name for the mix of predicted and fresh noise when re-noising).
+
+Defaults were tuned on simulated 10-tick windows (realistic noise, known calibration) of the
+tuning scenes of ``benchmarks/guided_data.py`` and checked on held-out scenes
+(``benchmarks/results/guided.md``): HQS in DPIR form (no re-noising), 8 steps from 50/255 to
+5/255, λ = 1.5, prior told 1.5 × the data-derived noise, signal-dependent noise weights, the
+dense-gradient mosaic, per-step self-ensemble. Q and the pyramid are **off** by default because
+they lowered PSNR in the HQS data step here (Q: −1.6 dB, 2 pyramid levels: −0.8 dB on the tuning
+scenes at 128×128); they stay available (``quantise``, ``k``, ``levels``) and are used by DPS runs.
 """
 
 from __future__ import annotations
@@ -89,9 +97,12 @@ class GuidedConfig(Config):
         alpha_max_windows: windows sampled from a long stream for that estimate.
         window: TFP window Δτ in ticks (>= 1; SpikeDiff uses 10).
         demosaic: demosaicking of the TFP start estimate Y₀ (``"bilinear"`` or ``"malvar2004"``).
-        sigma_scale: factor on the data-derived noise level handed to the prior (1 = as derived).
-        self_ensemble: rotate/flip the input of each prior call (a different one per step), > 0
-            helps the denoiser at no cost; ``False`` keeps the orientation.
+        sigma_scale: factor on the data-derived noise level handed to the prior (1 = as derived;
+            FFDNet wants more than the RMS noise because demosaicking makes it correlated).
+        self_ensemble: rotate/flip the input of each prior call (a different one of the 8 dihedral
+            transforms per step), which averages the prior's artefacts out at no cost.
+        chains: independent runs (different start noise and transform order) averaged into the
+            result (an estimate of the posterior mean; costs ``chains`` × the time).
         seed: seed of the sampler's torch.Generator (results are deterministic for a seed).
         warm_start: in video, start each window from the previous result re-noised to t_start.
         use_mosaic, use_cast: plan overrides (``None`` = let the plan decide): force the mosaic M /
