@@ -271,3 +271,20 @@ def test_count_kernel_random_layouts_match_reference(threads):
             exp = exp[::-1] if fv else exp
             exp = exp[:, ::-1] if fh else exp
             np.testing.assert_array_equal(got[w], exp, err_msg=f"trial {trial}")
+
+
+def test_pages_released_after_threshold_keep_reads_exact(tmp_path, monkeypatch):
+    """Handing mapped pages back to the OS (bounded RSS on multi-GB files) must not change any value."""
+    import spikeview.io._base as base
+
+    rng = np.random.default_rng(11)
+    spikes = (rng.random((40, 16, 24)) < 0.3).astype(np.uint8)
+    path = tmp_path / "r.dat"
+    write_plain(path, spikes)
+    monkeypatch.setattr(base, "RELEASE_AFTER_BYTES", 1)  # release after every access
+    src = PlainDatSource(path, 24, 16)
+    assert base._mmap_of(src._buf) is not None
+    for a in range(0, 30, 7):
+        np.testing.assert_array_equal(src.read(a, a + 10), spikes[a:a + 10])
+        np.testing.assert_array_equal(src.count(a, a + 10), spikes[a:a + 10].sum(0))
+    assert src._touched == 0

@@ -21,9 +21,11 @@ from pathlib import Path
 import numpy as np
 
 
-def _wait(app, cond, timeout: float = 300.0, what: str = "") -> None:
+def _wait(app, cond, timeout: float = 300.0, what: str = "", errors: list[str] | None = None) -> None:
     end = time.perf_counter() + timeout
     while not cond():
+        if errors:
+            raise RuntimeError(f"screenshot: {what} failed: {errors[-1]}")
         if time.perf_counter() > end:
             raise TimeoutError(f"screenshot: timed out waiting for {what}")
         app.processEvents()
@@ -61,42 +63,49 @@ def make_screenshot(out: Path, size: tuple[int, int] = (1800, 1080)) -> dict[str
         w = MainWindow(settings=settings)
         w.resize(*size)
         w.show()
-        w.open_demo()
-        _wait(app, lambda: w.session.stream is not None, what="the demo capture")
-        s, c = w.session, w.controller
-        _wait(app, lambda: c.last_frames is not None and c.alpha is not None, what="the first frames")
-        s.update_params({"speed": "window", "window": 10, "steps": 10, "levels": 2, "show_pyramid": True}, record=False)
-        # a little playback: the colour-cast history gets points
-        s.set_tick(200)
-        s.set_mark_in()
-        s.set_tick(800)
-        s.set_mark_out()
-        s.set_tick(200)
-        s.set_playing(True)
-        _spin(app, 4.0)
-        s.set_playing(False)
-        s.set_tick(640)
-        s.set_roi((150, 144, 96, 96))  # the fan (lower right of the demo scene)
-        _wait(app, lambda: c.last_frames is not None and c.last_frames.tick == 640, what="frames at tick 640")
-        for step_size in (0.5, 1.0):
-            s.set("s", step_size)
-            s.set("guidance", "dps" if step_size == 0.5 else "hqs")
-            run = c.run_guided()
-            _wait(app, lambda r=run: c.guided_result is not None and c.guided_result.run == r, what=f"guided run {run}")
-        _wait(app, lambda: w.degradation_panel.last is not None and "guided" in w.degradation_panel.panes["x"].title.text(),
-              what="the degradation preview of the guided result")
-        s.set("export_format", "png")
-        w.export_panel.path.setText(str(Path(tmp) / "demo_tfp_t640.png"))
-        w.export_now()
-        _wait(app, lambda: w.notice.kind == "success", what="the export")
-        _wait(app, lambda: not c.preview.is_active() and not c.tfi.is_active(), what="idle previews")
-        _spin(app, 1.0)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        if not w.grab().save(str(out)):
-            raise OSError(f"could not write {out}")
-        w.close()
-        app.processEvents()
+        try:
+            _populate(app, w, Path(tmp), out)
+        finally:
+            w.close()
+            app.processEvents()
     return image_stats(out)
+
+
+def _populate(app, w, tmp: Path, out: Path) -> None:
+    w.open_demo()
+    _wait(app, lambda: w.session.stream is not None, what="the demo capture")
+    s, c = w.session, w.controller
+    _wait(app, lambda: c.last_frames is not None and c.alpha is not None, what="the first frames")
+    s.update_params({"speed": "window", "window": 10, "steps": 10, "levels": 2, "show_pyramid": True}, record=False)
+    # a little playback: the colour-cast history gets points
+    s.set_tick(200)
+    s.set_mark_in()
+    s.set_tick(800)
+    s.set_mark_out()
+    s.set_tick(200)
+    s.set_playing(True)
+    _spin(app, 4.0)
+    s.set_playing(False)
+    s.set_tick(640)
+    s.set_roi((150, 144, 96, 96))  # the fan (lower right of the demo scene)
+    _wait(app, lambda: c.last_frames is not None and c.last_frames.tick == 640, what="frames at tick 640")
+    for step_size in (0.5, 1.0):
+        s.set("s", step_size)
+        s.set("guidance", "dps" if step_size == 0.5 else "hqs")
+        run = c.run_guided()
+        _wait(app, lambda r=run: c.guided_result is not None and c.guided_result.run == r, what=f"guided run {run}",
+              errors=c.errors)
+    _wait(app, lambda: w.degradation_panel.last is not None and "guided" in w.degradation_panel.panes["x"].title.text(),
+          what="the degradation preview of the guided result")
+    s.set("export_format", "png")
+    w.export_panel.path.setText(str(tmp / "demo_tfp_t640.png"))
+    w.export_now()
+    _wait(app, lambda: w.notice.kind == "success", what="the export")
+    _wait(app, lambda: not c.preview.is_active() and not c.tfi.is_active(), what="idle previews")
+    _spin(app, 1.0)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if not w.grab().save(str(out)):
+        raise OSError(f"could not write {out}")
 
 
 def main(argv: list[str] | None = None) -> int:

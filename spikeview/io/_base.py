@@ -8,6 +8,7 @@ for plain files, an index built by synchronisation for raw 1000×1000 streams).
 
 from __future__ import annotations
 
+import mmap
 import os
 from abc import abstractmethod
 from pathlib import Path
@@ -60,6 +61,22 @@ def open_bytes(path: str | os.PathLike[str], what: str) -> tuple[Path, np.ndarra
     return path, mm.view(np.ndarray)
 
 
+#: bytes read through a mapping after which its pages are handed back to the OS (see ``_touch``)
+RELEASE_AFTER_BYTES = 256 * 1024 * 1024
+
+
+def _mmap_of(arr: np.ndarray | None) -> mmap.mmap | None:
+    """The ``mmap.mmap`` under a memory-mapped array (following ``.base``), or ``None``."""
+    obj = arr
+    for _ in range(8):
+        if obj is None:
+            return None
+        if isinstance(obj, mmap.mmap):
+            return obj
+        obj = getattr(obj, "_mmap", None) or getattr(obj, "base", None)
+    return None
+
+
 class PackedFileSource(SpikeSource):
     """Base of the packed-bit file readers; subclasses set the layout and implement :meth:`_frame_offsets`.
 
@@ -74,6 +91,27 @@ class PackedFileSource(SpikeSource):
     _n_rows: int
     _segments: np.ndarray
     _flat: bool = False
+    _touched: int = 0
+
+    def _touch(self, n_bytes: int) -> None:
+        """Count bytes read through the mapping; past :data:`RELEASE_AFTER_BYTES`, drop the mapped pages.
+
+        Pages of a read-only file mapping stay in the process's resident set once touched, so
+        playing or randomly accessing a multi-GB file would make the RSS grow towards the file
+        size. ``MADV_DONTNEED`` unmaps them from the process (they stay in the OS page cache, so
+        the next access is a cheap minor fault): resident memory stays bounded whatever the file
+        length. No-op where ``madvise`` is unavailable.
+        """
+        self._touched += int(n_bytes)
+        if self._touched < RELEASE_AFTER_BYTES:
+            return
+        self._touched = 0
+        mm = _mmap_of(self._buf)
+        if mm is not None and hasattr(mm, "madvise") and hasattr(mmap, "MADV_DONTNEED"):
+            try:
+                mm.madvise(mmap.MADV_DONTNEED)
+            except (OSError, ValueError):  # closed or unsupported: nothing to release
+                pass
 
     @property
     def frame_bytes(self) -> int:
@@ -103,6 +141,7 @@ class PackedFileSource(SpikeSource):
             for i, o in enumerate(offs):
                 packed[i] = buf[o:o + fb]
         bits = np.unpackbits(packed, axis=1, bitorder="little")
+        self._touch(n * fb)
         if self._flat:
             frames = bits.reshape(n, self.height, self.width)
         else:
@@ -159,6 +198,7 @@ class PackedFileSource(SpikeSource):
         from spikeview.io._packed import count_frames  # numba: imported on first use only
 
         buf = self._buffer()
+        self._touch(offsets.size * self.frame_bytes)
         if self._flat:
             n_w = offsets.shape[0]
             flat = count_frames(buf, offsets, row_bytes=self._row_bytes, n_rows=1,
