@@ -303,20 +303,50 @@ def test_guided_job_reports_every_step_and_cancels(tmp_path):
 
 
 # ------------------------------------------------------------------------------------- presets
+APP_ONLY = {"speed", "slowmo", "loop", "show_pyramid", "export_format", "export_range"}
+
+
 def test_preset_round_trip_through_the_core_configs(tmp_path):
     from spikeview.config import load_toml
     from spikeview.gui.presets import load_preset, save_preset
 
     a = Session()
     a.update_params({"k": 75.0, "steps": 12, "guidance": "dps", "eta": 1.5, "window": 20, "demosaic": "malvar2004",
-                     "export_fps": 24.0, "transfer": "gamma", "gamma": 1.8, "speed": "slowmo"})
+                     "export_fps": 24.0, "transfer": "gamma", "gamma": 1.8, "export_method": "tfi", "speed": "slowmo"})
     path = save_preset(a, tmp_path / "p.toml")
     data = load_toml(path)
+    assert set(data) == {"run", "classical", "guided", "export"}  # no capture open: no [stream]
     assert data["guided"]["k"] == 75.0 and data["classical"]["window"] == 20 and data["export"]["fps"] == 24.0
     b = Session()
     load_preset(b, path)
-    assert b.params == a.params
+    assert {k: v for k, v in b.params.items() if k not in APP_ONLY} == {k: v for k, v in a.params.items() if k not in APP_ONLY}
+    assert b.get("speed") == default_params()["speed"]  # playback settings are not part of a preset
     assert b.undo_text()[0] == "Load preset p.toml"
+
+
+def test_the_cli_runs_the_apps_preset_and_the_app_loads_the_clis(tmp_path):
+    from spikeview.cli.main import main
+    from spikeview.config import load_toml
+    from spikeview.gui.presets import load_preset, save_preset
+    from spikeview.io import write_plain
+
+    spikes = periodic_stream(16, 16, n=60, period=3).source.read(0, 60)
+    dat = tmp_path / "c.dat"
+    write_plain(dat, spikes, cfa="RGGB")
+    s = Session()
+    s.open_stream(core.open_file(dat))
+    s.update_params({"window": 12, "eta": 1.5, "demosaic": "malvar2004"})
+    s.set_tick(30)
+    preset = save_preset(s, tmp_path / "app.toml")
+    assert load_toml(preset)["stream"]["cfa"] == "RGGB" and load_toml(preset)["run"] == {"method": "tfp", "at": 30}
+    out = tmp_path / "frame.png"
+    assert main(["reconstruct", str(dat), "--preset", str(preset), "--out", str(out)]) == 0
+    assert out.exists()
+    cli_preset = load_toml(tmp_path / "frame.png.preset.toml")
+    assert cli_preset["classical"]["window"] == 12 and cli_preset["run"]["at"] == 30
+    t = Session()
+    load_preset(t, tmp_path / "frame.png.preset.toml")
+    assert (t.get("window"), t.get("eta"), t.get("demosaic")) == (12, 1.5, "malvar2004")
 
 
 def test_bad_preset_names_the_file_and_changes_nothing(tmp_path):
@@ -327,12 +357,49 @@ def test_bad_preset_names_the_file_and_changes_nothing(tmp_path):
     s = Session()
     with pytest.raises(ParameterError, match="bad.toml"):
         load_preset(s, bad)
-    (tmp_path / "x.toml").write_text("a = 1\n")
+    (tmp_path / "x.toml").write_text("[run]\nmethod = 'tfp'\n")
     with pytest.raises(InputFileError, match="not a spikeview preset"):
         load_preset(s, tmp_path / "x.toml")
+    (tmp_path / "y.toml").write_text("[app]\nk = 1\n")
+    with pytest.raises(ParameterError, match="unknown table"):
+        load_preset(s, tmp_path / "y.toml")
     assert s.params == default_params()
 
 
 def test_every_spec_default_validates():
     for spec in SPECS.values():
         assert spec.validate(spec.default) == spec.default
+
+
+def test_downsample_is_a_rounded_block_mean():
+    img = np.arange(36, dtype=np.uint8).reshape(6, 6)
+    out = core.downsample(img, 3)
+    assert out.shape == (2, 2) and out.dtype == np.uint8
+    np.testing.assert_array_equal(out, [[7, 10], [25, 28]])  # mean of rows 0-2 × cols 0-2 is 7, …
+    rgb = np.zeros((5, 7, 3), np.uint8)
+    rgb[..., 1] = 255
+    assert core.downsample(rgb, 2).shape == (2, 3, 3)  # edges cropped to a multiple
+    assert core.downsample(rgb, 1) is rgb
+
+
+def test_psnr_ssim_match_scikit_image():
+    from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+
+    rng = np.random.default_rng(3)
+    gt = rng.random((24, 30, 3))
+    x = np.clip(gt + 0.05 * rng.standard_normal(gt.shape), 0, 1)
+    psnr, ssim = core.psnr_ssim(x, gt)
+    assert psnr == pytest.approx(peak_signal_noise_ratio(gt, x, data_range=1.0), rel=1e-9)
+    ref = structural_similarity(gt, x, data_range=1.0, gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
+                                channel_axis=-1)
+    assert ssim == pytest.approx(ref, rel=1e-9)
+    assert core.psnr_ssim(gt, gt)[1] == pytest.approx(1.0)
+
+
+def test_tfi_frame_and_rates_of_a_periodic_stream():
+    st = periodic_stream(16, 16, n=200, period=5, cfa=None)
+    img = core.tfi_frame(st.source, 100, default_params() | {"transfer": "linear"}, None)
+    assert img.shape == (16, 16, 3) and np.all(np.abs(img.astype(int) - 51) <= 1)  # 1/5 → 51
+    f = core.stream_frames(st.source, 100, default_params() | {"window": 10}, None, want_tfi=False)
+    r = core.site_rates(f.mosaic, None, 10)
+    assert list(r.hists) == ["all"] and r.hists["all"][2] == pytest.approx(1.0)  # all at 2/10

@@ -72,13 +72,17 @@ def add_reconstruct_args(p: argparse.ArgumentParser) -> None:
                       help="windows centred on A, A+STEP, ... below B (STEP defaults to the window length)")
     p.add_argument("--out", required=True, metavar="OUT",
                    help="output: .npy, .mp4, or an .exr/.png pattern with a frame number such as frame_%%04d.exr")
-    p.add_argument("--demosaic", default="malvar2004", choices=["bilinear", "malvar2004"], help="demosaicking method for Bayer streams")
+    p.add_argument("--demosaic", default=None, choices=["bilinear", "malvar2004"],
+                   help="demosaicking method for Bayer streams (default malvar2004; bilinear for the guided start estimate)")
     p.add_argument("--colour-cast", action=argparse.BooleanOptionalAction, default=True,
                    help="correct the sensor's colour cast with a gray-world estimate over the whole sequence")
     p.add_argument("--eta", type=float, default=None, help="range parameter of the colour-cast correction (X = Y*alpha/eta)")
     p.add_argument("--fps", type=float, default=30.0, help="output frame rate of .mp4 files (default 30)")
     p.add_argument("--compression", default="zip", choices=["zip", "piz", "none"], help="EXR compression (default zip)")
     p.add_argument("--preset", metavar="FILE", help="a TOML parameter file (written beside earlier outputs) to re-run")
+    from spikeview.cli.guided import add_args as add_guided_args
+
+    add_guided_args(p)
 
 
 def run_reconstruct(args: argparse.Namespace) -> int:
@@ -128,5 +132,8 @@ EPILOGS = {
         "  spikeview reconstruct demo.dat --method tfp --at 1000 --out frame.png\n"
         "  spikeview reconstruct demo.dat --method tfi --range 0:2000:20 --out frames/f_%04d.exr\n"
         "  spikeview reconstruct demo.dat --range 0:4000:10 --out clip.mp4 --fps 30\n"
+        "  spikeview reconstruct demo.dat --method guided --at 1000 --out guided.exr\n"
+        "  spikeview reconstruct demo.dat --method guided --guidance dps --s 0.5 --steps 20 --range 0:400:40 --out g_%04d.exr\n"
+        "  spikeview reconstruct demo.dat --preset guided.exr.preset.toml --out again.exr\n"
     ),
 }

@@ -96,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
 
         cdict = dict(preset.get("classical", {}))
         cdict["method"] = run_cfg.method
+        if "demosaic" not in cdict and args.demosaic is None:
+            cdict["demosaic"] = "malvar2004"
         for flag, key in (("window", "window"), ("demosaic", "demosaic"), ("eta", "eta")):
             value = getattr(args, flag)
             if value is not None and (not preset or flag in argv_given or key not in cdict):

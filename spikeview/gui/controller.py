@@ -71,7 +71,7 @@ class Controller(QtCore.QObject):
         self.session = session
         self.preview = Worker("spikeview-preview", priority=("frames", "degradation", "rates", "alpha"), parent=self)
         # the sampler leaves one core to the window: a single torch thread, at a lower priority
-        self.guided = Worker("spikeview-guided", parent=self, nice=10, torch_threads=max(1, (os.cpu_count() or 2) - 1))
+        self.guided = Worker("spikeview-guided", parent=self, nice=0, torch_threads=max(1, (os.cpu_count() or 2) - 1))
         self.exporter = Worker("spikeview-export", parent=self)
         self.tfi = Worker("spikeview-tfi", parent=self)
         for w in (self.preview, self.guided, self.exporter, self.tfi):

@@ -54,7 +54,7 @@ class NotificationBar(QtWidgets.QFrame):
         #: the tool-bar action that holds this bar (visibility goes through it), set by the window
         self.action: QtGui.QAction | None = None
         lay = QtWidgets.QHBoxLayout(self)
-        lay.setContentsMargins(8, 3, 4, 3)
+        lay.setContentsMargins(8, 1, 4, 1)
         lay.addWidget(self.label, 1)
         lay.addLayout(self.buttons)
         lay.addWidget(close)

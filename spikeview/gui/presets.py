@@ -1,31 +1,30 @@
-"""Parameter presets: the session's parameters as the TOML tables the core configs read (no Qt).
+"""Parameter presets: the session's parameters as the TOML file ``spikeview reconstruct --preset`` reads.
 
-A preset file holds one table per core config, with that config's field names, so the same file
-drives the app and the command line and every value is validated by the config that owns it::
+A preset holds one table per core config, with that config's field names, so the same file drives
+the app and the command line and every value is validated by the config that owns it — the format
+the CLI writes beside its outputs (``<out>.preset.toml``, :mod:`spikeview.cli.reconstruct`)::
+
+    [run]                # spikeview.cli.reconstruct.RunConfig: method, at / range (ticks)
+    method = "tfp"
+    at = 640
+
+    [stream]             # how the capture is read (format, size, CFA, flips, tick rate)
+    ...
 
     [classical]          # spikeview.classical.ClassicalConfig
-    method = "tfp"
     window = 10
-    demosaic = "bilinear"
-    colour_cast = true
-    eta = 2.0
-    tfi_half_window = 32
+    ...
 
     [guided]             # spikeview.guided.GuidedConfig
-    guidance = "hqs"
-    steps = 8
     ...
 
-    [export]             # spikeview.export.ExportConfig
-    fps = 30.0
+    [export]             # spikeview.export.ExportConfig (display levels and curve included)
     ...
 
-    [app]                # display and playback settings only the app uses
-    transfer = "srgb"
-    ...
-
-Exported files record the same dict as their ``params`` (see :func:`spikeview.export.read_export_metadata`),
-so a preset can also be loaded from an export's record (a TOML with a ``[params]`` table).
+Settings only the app has (playback speed, loop, per-level residual view, the export format, which
+the CLI takes from the output's suffix) are remembered in the app's settings, not in presets.
+Loading a preset changes parameters only: its ``[stream]`` and ``[run]`` ticks are not applied to
+the open capture (File ▸ Stream settings… changes the CFA and flip).
 """
 
 from __future__ import annotations
@@ -38,34 +37,46 @@ from spikeview.config import load_toml
 from spikeview.errors import InputFileError, ParameterError
 from spikeview.gui.model import SPECS, Session
 
-#: session parameter → ClassicalConfig field (same name unless given)
+#: session parameters that are ClassicalConfig fields of the same name
 _CLASSICAL = ("window", "tfi_half_window", "demosaic", "colour_cast", "eta")
 #: session parameter → GuidedConfig field
 _GUIDED = {"guidance": "guidance", "prior": "prior", "model_path": "model_path", "steps": "steps", "t_start": "t_start",
            "s": "s", "k": "k", "levels": "levels", "eta": "eta", "window": "window", "seed": "seed"}
 #: session parameter → ExportConfig field
 _EXPORT = {"export_fps": "fps", "black": "black", "white": "white", "transfer": "transfer", "gamma": "gamma"}
-#: only the app uses these
-_APP = ("black", "white", "transfer", "gamma", "show_pyramid", "speed", "slowmo", "loop", "export_format",
-        "export_range", "export_method")
+#: the tables of a preset (as the CLI's ``--preset`` accepts them)
+TABLES = ("run", "stream", "classical", "guided", "export")
 
 
-def preset_dict(session: Session | dict[str, Any]) -> dict[str, Any]:
-    """The session's parameters as a dict of config tables (validated by each config)."""
+def preset_dict(session: Session) -> dict[str, Any]:
+    """The session's parameters (and open stream, current tick or marked range) as preset tables."""
+    from spikeview.cfa import cfa_to_str
     from spikeview.classical.reconstruct import ClassicalConfig
     from spikeview.export import ExportConfig
     from spikeview.gui.jobs import guided_config
 
-    p = session.params if isinstance(session, Session) else session
-    classical = ClassicalConfig(method=p["export_method"] if p["export_method"] in ("tfp", "tfi") else "tfp",
-                                **{k: p[k] for k in _CLASSICAL})
-    guided = guided_config(p)
+    p = session.params
+    method = p["export_method"]
+    classical = ClassicalConfig(method=method if method in ("tfp", "tfi") else "tfp", **{k: p[k] for k in _CLASSICAL})
+    guided = guided_config(p).to_dict()
+    guided.pop("diffusion", None)  # the app always samples; a CLI run keeps its default
     export = ExportConfig(**{v: p[k] for k, v in _EXPORT.items() if k != "white"},
                           white=max(float(p["white"]), float(p["black"]) + 1e-3))
-    g = guided.to_dict()
-    g.pop("diffusion", None)  # the app always samples; the CLI's default ("auto") applies elsewhere
-    return {"classical": classical.to_dict(), "guided": g, "export": export.to_dict(),
-            "app": {k: p[k] for k in _APP}}
+    out: dict[str, Any] = {"run": {"method": method}}
+    src = session.source
+    if src is not None:
+        if p["export_range"] == "marked":
+            lo, hi = session.marked_range()
+            out["run"]["range"] = f"{lo}:{hi + 1}:{int(p['window'])}"
+        else:
+            out["run"]["at"] = int(session.tick)
+        info = src.info
+        if info.format in ("plain", "raw400", "raw1m", "npz"):
+            out["stream"] = {"format": info.format, "width": info.width, "height": info.height, "cfa": cfa_to_str(info.cfa),
+                             "flip_vertical": info.flip_vertical, "flip_horizontal": info.flip_horizontal,
+                             "tick_rate": info.tick_rate}
+    out.update(classical=classical.to_dict(), guided=guided, export=export.to_dict())
+    return out
 
 
 def save_preset(session: Session, path: str | os.PathLike[str]) -> Path:
@@ -107,9 +118,11 @@ def _params_from_preset(data: dict[str, Any], where: str) -> dict[str, Any]:
 
     if "params" in data and isinstance(data["params"], dict):  # an export's record
         data = data["params"]
-    known = {"classical", "guided", "export", "app"}
-    if not known & set(data):
-        raise InputFileError(f"{where}: no [classical], [guided], [export] or [app] table; it is not a spikeview preset.")
+    unknown = sorted(set(data) - set(TABLES))
+    if unknown:
+        raise ParameterError(f"{where}: unknown table(s) {', '.join(unknown)}; a preset holds {', '.join(TABLES)}.")
+    if not {"classical", "guided", "export"} & set(data):
+        raise InputFileError(f"{where}: no [classical], [guided] or [export] table; it is not a spikeview preset.")
     out: dict[str, Any] = {}
     if "guided" in data:
         g = GuidedConfig.from_dict(dict(data["guided"]), where=f"{where} [guided]")
@@ -123,14 +136,10 @@ def _params_from_preset(data: dict[str, Any], where: str) -> dict[str, Any]:
     if "export" in data:
         e = ExportConfig.from_dict(dict(data["export"]), where=f"{where} [export]")
         out.update({k: getattr(e, f) for k, f in _EXPORT.items()})
-    app = data.get("app", {})
-    if not isinstance(app, dict):
-        raise ParameterError(f"{where}: [app] must be a table.")
-    unknown = sorted(set(app) - set(_APP))
-    if unknown:
-        raise ParameterError(f"{where} [app]: unknown setting(s) {', '.join(unknown)}; valid ones are {', '.join(_APP)}.")
-    out.update(app)
-    for k, v in out.items():  # the app's own ranges (narrower for sliders) must hold too
+    method = data.get("run", {}).get("method") if isinstance(data.get("run"), dict) else None
+    if method is not None:
+        out["export_method"] = method
+    for k, v in out.items():  # the app's own ranges (narrower, for sliders) must hold too
         out[k] = SPECS[k].validate(v)
     return out
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import pyqtgraph as pg
@@ -10,8 +11,11 @@ from PySide6 import QtCore, QtGui, QtWidgets
 from spikeview.gui.model import Session
 from spikeview.gui.widgets import ImagePane, ParamCombo, ParamSlider, ParamSpin, form, subscribe
 
-#: the live preview and the curves are redrawn at most this often during a run (ms)
+#: the live preview is redrawn at most this often during a run (ms)
 DRAW_INTERVAL_MS = 100
+#: the PSNR/SSIM curves are redrawn at most this often during a run (ms): re-plotting (axes, text)
+#: is the costliest update of the panel, and a busy machine stretches it
+PLOT_INTERVAL_MS = 500
 RUN_COLOURS = [(255, 170, 0), (0, 190, 255), (255, 90, 160), (120, 220, 90), (200, 140, 255), (255, 230, 80)]
 
 
@@ -107,6 +111,7 @@ class GuidedPanel(QtWidgets.QWidget):
         self.ssim_plot.setXLink(self.psnr_plot)
         for plot in (self.psnr_plot, self.ssim_plot):
             plot.getAxis("left").enableAutoSIPrefix(False)
+            plot.getAxis("left").setWidth(48)  # fixed: new tick labels do not re-layout the plot
         self.psnr_plot.addLegend(offset=(-5, -5), labelTextSize="7pt")
         self.clear_btn = QtWidgets.QToolButton(text="Clear curves")
         self.clear_btn.clicked.connect(self.clear_curves)
@@ -133,6 +138,7 @@ class GuidedPanel(QtWidgets.QWidget):
         self._pending: list[Any] = []
         self._draw_timer = QtCore.QTimer(self, singleShot=True, interval=DRAW_INTERVAL_MS)
         self._draw_timer.timeout.connect(self._flush)
+        self._last_plot = 0.0
         subscribe(self, session.events.param_changed, self._on_param)
         subscribe(self, session.events.source_changed, self._on_source)
         self._on_param("t_start", session.get("t_start"))
@@ -165,7 +171,7 @@ class GuidedPanel(QtWidgets.QWidget):
     def set_state(self, state: str, message: str) -> None:
         running = state == "running"
         if not running:
-            self._flush()
+            self._flush(final=True)
         self.cancel_btn.setEnabled(running)
         self.run_btn.setText("Restart" if running else "Run")
         self.status.setText(message)
@@ -192,9 +198,11 @@ class GuidedPanel(QtWidgets.QWidget):
         if not self._draw_timer.isActive():
             self._draw_timer.start()
 
-    def _flush(self) -> None:
+    def _flush(self, final: bool = False) -> None:
         pending, self._pending = self._pending, []
         if not pending:
+            if final:
+                self._redraw_curves()
             return
         u = pending[-1]
         self.progress.setRange(0, max(u.total, 1))
@@ -204,10 +212,20 @@ class GuidedPanel(QtWidgets.QWidget):
             self.preview.set_title(f"x̂₀ run {u.run}, step {u.step}/{u.total}")
         for p in pending:
             if p.psnr is not None:
-                self._add_point(p.run, p.elapsed, p.psnr, p.ssim, redraw=p is pending[-1] or p.run != pending[-1].run)
+                self._add_point(p.run, p.elapsed, p.psnr, p.ssim, redraw=False)
+        now = time.perf_counter()
+        if now - self._last_plot >= PLOT_INTERVAL_MS / 1000 or final:
+            self._last_plot = now
+            self._redraw_curves()
+
+    def _redraw_curves(self) -> None:
+        for pc, sc, ts, ps, ss in self.curves.values():
+            if len(ts) != len(pc.xData if pc.xData is not None else ()):
+                pc.setData(ts, ps)
+                sc.setData(ts, ss)
 
     def show_result(self, r: Any) -> None:
-        self._flush()
+        self._flush(final=True)
         self.preview.set_image(r.preview)
         self.preview.set_title(f"result of run {r.run} (tick {r.tick})")
         self.progress.setValue(self.progress.maximum())
