@@ -143,24 +143,29 @@ def display_rate(app, w, seconds: float, tfi: bool) -> dict[str, float]:
     s.update_params({"speed": "window", "window": 10, "loop": True}, record=False)
     shown: list[float] = []
     rates: list[int] = []
+    tfis: list[int] = []
     on_frames = lambda f: shown.append(time.perf_counter())  # noqa: E731
     on_rates = lambda r: rates.append(r.tick)  # noqa: E731
+    on_tfi = lambda t, img, shape: tfis.append(t)  # noqa: E731
     w.controller.frames_ready.connect(on_frames)
     w.controller.rates_ready.connect(on_rates)
+    w.controller.tfi_ready.connect(on_tfi)
     s.set_playing(True)
     spin(app, 2.0)  # warm-up
     shown.clear()
     rates.clear()
+    tfis.clear()
     t0 = time.perf_counter()
     spin(app, seconds)
     dur = time.perf_counter() - t0
     s.set_playing(False)
     w.controller.frames_ready.disconnect(on_frames)
     w.controller.rates_ready.disconnect(on_rates)
+    w.controller.tfi_ready.disconnect(on_tfi)
     spin(app, 0.5)
     per_second = [sum(1 for x in shown if t0 + i <= x < t0 + i + 1) for i in range(int(dur))]
     return {"fps_median": statistics.median(per_second) if per_second else 0.0, "fps_mean": len(shown) / dur,
-            "fps_min": min(per_second) if per_second else 0.0, "rates_per_s": len(rates) / dur}
+            "fps_min": min(per_second) if per_second else 0.0, "rates_per_s": len(rates) / dur, "tfi_per_s": len(tfis) / dur}
 
 
 def compute_only_rate(source, params: dict, alpha, seconds: float, tfi: bool) -> float:
@@ -261,8 +266,9 @@ def main(argv: list[str] | None = None) -> int:
     for tfi in (True, False):
         r = results[tfi]
         rows.append(f"| 1000×1000, TFI {'on ' if tfi else 'off'} | {r['fps_median']:.0f} | {r['fps_mean']:.1f} | {r['fps_min']:.0f} | "
-                    f"{r['compute']:.1f} | {r['fps_mean'] / max(r['compute'], 1e-9):.2f} | {r['rates_per_s']:.1f} |")
-    verdict_fps = "met" if results[False]["fps_median"] >= 30 else "NOT met"
+                    f"{r['compute']:.1f} | {r['fps_mean'] / max(r['compute'], 1e-9):.2f} | {r['rates_per_s']:.1f} | "
+                    f"{r['tfi_per_s']:.1f} |")
+    verdict_fps = "met" if results[False]["fps_median"] >= 30 else "NOT met"  # noqa: F841 - used in the text
     verdict_lat = "met" if statistics.median(lat) <= 0.100 else "NOT met"
     text = f"""# Desktop app: display rate and slider latency
 
@@ -279,12 +285,15 @@ ticks, raw spike frame + TFP (+ TFI) panes, firing-rate histograms throttled, wi
 "Frames shown" are previews that reached the screen; the display never queues frames (back-pressure:
 the next window is requested only when the last one is shown).
 
-| stream | median fps (per-second counts) | mean fps | worst second | compute-only frames/s (no window, same process) | shown / compute | rate updates /s |
-|---|---|---|---|---|---|---|
+| stream | median fps (per-second counts) | mean fps | worst second | compute-only frames/s (no window, same process) | shown / compute | rate updates /s | TFI updates /s |
+|---|---|---|---|---|---|---|---|
 {chr(10).join(rows)}
 
-Target ≥ 30 fps with TFI off: **{verdict_fps}** (TFI at 1000×1000 searches ±32 ticks per pixel and is
-the costly pane; turn it off with the TFI box for fast playback of full-size captures).
+Target ≥ 30 fps (TFI off): **{verdict_fps}**. The compute-only baseline computes raw + TFP (+ TFI)
+for every window in one loop. In the app the TFI pane (±32 ticks searched per pixel, the costly one at
+1000×1000) runs on its own thread and is refreshed at most 5 times a second during playback, so with
+TFI on the raw and TFP panes still play at the rate shown and the TFI pane trails them (its title says
+which tick it shows); paused, every pane shows the same tick.
 
 ## k-slider → updated degradation preview (target ≤ 100 ms)
 

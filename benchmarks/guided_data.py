@@ -53,11 +53,16 @@ def _image(name: str) -> np.ndarray:
     return img[..., :3]
 
 
-def make_capture(name: str, size: int = 256, n_ticks: int = 60, seed: int = 0, window: int = 10, **overrides):
-    """Simulate scene ``name`` (see :data:`SCENES`) for ``n_ticks`` ticks at ``size × size``."""
+def make_capture(name: str, size: int = 256, n_ticks: int = 60, seed: int = 0, window: int = 10,
+                 pan: tuple[float, float] | None = None, **overrides):
+    """Simulate scene ``name`` (see :data:`SCENES`) for ``n_ticks`` ticks at ``size × size``.
+
+    ``pan`` (px/s) replaces the scene's own camera pan.
+    """
     from spikeview.sim import MotionScene, SimConfig, simulate
 
-    pan, rot, zoom = SCENES[name]
+    pan0, rot, zoom = SCENES[name]
+    pan = pan0 if pan is None else pan
     scene = MotionScene(_image(name), size=(size, size), pan=pan, rotation=rot, zoom=zoom)
     cfg = SimConfig(n_ticks=n_ticks, seed=seed, gt_every=window, **overrides)
     return simulate(scene, cfg)

@@ -469,3 +469,14 @@ def test_a_qt_warning_fails_a_test(tmp_path):
                          env={**__import__("os").environ, "QT_QPA_PLATFORM": "offscreen"})
     assert out.returncode == 1, out.stdout[-2000:]
     assert "boom" in out.stdout
+
+
+def test_export_name_follows_the_format_and_range(opened, tmp_path):
+    w, s = opened, opened.session
+    w.export_panel.path.setText(str(tmp_path / "mine.png"))
+    w.export_panel.path.textEdited.emit("mine.png")  # typed by the user: no more automatic names
+    s.set("export_format", "mp4")
+    assert w.export_panel.path.text() == str(tmp_path / "mine.mp4")
+    s.set("export_range", "marked")
+    s.set("export_format", "exr")
+    assert w.export_panel.path.text() == str(tmp_path / "mine_%04d.exr")

@@ -11,7 +11,7 @@ import torch
 from spikeview.errors import Cancelled, ParameterError
 from spikeview.guided.baseline import baseline, start_estimate
 from spikeview.guided.config import GuidedConfig
-from spikeview.guided.guidance import HQSGuidance, _dihedral
+from spikeview.guided.guidance import _dihedral
 from spikeview.guided.observation import Observation
 from spikeview.guided.plan import make_plan
 from spikeview.guided.sampler import GuidedSampler, load_prior
@@ -201,3 +201,25 @@ def test_sequence_callback_and_cancel():
     with pytest.raises(Cancelled):
         list(gen)
     assert calls[:4] == [(0, 3, 1, 3), (0, 3, 2, 3), (0, 3, 3, 3), (1, 3, 1, 3)]
+
+
+def test_sequence_resamples_only_the_changed_region():
+    # 64x64 static texture; from tick 30 on, one 16x16 block (top-left) changes: the second window
+    # keeps the first result outside the changed box and recomputes inside it
+    rates = scene_rates("texture", 64, 64, seed=1)
+    spikes = spikes_from_rates(rates, 60, seed=2)
+    changed = rates.copy()
+    changed[:16, :16] = np.clip(changed[:16, :16] + 0.3, 0, 1)
+    spikes[30:, :16, :16] = spikes_from_rates(changed, 60, seed=5)[30:, :16, :16]
+    src = ArraySource(spikes, cfa="RGGB")
+    infos = []
+    f0, f1 = reconstruct_sequence(src, [25, 35], GuidedConfig(**FAST), alpha=ALPHA, sampler=GuidedSampler(prior=BlurDenoiser()),
+                                  infos=infos)
+    assert infos[1].mode == "region"
+    assert infos[1].plan.changed[0, 0] and infos[1].plan.changed.sum() <= 2
+    rows, cols = np.nonzero(infos[1].plan.changed)
+    box = np.zeros((64, 64), dtype=bool)
+    for r, c in zip(rows, cols):
+        box[16 * r:16 * (r + 1), 16 * c:16 * (c + 1)] = True
+    np.testing.assert_array_equal(f1[~box], f0[~box])
+    assert np.abs(f1[:16, :16] - f0[:16, :16]).mean() > 0.05  # the changed block got brighter

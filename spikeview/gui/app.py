@@ -19,7 +19,7 @@ def configure_pyqtgraph() -> None:
 
 #: how often (s) a thread running Python code hands the interpreter lock to another: 1 ms instead of
 #: Python's 5 ms, so the window gets it back quickly while a worker runs Python code
-SWITCH_INTERVAL_S = 0.0002
+SWITCH_INTERVAL_S = 0.001
 
 
 def configure_runtime() -> None:

@@ -189,8 +189,6 @@ class Controller(QtCore.QObject):
             self.request_frames()
         if group in _FRAME_GROUPS or group == "forward":
             self.request_degradation()
-        if name in ("eta", "demosaic", "colour_cast") and self.guided_result is not None:
-            self._guided_key = None
         if group in ("guided", "forward") or name in ("window", "demosaic", "colour_cast"):
             if self.guided.is_active("guided") or self.guided_live:
                 self.guided_timer.start()

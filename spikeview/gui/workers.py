@@ -175,26 +175,30 @@ class Worker(QtCore.QThread):
             self.busy.emit(True)
             ctx = JobContext(job.job_id, job.channel, job.cancelled, self.state,
                              lambda p, j=job: self.progress.emit(j.channel, j.job_id, p))
+            outcome: tuple[str, Any]
             try:
                 result = job.fn(ctx)
             except Cancelled:
-                self.cancelled.emit(job.channel, job.job_id)
+                outcome = ("cancelled", None)
             except SpikeviewError as e:
-                self.failed.emit(job.channel, job.job_id, str(e))
+                outcome = ("failed", str(e))
             except MemoryError:
-                self.failed.emit(job.channel, job.job_id, "Out of memory: use a smaller region (ROI) or a shorter range.")
+                outcome = ("failed", "Out of memory: use a smaller region (ROI) or a shorter range.")
             except Exception as e:  # never let a bug kill the thread or the window
                 traceback.print_exc(file=sys.stderr)
-                self.failed.emit(job.channel, job.job_id,
-                                 f"Unexpected {type(e).__name__}: {e} (this is a bug; please report it with the terminal output).")
+                outcome = ("failed", f"Unexpected {type(e).__name__}: {e} (this is a bug; please report it with the terminal output).")
             else:
-                if job.cancelled.is_set():
-                    self.cancelled.emit(job.channel, job.job_id)
-                else:
-                    self.finished.emit(job.channel, job.job_id, result)
-            finally:
-                with self._cond:
-                    self._running = None
-                    idle = not self._pending
-                if idle:
-                    self.busy.emit(False)
+                outcome = ("cancelled", None) if job.cancelled.is_set() else ("finished", result)
+            # the job is over before anyone hears about it: a receiver may submit the next one at once
+            with self._cond:
+                self._running = None
+                idle = not self._pending
+            kind, payload = outcome
+            if kind == "finished":
+                self.finished.emit(job.channel, job.job_id, payload)
+            elif kind == "failed":
+                self.failed.emit(job.channel, job.job_id, payload)
+            else:
+                self.cancelled.emit(job.channel, job.job_id)
+            if idle:
+                self.busy.emit(False)

@@ -13,7 +13,7 @@ c by ``eta / alpha_c``; the CLI's ``--eta``), **not** DDIM's stochasticity, whic
 
 Defaults were tuned on simulated 10-tick windows (realistic noise, known calibration) of the
 tuning scenes of ``benchmarks/guided_data.py`` and checked on held-out scenes
-(``benchmarks/results/guided.md``): HQS in DPIR form (no re-noising), 8 steps from 50/255 to
+(``benchmarks/results/guided.md``): HQS in DPIR form (no re-noising), 6 steps from 50/255 to
 5/255, λ = 1.5, prior told 1.5 × the data-derived noise, signal-dependent noise weights, the
 dense-gradient mosaic, per-step self-ensemble. Q and the pyramid are **off** by default because
 they lowered PSNR in the HQS data step here (Q: −1.6 dB, 2 pyramid levels: −0.8 dB on the tuning
@@ -125,7 +125,7 @@ class GuidedConfig(Config):
     guidance: str = "hqs"
     prior: str = "ffdnet"
     model_path: str | None = None
-    steps: int = 8
+    steps: int = 6
     t_start: float = 50.0 / 255.0
     top_up: bool = True
     sigma_end: float = 5.0 / 255.0

@@ -45,7 +45,7 @@ from spikeview.guided.guidance import DPSGuidance, GuidanceRule, HQSGuidance
 from spikeview.guided.likelihood import DataTerm
 from spikeview.guided.observation import Observation
 from spikeview.guided.plan import Plan, make_plan
-from spikeview.guided.priors.base import DenoiserPrior, PriorUnavailableError
+from spikeview.guided.priors.base import DenoiserPrior
 from spikeview.guided.schedule import VESchedule
 from spikeview.ops.forward import ForwardModel
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +22,26 @@ def suggested_name(stem: str, fmt: str, n_frames: int) -> str:
     if fmt == "mp4":
         return f"{stem}.mp4"
     return f"{stem}_%04d.{fmt}" if n_frames > 1 else f"{stem}.{fmt}"
+
+
+def matching_name(path: str, fmt: str, n_frames: int) -> str:
+    """A typed file name adapted (visibly, in the field) to the chosen format and frame count.
+
+    The suffix follows the format; an image sequence gets a ``_%04d`` field if it has none; an
+    MP4 loses the field. Other names are left alone.
+    """
+    if not path:
+        return path
+    p = Path(path)
+    if p.suffix.lower() not in (".png", ".exr", ".mp4"):
+        return path
+    stem = p.stem
+    field = re.search(r"[_.\-]?%0?\d*d", stem)
+    if fmt == "mp4" and field:
+        stem = stem[: field.start()] + stem[field.end():]
+    elif fmt != "mp4" and n_frames > 1 and not field:
+        stem += "_%04d"
+    return str(p.with_name(f"{stem}.{fmt}"))
 
 
 class ExportPanel(QtWidgets.QWidget):
@@ -137,6 +158,10 @@ class ExportPanel(QtWidgets.QWidget):
             self.slowmo.setText(str(e))
         if self._auto_name:
             self.path.setText(str(self.folder / suggested_name(self.stem(), fmt, n)))
+        else:
+            adapted = matching_name(self.path.text().strip(), fmt, n)
+            if adapted != self.path.text().strip():
+                self.path.setText(adapted)
 
     def _browse(self) -> None:
         fmt = self.session.get("export_format")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
+import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
@@ -110,6 +111,7 @@ class GuidedPanel(QtWidgets.QWidget):
         self.ssim_plot.setMenuEnabled(False)
         self.ssim_plot.setXLink(self.psnr_plot)
         for plot in (self.psnr_plot, self.ssim_plot):
+            plot.disableAutoRange()  # ranges grow in coarse steps (see _fit_ranges)
             plot.getAxis("left").enableAutoSIPrefix(False)
             plot.getAxis("left").setWidth(48)  # fixed: new tick labels do not re-layout the plot
         self.psnr_plot.addLegend(offset=(-5, -5), labelTextSize="7pt")
@@ -139,6 +141,7 @@ class GuidedPanel(QtWidgets.QWidget):
         self._draw_timer = QtCore.QTimer(self, singleShot=True, interval=DRAW_INTERVAL_MS)
         self._draw_timer.timeout.connect(self._flush)
         self._last_plot = 0.0
+        self._ranges: dict[str, Any] = {}
         subscribe(self, session.events.param_changed, self._on_param)
         subscribe(self, session.events.source_changed, self._on_source)
         self._on_param("t_start", session.get("t_start"))
@@ -219,10 +222,40 @@ class GuidedPanel(QtWidgets.QWidget):
             self._redraw_curves()
 
     def _redraw_curves(self) -> None:
+        changed = False
         for pc, sc, ts, ps, ss in self.curves.values():
             if len(ts) != len(pc.xData if pc.xData is not None else ()):
                 pc.setData(ts, ps)
                 sc.setData(ts, ss)
+                changed = True
+        if changed:
+            self._fit_ranges()
+
+    def _fit_ranges(self) -> None:
+        """Grow the axes in coarse steps (never per point): an unchanged axis is not redrawn."""
+        ts = [t for c in self.curves.values() for t in c[2]]
+        ps = [p for c in self.curves.values() for p in c[3] if np.isfinite(p)]
+        ss = [x for c in self.curves.values() for x in c[4] if np.isfinite(x)]
+        if not ts:
+            return
+        t_max = max(ts)
+        x_hi = self._ranges.get("t", 0.0)
+        if t_max > x_hi:
+            x_hi = 2.0 ** np.ceil(np.log2(max(t_max, 0.5) * 1.05))  # 0.5, 1, 2, 4 … s
+            self._ranges["t"] = x_hi
+            self.psnr_plot.setXRange(0, x_hi, padding=0.02)
+        for key, vals, plot, step in (("p", ps, self.psnr_plot, 1.0), ("s", ss, self.ssim_plot, 0.05)):
+            if not vals:
+                continue
+            lo, hi = float(np.floor(min(vals) / step) * step), float(np.ceil(max(vals) / step) * step)
+            old = self._ranges.get(key)
+            if old is None or lo < old[0] or hi > old[1]:
+                lo = min(lo, old[0]) if old else lo
+                hi = max(hi, old[1]) if old else hi
+                if hi - lo < step:
+                    hi = lo + step
+                self._ranges[key] = (lo, hi)
+                plot.setYRange(lo, hi, padding=0.05)
 
     def show_result(self, r: Any) -> None:
         self._flush(final=True)
@@ -257,3 +290,4 @@ class GuidedPanel(QtWidgets.QWidget):
             self.ssim_plot.removeItem(sc)
         self.psnr_plot.plotItem.legend.clear()
         self.curves.clear()
+        self._ranges.clear()

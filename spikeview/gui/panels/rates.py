@@ -36,8 +36,9 @@ class RatesPanel(QtWidgets.QWidget):
         self.alpha_plot.setLabel("left", "gray-world α")
         self.alpha_plot.addLegend(offset=(-5, 5), labelTextSize="8pt")
         self.alpha_plot.setMenuEnabled(False)
-        self.alpha_curves = [self.alpha_plot.plot([], [], pen=pg.mkPen(c, width=2), symbol="o", symbolSize=3,
-                                                  symbolBrush=c, symbolPen=None, name=n)
+        # lines only, and the tick marker moves with the (throttled) rates during playback: this plot
+        # must not be redrawn at the display's frame rate
+        self.alpha_curves = [self.alpha_plot.plot([], [], pen=pg.mkPen(c, width=2), name=n)
                              for c, n in zip(CHANNEL_PENS, ("α R", "α G", "α B"))]
         self.seq_lines = [pg.InfiniteLine(angle=0, pen=pg.mkPen(c, style=pg.QtCore.Qt.PenStyle.DashLine)) for c in CHANNEL_PENS]
         for ln in self.seq_lines:
@@ -73,11 +74,13 @@ class RatesPanel(QtWidgets.QWidget):
         self.hint.setText("")
 
     def _on_tick(self, tick: int) -> None:
-        self.tick_line.setValue(tick)
+        if not self.session.playing:
+            self.tick_line.setValue(tick)
 
     def show_rates(self, r: Any) -> None:
         """Show a :class:`~spikeview.gui.core.RatesResult`."""
         self.last = r
+        self.tick_line.setValue(r.tick)
         for name, hist in r.hists.items():
             curve = self.hist_curves.get(name)
             if curve is None:
