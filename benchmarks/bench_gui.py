@@ -34,7 +34,7 @@ from pathlib import Path
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -144,9 +144,9 @@ def display_rate(app, w, seconds: float, tfi: bool) -> dict[str, float]:
     shown: list[float] = []
     rates: list[int] = []
     tfis: list[int] = []
-    on_frames = lambda f: shown.append(time.perf_counter())  # noqa: E731
-    on_rates = lambda r: rates.append(r.tick)  # noqa: E731
-    on_tfi = lambda t, img, shape: tfis.append(t)  # noqa: E731
+    on_frames = lambda f: shown.append(time.perf_counter())
+    on_rates = lambda r: rates.append(r.tick)
+    on_tfi = lambda t, img, shape: tfis.append(t)
     w.controller.frames_ready.connect(on_frames)
     w.controller.rates_ready.connect(on_rates)
     w.controller.tfi_ready.connect(on_tfi)
@@ -261,14 +261,14 @@ def main(argv: list[str] | None = None) -> int:
         app.processEvents()
     load_end = load()
 
-    ms = lambda xs: f"{1000 * statistics.median(xs):.0f}"  # noqa: E731
-    p90 = lambda xs: f"{1000 * float(np.percentile(xs, 90)):.0f}"  # noqa: E731
+    ms = lambda xs: f"{1000 * statistics.median(xs):.0f}"
+    p90 = lambda xs: f"{1000 * float(np.percentile(xs, 90)):.0f}"
     for tfi in (True, False):
         r = results[tfi]
         rows.append(f"| 1000×1000, TFI {'on ' if tfi else 'off'} | {r['fps_median']:.0f} | {r['fps_mean']:.1f} | {r['fps_min']:.0f} | "
                     f"{r['compute']:.1f} | {r['fps_mean'] / max(r['compute'], 1e-9):.2f} | {r['rates_per_s']:.1f} | "
                     f"{r['tfi_per_s']:.1f} |")
-    verdict_fps = "met" if results[False]["fps_median"] >= 30 else "NOT met"  # noqa: F841 - used in the text
+    verdict_fps = "met" if results[False]["fps_median"] >= 30 else "NOT met"
     verdict_lat = "met" if statistics.median(lat) <= 0.100 else "NOT met"
     text = f"""# Desktop app: display rate and slider latency
 

@@ -17,13 +17,13 @@ import numpy as np
 import pytest
 
 pytest.importorskip("pytestqt")
-from PySide6 import QtCore, QtGui, QtWidgets  # noqa: E402
+from PySide6 import QtCore, QtGui, QtWidgets
 
-from spikeview.gui import core  # noqa: E402
-from spikeview.gui.app import configure_pyqtgraph  # noqa: E402
-from spikeview.gui.main_window import MainWindow  # noqa: E402
-from spikeview.gui.model import SPECS  # noqa: E402
-from spikeview.gui.widgets import ParamSlider  # noqa: E402
+from spikeview.gui import core
+from spikeview.gui.app import configure_pyqtgraph
+from spikeview.gui.main_window import MainWindow
+from spikeview.gui.model import SPECS
+from spikeview.gui.widgets import ParamSlider
 
 OFFSCREEN_NOISE = r"This plugin does not support propagateSizeHints"
 pytestmark = [pytest.mark.gui, pytest.mark.qt_log_level_fail("WARNING"), pytest.mark.qt_log_ignore(OFFSCREEN_NOISE)]
@@ -262,7 +262,7 @@ def test_guided_run_to_the_end_plots_quality(opened, qtbot):
     assert r.image.shape == (64, 64, 3) and np.isfinite(r.image).all()
     assert "mosaic" in g.plan.toPlainText() and "levels" in g.plan.toPlainText()
     assert g.progress.value() == g.progress.maximum() == 3
-    pc, sc, ts, ps, ss = g.curves[r.run]
+    _pc, _sc, ts, ps, ss = g.curves[r.run]
     assert len(ts) == 3 and ts == sorted(ts) and all(np.isfinite(ps)) and 0 < ss[-1] <= 1
     assert "finished" in g.status.text()
     # the degradation preview now starts from the guided result
@@ -464,7 +464,7 @@ def test_a_qt_warning_fails_a_test(tmp_path):
         "pytestmark = [pytest.mark.qt_log_level_fail('WARNING')]\n"
         "def test_warns(qtbot):\n    QtCore.qWarning('boom')\n"
     )
-    out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(test)],
+    out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(test)], check=False,
                          capture_output=True, text=True, timeout=300, cwd=tmp_path,
                          env={**__import__("os").environ, "QT_QPA_PLATFORM": "offscreen"})
     assert out.returncode == 1, out.stdout[-2000:]
@@ -480,3 +480,43 @@ def test_export_name_follows_the_format_and_range(opened, tmp_path):
     s.set("export_range", "marked")
     s.set("export_format", "exr")
     assert w.export_panel.path.text() == str(tmp_path / "mine_%04d.exr")
+
+
+def test_a_missing_model_is_a_message_with_the_fix(opened, qtbot, tmp_path):
+    w, s = opened, opened.session
+    s.set("prior", "sd")  # the latent prior needs DPS: the message says so
+    w.controller.run_guided()
+    qtbot.waitUntil(lambda: w.notice.kind == "error", timeout=WAIT_MS)
+    assert 'set guidance = "dps"' in w.notice.text()
+    w.notice.dismiss()
+    s.set("guidance", "dps")
+    s.set("model_path", str(tmp_path / "no-such-weights"))
+    w.controller.run_guided()
+    qtbot.waitUntil(lambda: "failed" in w.guided_panel.status.styleSheet() or w.notice.kind == "error", timeout=WAIT_MS)
+    assert w.notice.kind == "error" and "no-such-weights" in w.notice.text()
+    assert s.get("k") == SPECS["k"].default and w.isVisible()  # nothing lost, nothing crashed
+
+
+def test_the_spikeview_command_opens_the_window_on_the_demo(qtbot, monkeypatch, tmp_path):
+    """``spikeview`` with no argument: the CLI's ``app`` command → run_app(None) → the demo capture."""
+    from spikeview.cli.main import main
+
+    QtCore.QSettings.setPath(QtCore.QSettings.Format.NativeFormat, QtCore.QSettings.Scope.UserScope, str(tmp_path))
+    QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat, QtCore.QSettings.Scope.UserScope, str(tmp_path))
+    monkeypatch.setattr(core, "demo_stream", lambda size, n_ticks: demo_stream())  # the tiny capture, not 256×256
+    monkeypatch.setattr(sys, "excepthook", sys.excepthook)
+    app = QtWidgets.QApplication.instance()
+    seen: dict[str, object] = {}
+
+    def poll() -> None:
+        wins = [x for x in app.topLevelWidgets() if isinstance(x, MainWindow) and x.isVisible()]
+        if wins and wins[0].controller.last_frames is not None:
+            seen["label"] = wins[0].session.stream.label
+            seen["live"] = hasattr(wins[0], "live_panel")
+            app.quit()
+        else:
+            QtCore.QTimer.singleShot(50, poll)
+
+    QtCore.QTimer.singleShot(50, poll)
+    assert main([]) == 0
+    assert seen == {"label": "test capture", "live": True}

@@ -10,7 +10,14 @@ import pytest
 
 from spikeview.errors import Cancelled, InputFileError, ParameterError
 from spikeview.gui import core, jobs
-from spikeview.gui.model import SPECS, Event, OpenedStream, Session, default_params, format_us
+from spikeview.gui.model import (
+    SPECS,
+    Event,
+    OpenedStream,
+    Session,
+    default_params,
+    format_us,
+)
 from spikeview.io.source import ArraySource
 
 
@@ -56,7 +63,7 @@ def test_model_imports_no_qt():
            "print([m for m in ('PySide6', 'pyqtgraph') if m in sys.modules])"
     import subprocess
 
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    out = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
 

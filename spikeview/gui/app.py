@@ -63,8 +63,8 @@ def _excepthook(window: Any) -> Any:
             window.save_settings()
             window.show_error(f"Unexpected {exc_type.__name__}: {exc} (a bug; your parameters are saved — please report the "
                               "terminal output).")
-        except Exception:  # the window itself is broken: nothing more to do than print
-            pass
+        except Exception as e:  # noqa: BLE001 - the window itself is broken: all that is left is the terminal
+            print(f"spikeview: could not report the error in the window ({e}).", file=sys.stderr)
 
     return hook
 
@@ -87,7 +87,10 @@ def run_app(path: str | os.PathLike[str] | None = None) -> int:
         window.open_demo()
     else:
         window.open_path(Path(path))
-    return int(app.exec())
+    status = int(app.exec())
+    window.close()  # after app.quit() the window may still be open: stop its workers, save the settings
+    sys.excepthook = sys.__excepthook__
+    return status
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -189,9 +189,9 @@ class Controller(QtCore.QObject):
             self.request_frames()
         if group in _FRAME_GROUPS or group == "forward":
             self.request_degradation()
-        if group in ("guided", "forward") or name in ("window", "demosaic", "colour_cast"):
-            if self.guided.is_active("guided") or self.guided_live:
-                self.guided_timer.start()
+        restart = group in ("guided", "forward") or name in ("window", "demosaic", "colour_cast")
+        if restart and (self.guided.is_active("guided") or self.guided_live):
+            self.guided_timer.start()
 
     def _on_roi(self, roi: Any) -> None:
         self.request_rates()
@@ -225,8 +225,8 @@ class Controller(QtCore.QObject):
     # ------------------------------------------------------------------------------ previews
     def _request(self, **overrides: Any) -> jobs.PreviewRequest:
         s = self.session
-        kw = dict(source=s.source, tick=s.tick, params=dict(s.params), alpha=self.alpha, roi=s.roi,
-                  want_tfi=self.enabled["tfi"], factor=self.display_factor)
+        kw: dict[str, Any] = {"source": s.source, "tick": s.tick, "params": dict(s.params), "alpha": self.alpha,
+                              "roi": s.roi, "want_tfi": self.enabled["tfi"], "factor": self.display_factor}
         kw.update(overrides)
         return jobs.PreviewRequest(**kw)
 

@@ -22,11 +22,10 @@ from typing import Any
 
 import numpy as np
 
-from spikeview.cfa import SITE_NAMES, flip_cfa, parse_cfa, site_masks
-from spikeview.errors import ParameterError, SpikeviewError
-from spikeview.io.source import ArraySource, SpikeSource, StreamInfo
-
+from spikeview.cfa import SITE_NAMES, flip_cfa, parse_cfa
+from spikeview.errors import ParameterError
 from spikeview.gui.model import OpenedStream
+from spikeview.io.source import ArraySource, SpikeSource, StreamInfo
 
 # ------------------------------------------------------------------------------------ imports
 
@@ -264,7 +263,11 @@ def alpha_note(means: np.ndarray) -> tuple[np.ndarray, str | None]:
 
 def sequence_alpha(source: SpikeSource, window: int = 10, max_windows: int = 64) -> tuple[np.ndarray, str | None]:
     """Gray-world α of the whole sequence (the sampling of :func:`spikeview.classical.estimate_alpha`)."""
-    from spikeview.classical.colour_cast import _channel_means_from_sums, _site_sums, sample_starts
+    from spikeview.classical.colour_cast import (
+        _channel_means_from_sums,
+        _site_sums,
+        sample_starts,
+    )
     from spikeview.classical.tfp import window_counts
 
     window = max(1, min(int(window), source.n_frames))
@@ -341,7 +344,7 @@ def stream_frames(source: SpikeSource, tick: int, params: dict[str, Any], alpha:
     use_cast = bool(params["colour_cast"]) and cfa is not None
     if use_cast and alpha is None:
         alpha = alpha_note(_channel_means(block[a - lo:b - lo], cfa))[0]
-    levels = dict(black=params["black"], white=max(params["white"], params["black"] + 1e-3), gamma=display_gamma(params))
+    levels = {"black": params["black"], "white": max(params["white"], params["black"] + 1e-3), "gamma": display_gamma(params)}
     tfp_img = preview_rgb(sub, tick - lo, window, alpha=alpha, colour_cast=use_cast, eta=params["eta"],
                           demosaic_method=params["demosaic"], **levels)
     sfr = block[a - lo:b - lo].sum(axis=0, dtype=np.uint16).astype(np.float32) * np.float32(1.0 / (b - a))
@@ -532,7 +535,7 @@ def degradation_chain(x_img: np.ndarray, y_mosaic: np.ndarray, cfa: str | None, 
             n_bands = min(int(levels) + 1, max_pyramid_levels(*y_mosaic.shape))
             if n_bands > 1:
                 bands_np = [t[0, 0].numpy() for t in laplacian_pyramid(res, n_bands)]
-    sensor = dict(black=0.0, white=1.0, gamma="srgb")
+    sensor = {"black": 0.0, "white": 1.0, "gamma": "srgb"}
     images = {
         "x": show(x_img, display),
         "mx": show(mx[0, 0].numpy(), display),

@@ -202,17 +202,26 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
 
 
 def run_sampler(obs: Any, cfg: Any, callback: Callable[[int, int, np.ndarray], None], ctx: Any) -> np.ndarray:
-    """Run :class:`spikeview.guided.sampler.GuidedSampler`, kept in ``ctx.state`` (the worker owns it).
+    """Run the guided sampler for ``cfg.prior``, kept in ``ctx.state`` (the worker owns it).
 
-    The sampler loads its prior once (FFDNet by default) and keeps it; ``callback(step, total,
-    preview)`` gets the float clean estimate after every step; the sampler checks ``ctx.cancelled``
-    before every step and raises :class:`~spikeview.errors.Cancelled`.
+    ``"ffdnet"``: :class:`spikeview.guided.sampler.GuidedSampler` (pixel-space prior, loaded once);
+    ``"sd"``: :class:`spikeview.guided.latent.LatentGuidedSampler` (weights from ``cfg.model_path``,
+    loaded on the first run and kept while the path stays the same). ``callback(step, total,
+    preview)`` gets the float clean estimate after every step; both samplers check ``ctx.cancelled``
+    before every step and raise :class:`~spikeview.errors.Cancelled`.
     """
-    from spikeview.guided.sampler import GuidedSampler
+    if cfg.prior == "sd":
+        from spikeview.guided.latent import LatentGuidedSampler
 
-    sampler = ctx.state.get("sampler")
-    if sampler is None:
-        sampler = ctx.state["sampler"] = GuidedSampler(cfg)
+        sampler = ctx.state.get("latent_sampler")
+        if sampler is None:
+            sampler = ctx.state["latent_sampler"] = LatentGuidedSampler()
+    else:
+        from spikeview.guided.sampler import GuidedSampler
+
+        sampler = ctx.state.get("sampler")
+        if sampler is None:
+            sampler = ctx.state["sampler"] = GuidedSampler(cfg)
     return sampler.run(obs, cfg, callback=callback, cancel=ctx.cancelled)
 
 

@@ -445,13 +445,13 @@ class MainWindow(QtWidgets.QMainWindow):
         self.open_path(p, **item.get("kwargs", {}))
 
     # ------------------------------------------------------------------------------ drag and drop
-    def dragEnterEvent(self, ev: QtGui.QDragEnterEvent) -> None:  # noqa: N802 - Qt override
+    def dragEnterEvent(self, ev: QtGui.QDragEnterEvent) -> None:
         if ev.mimeData().hasUrls() and any(u.isLocalFile() for u in ev.mimeData().urls()):
             ev.acceptProposedAction()
         else:
             ev.ignore()
 
-    def dropEvent(self, ev: QtGui.QDropEvent) -> None:  # noqa: N802 - Qt override
+    def dropEvent(self, ev: QtGui.QDropEvent) -> None:
         files = [u.toLocalFile() for u in ev.mimeData().urls() if u.isLocalFile()]
         if files:
             ev.acceptProposedAction()
@@ -602,7 +602,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.settings.setValue("window/layout_version", LAYOUT_VERSION)
         self.settings.sync()
 
-    def closeEvent(self, ev: QtGui.QCloseEvent) -> None:  # noqa: N802 - Qt override
+    def closeEvent(self, ev: QtGui.QCloseEvent) -> None:
         self._closing = True
         self.save_settings()
         self.fps_timer.stop()

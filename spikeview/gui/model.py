@@ -25,7 +25,9 @@ from pathlib import Path
 from typing import Any
 
 from spikeview.errors import ParameterError
-from spikeview.guided.config import GuidedConfig  # plain dataclass, no torch: the defaults come from it
+from spikeview.guided.config import (
+    GuidedConfig,  # plain dataclass, no torch: the defaults come from it
+)
 
 _G = GuidedConfig()
 
@@ -212,7 +214,7 @@ class OpenedStream:
     source: Any
     label: str
     path: Path | None = None
-    reopen: Callable[..., "OpenedStream"] | None = None
+    reopen: Callable[..., OpenedStream] | None = None
     ground_truth: Callable[[int], Any] | None = None
     open_kwargs: dict[str, Any] = field(default_factory=dict)
 
@@ -427,7 +429,7 @@ class Session:
     def set_roi(self, roi: tuple[int, int, int, int] | None) -> None:
         """Set the region of interest ``(x, y, w, h)`` in pixels (clipped to the frame) or ``None``."""
         if roi is not None and self.source is not None:
-            x, y, w, h = (int(round(v)) for v in roi)
+            x, y, w, h = (round(v) for v in roi)
             W, H = self.source.width, self.source.height
             x0, y0 = min(max(x, 0), W - 1), min(max(y, 0), H - 1)
             x1, y1 = min(max(x + w, x0 + 1), W), min(max(y + h, y0 + 1), H)
@@ -507,9 +509,8 @@ class Session:
         if old == value:
             return
         self.params[name] = value
-        if record and SPECS[name].undoable:
-            if self.undo_stack.record(name, old, value, SPECS[name].label):
-                self._undo_changed()
+        if record and SPECS[name].undoable and self.undo_stack.record(name, old, value, SPECS[name].label):
+            self._undo_changed()
         self.events.param_changed.emit(name, value)
 
     def update_params(self, values: Mapping[str, Any], record: bool = True, strict: bool = True,

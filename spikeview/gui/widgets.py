@@ -74,14 +74,14 @@ class ImagePane(QtWidgets.QWidget):
             return 1
         try:
             px = self.vb.viewPixelSize()
-        except Exception:  # no view geometry yet (hidden): full resolution
+        except (TypeError, RuntimeError, ZeroDivisionError):  # no view geometry yet (hidden): full resolution
             return 1
         return max(1, int(min(px[0], px[1])))
 
     def image(self) -> np.ndarray | None:
         return self.item.image
 
-    def link(self, other: "ImagePane") -> None:
+    def link(self, other: ImagePane) -> None:
         self.vb.setXLink(other.vb)
         self.vb.setYLink(other.vb)
 
@@ -147,7 +147,7 @@ class ParamSlider(QtWidgets.QWidget):
         if self.is_int:
             return int(min(max(v, self.slider.minimum()), self.slider.maximum()))
         lo, hi = float(self.spec.minimum), float(self.spec.maximum)
-        return int(round((v - lo) / (hi - lo) * self.RESOLUTION))
+        return round((v - lo) / (hi - lo) * self.RESOLUTION)
 
     def _from_pos(self, p: int) -> float:
         if self.is_int:

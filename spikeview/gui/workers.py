@@ -67,14 +67,13 @@ class Worker(QtCore.QThread):
 
     Signals (delivered on the GUI thread):
         progress(channel, job_id, payload), finished(channel, job_id, result),
-        failed(channel, job_id, message), cancelled(channel, job_id), busy(bool).
+        failed(channel, job_id, message), cancelled(channel, job_id).
     """
 
     progress = QtCore.Signal(str, int, object)
     finished = QtCore.Signal(str, int, object)
     failed = QtCore.Signal(str, int, str)
     cancelled = QtCore.Signal(str, int)
-    busy = QtCore.Signal(bool)
 
     def __init__(self, name: str, priority: tuple[str, ...] = (), parent: QtCore.QObject | None = None,
                  *, nice: int = 0, torch_threads: int | None = None):
@@ -166,13 +165,12 @@ class Worker(QtCore.QThread):
 
             torch.set_num_threads(self.torch_threads)
 
-    def run(self) -> None:  # noqa: D401 - QThread entry point
+    def run(self) -> None:
         self._lower_priority()
         while True:
             job = self._next_job()
             if job is None:
                 return
-            self.busy.emit(True)
             ctx = JobContext(job.job_id, job.channel, job.cancelled, self.state,
                              lambda p, j=job: self.progress.emit(j.channel, j.job_id, p))
             outcome: tuple[str, Any]
@@ -184,7 +182,7 @@ class Worker(QtCore.QThread):
                 outcome = ("failed", str(e))
             except MemoryError:
                 outcome = ("failed", "Out of memory: use a smaller region (ROI) or a shorter range.")
-            except Exception as e:  # never let a bug kill the thread or the window
+            except Exception as e:  # noqa: BLE001 - a bug must not kill the thread or the window: report it
                 traceback.print_exc(file=sys.stderr)
                 outcome = ("failed", f"Unexpected {type(e).__name__}: {e} (this is a bug; please report it with the terminal output).")
             else:
@@ -192,7 +190,6 @@ class Worker(QtCore.QThread):
             # the job is over before anyone hears about it: a receiver may submit the next one at once
             with self._cond:
                 self._running = None
-                idle = not self._pending
             kind, payload = outcome
             if kind == "finished":
                 self.finished.emit(job.channel, job.job_id, payload)
@@ -200,5 +197,3 @@ class Worker(QtCore.QThread):
                 self.failed.emit(job.channel, job.job_id, payload)
             else:
                 self.cancelled.emit(job.channel, job.job_id)
-            if idle:
-                self.busy.emit(False)

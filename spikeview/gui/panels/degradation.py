@@ -13,7 +13,13 @@ from PySide6 import QtWidgets
 
 from spikeview.gui.core import RESIDUAL_RANGE
 from spikeview.gui.model import Session
-from spikeview.gui.widgets import ImagePane, ParamCheck, ParamSlider, ParamSpin, subscribe
+from spikeview.gui.widgets import (
+    ImagePane,
+    ParamCheck,
+    ParamSlider,
+    ParamSpin,
+    subscribe,
+)
 
 TITLES = {
     "x": "X (reconstruction)",

@@ -8,6 +8,7 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
+from spikeview.errors import SpikeviewError
 from spikeview.gui import jobs
 from spikeview.gui.model import Session
 from spikeview.gui.widgets import ParamCombo, ParamSpin, form, subscribe
@@ -154,7 +155,7 @@ class ExportPanel(QtWidgets.QWidget):
 
             factor = slow_motion_factor(s.tick_rate, max(1, int(s.get("window"))), float(s.get("export_fps")))
             self.slowmo.setText(describe_slow_motion(factor) + (" — for MP4" if fmt != "mp4" else ""))
-        except Exception as e:  # a note only; the export itself reports real errors
+        except SpikeviewError as e:  # a note only; the export itself reports real errors
             self.slowmo.setText(str(e))
         if self._auto_name:
             self.path.setText(str(self.folder / suggested_name(self.stem(), fmt, n)))

@@ -10,7 +10,14 @@ import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from spikeview.gui.model import Session
-from spikeview.gui.widgets import ImagePane, ParamCombo, ParamSlider, ParamSpin, form, subscribe
+from spikeview.gui.widgets import (
+    ImagePane,
+    ParamCombo,
+    ParamSlider,
+    ParamSpin,
+    form,
+    subscribe,
+)
 
 #: the live preview is redrawn at most this often during a run (ms)
 DRAW_INTERVAL_MS = 100

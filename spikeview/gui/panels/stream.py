@@ -8,7 +8,15 @@ import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from spikeview.gui.model import Session, format_us
-from spikeview.gui.widgets import ImagePane, ParamCheck, ParamCombo, ParamSlider, ParamSpin, subscribe, tool_button
+from spikeview.gui.widgets import (
+    ImagePane,
+    ParamCheck,
+    ParamCombo,
+    ParamSlider,
+    ParamSpin,
+    subscribe,
+    tool_button,
+)
 
 SPEED_TEXT = {"realtime": "Real time", "slowmo": "Slow motion ×1/N", "window": "Every window"}
 
@@ -22,7 +30,7 @@ class ScrubBar(QtWidgets.QSlider):
         self.setObjectName("scrub")
         self.setToolTip("Scrub through the stream (ticks); Home/End jump to the ends, ←/→ step one tick")
 
-    def paintEvent(self, ev: QtGui.QPaintEvent) -> None:  # noqa: N802 - Qt override
+    def paintEvent(self, ev: QtGui.QPaintEvent) -> None:
         lo, hi = self.marks
         if (lo is not None or hi is not None) and self.maximum() > self.minimum():
             p = QtGui.QPainter(self)
