@@ -164,6 +164,37 @@ def _warm_start(size: int, quick: bool):
     return out, speed
 
 
+def timing_section(obs, repeats: int = 5) -> list[str]:
+    """Markdown lines: repeated timing (min and median of ``repeats`` runs after a warm-up) of the
+    baseline, the default guided sampler and DPS with the same steps, on one window, in one process."""
+    from spikeview.guided.baseline import baseline
+    from spikeview.guided.config import GuidedConfig
+    from spikeview.guided.sampler import GuidedSampler, load_prior
+
+    prior = load_prior(GuidedConfig(), 3)
+    smp = GuidedSampler(prior=prior)
+    d = GuidedConfig()
+    runs = {
+        "baseline σ×2.5 (one FFDNet pass)": lambda: baseline(obs, prior, sigma_scale=2.5),
+        f"guided default (HQS, {d.steps} steps)": lambda: smp.run(obs, GuidedConfig(eta=1.0, diffusion="always")),
+        f"guided DPS ({d.steps} steps)": lambda: smp.run(obs, GuidedConfig(eta=1.0, guidance="dps", diffusion="always")),
+    }
+    med = {}
+    lines = ["", f"## Repeated timing (one {obs.shape[0]}×{obs.shape[1]} window, {repeats} runs after a warm-up, same process)", "",
+             "| method | min s | median s | median / baseline | load average |", "|---|---|---|---|---|"]
+    for name, fn in runs.items():
+        fn()
+        ts = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            fn()
+            ts.append(time.perf_counter() - t0)
+        med[name] = statistics.median(ts)
+        ratio = med[name] / next(iter(med.values()))
+        lines.append(f"| {name} | {min(ts):.2f} | {med[name]:.2f} | {ratio:.1f}× | {os.getloadavg()[0]:.1f} |")
+    return lines
+
+
 def pareto(points: list[tuple[float, float]]) -> list[int]:
     """Indices of the points not dominated in (lower seconds, higher PSNR)."""
     idx = []
@@ -208,17 +239,18 @@ def run_benchmark(out_dir: str | os.PathLike[str] | None = "benchmarks/results",
         log(f"{name:45s} PSNR {row['psnr']:.2f}  SSIM {row['ssim']:.3f}  {row['seconds']:.2f} s/frame", flush=True)
     sweeps = _sweeps((obs[0], cases[0]), quick)
     warm, speed = _warm_start(size, quick)
+    timing = timing_section(obs[-1], 2 if quick else 5)
     for k, v in warm.items():
         log(f"{k}: PSNR {v[0]:.2f} dB, {v[1]:.2f} s/frame")
     if out_dir is not None:
         import json
 
-        _write(Path(out_dir), rows, sweeps, warm, speed, cases, size)
+        _write(Path(out_dir), rows, sweeps, warm, speed, cases, size, timing)
         (Path(out_dir) / "guided.json").write_text(json.dumps(dict(rows=rows, sweeps=sweeps, warm=warm), indent=1), encoding="utf-8")
     return rows
 
 
-def _write(out: Path, rows, sweeps, warm, speed, cases, size) -> None:
+def _write(out: Path, rows, sweeps, warm, speed, cases, size, timing=()) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -281,6 +313,7 @@ def _write(out: Path, rows, sweeps, warm, speed, cases, size) -> None:
               "| variant | mean PSNR of windows 2… | s/frame |", "|---|---|---|"]
     for k, (p, t) in warm.items():
         lines.append(f"| {k} | {p:.2f} | {t:.2f} |")
+    lines += list(timing)
     (out / "guided.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
 
     fig, ax = plt.subplots(figsize=(8, 5.5))

@@ -223,3 +223,25 @@ def test_sequence_resamples_only_the_changed_region():
         box[16 * r:16 * (r + 1), 16 * c:16 * (c + 1)] = True
     np.testing.assert_array_equal(f1[~box], f0[~box])
     assert np.abs(f1[:16, :16] - f0[:16, :16]).mean() > 0.05  # the changed block got brighter
+
+
+def test_prior_sd_runs_the_latent_sampler_through_the_same_driver(tmp_path):
+    # a tiny randomly initialised SD-style model (the SD backend's test configs); no weights downloaded
+    pytest.importorskip("diffusers")
+    from test_sd_backend import _tiny_modules
+
+    from spikeview.guided.priors.sd import LatentDiffusionPrior
+
+    unet, vae, sched = _tiny_modules()
+    for name, part in (("unet", unet), ("vae", vae), ("scheduler", sched)):
+        part.save_pretrained(tmp_path / name)
+    latent = LatentDiffusionPrior.from_pretrained(tmp_path, device="cpu")
+    obs = _obs(h=16, w=24)  # latent 2x3: the tiny UNet needs more than one latent pixel after downsampling
+    p = GuidedConfig(prior="sd", guidance="dps", steps=2, t_start=40 / 255, diffusion="always", eta=1.0)
+    seen = []
+    smp = GuidedSampler(p, prior=latent)
+    out = smp.run(obs, p, callback=lambda i, n, img: seen.append((i, n)))
+    assert out.shape == (16, 24, 3) and np.isfinite(out).all() and 0 <= out.min() and out.max() <= 1
+    assert seen == [(1, 2), (2, 2)] and smp.info.mode == "diffusion"
+    with pytest.raises(ParameterError, match="dps"):
+        smp.run(obs, p.replace(guidance="hqs"))

@@ -32,6 +32,8 @@ class ImagePane(QtWidgets.QWidget):
         self.title = QtWidgets.QLabel(title)
         self.title.setObjectName("paneTitle")
         self.title.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+        # a new title (tick, step…) must not re-layout the panel: its size does not follow the text
+        self.title.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored, QtWidgets.QSizePolicy.Policy.Fixed)
         self.view = pg.GraphicsView()
         self.view.setBackground(pg.mkColor(24, 24, 24))
         self.vb = pg.ViewBox(lockAspect=True, invertY=True, enableMenu=False)

@@ -202,6 +202,3 @@ class Observation:
         """``(H, W)`` float32 per-photosite variance of ``y`` (SFR² units): κ_c × binomial model."""
         kappa = self.noise_scale()
         return (binomial_variance(self.y, self.window) * kappa[self.channel_map()]).astype(np.float32)
-
-    def previous_window(self) -> "Observation | None":
-        return self.previous

@@ -112,6 +112,8 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
             box = _crop_box(plan.changed, obs.shape)
             if box is not None:
                 out = _resample_region(smp, obs, p, box, prev, cb, cancel, init)
+                if out is not None:
+                    smp.info.plan = plan  # report the frame's plan (with its changed blocks)
         if out is None:
             out = smp.run(obs, p, cb, cancel, init=init, previous=prev, plan=plan)
         if infos is not None:
@@ -121,7 +123,7 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
 
 
 def _resample_region(smp: GuidedSampler, obs: Observation, p: GuidedConfig, box: tuple[int, int, int, int],
-                     prev: np.ndarray, cb: Any, cancel: Any, init: np.ndarray | None) -> np.ndarray:
+                     prev: np.ndarray, cb: Any, cancel: Any, init: np.ndarray | None) -> np.ndarray | None:
     """Sample only the changed box (plus margin) and paste it into the previous result."""
     y0, y1, x0, x1 = box
     h, w = obs.shape
@@ -129,7 +131,7 @@ def _resample_region(smp: GuidedSampler, obs: Observation, p: GuidedConfig, box:
     cy0, cx0 = max(0, y0 - MARGIN) & ~1, max(0, x0 - MARGIN) & ~1
     cy1, cx1 = min(h, y1 + MARGIN), min(w, x1 + MARGIN)
     if cy1 - cy0 < 8 or cx1 - cx0 < 8:
-        return None  # type: ignore[return-value]
+        return None
     sub = _crop_obs(obs, cy0, cy1, cx0, cx1)
     sub_plan = make_plan(sub, p.replace(reuse=False))
     sub_plan.sigma = make_plan(obs, p.replace(reuse=False)).sigma  # noise of the whole frame (more samples)

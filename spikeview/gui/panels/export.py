@@ -105,6 +105,7 @@ class ExportPanel(QtWidgets.QWidget):
         subscribe(self, ev.marks_changed, lambda *_: self.refresh())
         subscribe(self, ev.source_changed, self._on_source)
         subscribe(self, ev.tick_changed, self._on_tick)
+        subscribe(self, ev.playback_changed, lambda playing: None if playing else self.refresh())
         self._auto_name = True
         self.path.textEdited.connect(self._edited)
         self._on_source()
@@ -120,7 +121,8 @@ class ExportPanel(QtWidgets.QWidget):
         self.refresh()
 
     def _on_tick(self, _tick: int) -> None:
-        if self.session.get("export_range") == "frame":
+        # the suggested name follows the tick; not at the display rate during playback (on pause)
+        if self.session.get("export_range") == "frame" and not self.session.playing:
             self.refresh()
 
     def ticks(self) -> tuple[int, ...]:
