@@ -117,12 +117,37 @@ def run_app(args: argparse.Namespace) -> int:
     return _run(args.input)
 
 
+# ---------------------------------------------------------------------------------- bench
+def add_bench_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quick", action="store_true", help="64x64, 2 scenes, fewer steps: a smoke run (minutes, not written unless --out)")
+    p.add_argument("--size", type=int, help="frame size of the synthetic set (default 256)")
+    p.add_argument("--frames", type=int, default=2, help="windows per scene (default 2)")
+    p.add_argument("--out", metavar="DIR", help="folder for guided.md, guided.json and guided_pareto.png (default benchmarks/results)")
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    from spikeview.bench.guided import main as bench_main
+
+    argv = ["--frames", str(args.frames)]
+    if args.quick:
+        argv.append("--quick")
+    if args.size:
+        argv += ["--size", str(args.size)]
+    if args.out:
+        if not Path(args.out).is_dir():
+            raise ParameterError(f"--out {args.out}: folder not found; create it first.")
+        argv += ["--out", args.out]
+    return bench_main(argv)
+
+
 COMMANDS = {
     "app": ("open the desktop app (the default when no command is given)", add_app_args, run_app),
     "info": ("describe a spike file: format, geometry, duration, per-channel firing rates", add_info_args, run_info),
     "simulate": ("simulate a chromatic spike capture (with ground truth) from a video, images or the demo scene",
                  add_simulate_args, run_simulate),
     "reconstruct": ("reconstruct frames from spikes and export them (.npy, .exr, .png, .mp4)", add_reconstruct_args, run_reconstruct),
+    "bench": ("error against run time of TFP, TFI, the strong baseline and the guided sampler (PSNR/SSIM vs. ground truth)",
+              add_bench_args, run_bench),
 }
 
 EPILOGS = {

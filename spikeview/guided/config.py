@@ -12,7 +12,7 @@ c by ``eta / alpha_c``; the CLI's ``--eta``), **not** DDIM's stochasticity, whic
 (DiffPIR's name for the mix of predicted and fresh noise when re-noising).
 
 Defaults were tuned on simulated 10-tick windows (realistic noise, known calibration) of the
-tuning scenes of ``benchmarks/guided_data.py`` and checked on held-out scenes
+tuning scenes of ``spikeview/bench/data.py`` and checked on held-out scenes
 (``benchmarks/results/guided.md``): HQS in DPIR form (no re-noising), 6 steps from 50/255 to
 5/255, λ = 1.5, prior told 1.5 × the data-derived noise, signal-dependent noise weights, the
 dense-gradient mosaic, per-step self-ensemble. Q and the pyramid are **off** by default because

@@ -145,7 +145,7 @@ class LatentConfig(Config):
             ddim_eta=cfg.zeta,
             seed=cfg.seed,
             k=cfg.k,
-            levels=cfg.levels,
+            levels=cfg.levels + 1,  # GuidedConfig counts band-pass levels; here bands (L + 1)
             dense_gradient=cfg.dense_gradient,
             cast=getattr(cfg, "use_cast", None) is not False,
         )
