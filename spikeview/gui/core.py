@@ -551,6 +551,41 @@ def degradation_chain(x_img: np.ndarray, y_mosaic: np.ndarray, cfa: str | None, 
 # ------------------------------------------------------------------------------- metrics
 
 
+def align_ground_truth(gt: np.ndarray, y: np.ndarray, cfa: str | None, alpha: np.ndarray | None,
+                       eta: float) -> np.ndarray:
+    """Express the simulator's linear ground truth in the reconstruction's colour normalisation.
+
+    Reconstructions are gray-world corrected (``Y·α/η``), so their per-channel scale differs from
+    the scene's linear RGB by the unknown sensor gain. Each channel of ``gt`` is scaled by the
+    least-squares gain that maps it onto the corrected observation ``y·α_c/η`` at that channel's
+    photosites (one gain per channel, the same for every method and step of a run), then clipped
+    to [0, 1]. Without this, PSNR measures the colour normalisation rather than the reconstruction.
+
+    Args:
+        gt: ``(H, W, 3)`` or ``(H, W)`` float32 linear ground truth.
+        y: ``(H, W)`` mosaicked TFP of the same window.
+        cfa, alpha, eta: the observation's CFA, gains and range parameter.
+    """
+    from spikeview.cfa import channel_map
+
+    gt = np.asarray(gt, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    out = np.empty_like(gt)
+    if gt.ndim == 2 or cfa is None:
+        g = gt if gt.ndim == 2 else gt.mean(axis=-1)
+        gain = float((y * g).sum() / max((g * g).sum(), 1e-12))
+        return np.clip(gt * gain, 0, 1).astype(np.float32)
+    cmap = channel_map(cfa, *y.shape)
+    scale = np.ones(3) if alpha is None else np.asarray(alpha, dtype=np.float64) / eta
+    for c in range(3):
+        m = cmap == c
+        obs_c = y[m] * scale[c]
+        g_c = gt[..., c][m]
+        gain = float((obs_c * g_c).sum() / max((g_c * g_c).sum(), 1e-12))
+        out[..., c] = gt[..., c] * gain
+    return np.clip(out, 0, 1).astype(np.float32)
+
+
 def psnr_ssim(x: np.ndarray, gt: np.ndarray) -> tuple[float, float]:
     """PSNR (dB) and SSIM of ``x`` against ``gt``, float images in [0, 1] (``data_range = 1``).
 

@@ -178,6 +178,8 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     if req.ground_truth is not None:
         g = np.asarray(req.ground_truth(req.tick), dtype=np.float32)
         gt, _ = core.crop_roi(g, req.roi)
+        if gt.shape[:2] == obs.y.shape:
+            gt = core.align_ground_truth(gt, obs.y, obs.cfa, obs.alpha, obs.eta)
     t0 = time.perf_counter()
     last: dict[str, Any] = {}
 
