@@ -8,6 +8,7 @@ omission). ``Config.from_dict`` rejects unknown keys and wrong types with a sent
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import tomllib
 import types
@@ -146,3 +147,12 @@ def load_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise InputFileError(f"{path}: not valid TOML ({e}); fix or delete the file.") from None
     except UnicodeDecodeError:
         raise InputFileError(f"{path}: not a text TOML file; point to a settings file written by spikeview.") from None
+
+
+def check_range(name: str, value: float, lo: float, hi: float, *, lo_open: bool = False) -> None:
+    """Raise :class:`ParameterError` unless ``lo <= value <= hi`` (``lo < value`` when ``lo_open``), finite."""
+    bad = not math.isfinite(value) or value > hi or (value <= lo if lo_open else value < lo)
+    if bad:
+        lo_s = f"> {lo:g}" if lo_open else f">= {lo:g}"
+        hi_s = "" if math.isinf(hi) else f" and <= {hi:g}"
+        raise ParameterError(f"{name} = {value!r} is out of range: use a number {lo_s}{hi_s}.")

@@ -247,7 +247,8 @@ def test_guided_config_maps_onto_the_latent_sampler():
     g = GuidedConfig(prior="sd", guidance="dps", model_path="/m", steps=12, t_start=40 / 255, s=0.7, zeta=0.25, seed=3, k=20.0,
                      levels=2, dense_gradient=False, use_cast=False)
     cfg = LatentConfig.coerce(g)
-    assert (cfg.model_path, cfg.steps, cfg.s, cfg.ddim_eta, cfg.seed, cfg.k, cfg.levels) == ("/m", 12, 0.7, 0.25, 3, 20.0, 2)
+    # GuidedConfig.levels counts band-pass levels (L = 2 → 3 bands); LatentConfig.levels counts bands
+    assert (cfg.model_path, cfg.steps, cfg.s, cfg.ddim_eta, cfg.seed, cfg.k, cfg.levels) == ("/m", 12, 0.7, 0.25, 3, 20.0, 3)
     assert cfg.sigma_start == pytest.approx(40 / 255)
     assert cfg.dense_gradient is False and cfg.cast is False
     with pytest.raises(ParameterError, match='guidance = "dps"'):

@@ -31,8 +31,7 @@ Names are imported lazily: ``import spikeview.guided`` does not load torch.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from spikeview._lazy import lazy_exports
 
 _EXPORTS = {
     "GuidedConfig": "spikeview.guided.config",
@@ -54,7 +53,4 @@ _EXPORTS = {
 __all__ = list(_EXPORTS)
 
 
-def __getattr__(name: str) -> Any:
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module 'spikeview.guided' has no attribute {name!r}")
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

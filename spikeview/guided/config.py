@@ -25,7 +25,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from spikeview.config import Config
+from spikeview.config import Config, check_range
 from spikeview.errors import ParameterError
 
 PRIORS = ("ffdnet", "sd")
@@ -39,11 +39,7 @@ SIGMA_MAX = 75.0 / 255.0
 
 
 def _check_range(name: str, value: float, lo: float, hi: float, *, lo_open: bool = False) -> None:
-    bad = not math.isfinite(value) or value > hi or (value <= lo if lo_open else value < lo)
-    if bad:
-        lo_s = f"> {lo:g}" if lo_open else f">= {lo:g}"
-        hi_s = "" if math.isinf(hi) else f" and <= {hi:g}"
-        raise ParameterError(f"GuidedConfig.{name} = {value!r} is out of range: use a number {lo_s}{hi_s}.")
+    check_range(f"GuidedConfig.{name}", value, lo, hi, lo_open=lo_open)
 
 
 def _check_choice(name: str, value: str, choices: tuple[str, ...]) -> None:

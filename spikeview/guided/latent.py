@@ -36,7 +36,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from spikeview.config import Config
+from spikeview.config import Config, check_range
 from spikeview.errors import Cancelled, ParameterError
 from spikeview.guided.schedule import StepOutput
 
@@ -46,11 +46,7 @@ Callback = Callable[[int, int, np.ndarray], None]
 
 
 def _check_range(name: str, value: float, lo: float, hi: float, *, lo_open: bool = False) -> None:
-    bad = not math.isfinite(value) or value > hi or (value <= lo if lo_open else value < lo)
-    if bad:
-        lo_s = f"> {lo:g}" if lo_open else f">= {lo:g}"
-        hi_s = "" if math.isinf(hi) else f" and <= {hi:g}"
-        raise ParameterError(f"LatentConfig.{name} = {value!r} is out of range: use a number {lo_s}{hi_s}.")
+    check_range(f"LatentConfig.{name}", value, lo, hi, lo_open=lo_open)
 
 
 @dataclasses.dataclass

@@ -15,8 +15,7 @@ Names are imported lazily, so ``import spikeview.sim`` does not load numba, PyAV
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from spikeview._lazy import lazy_exports
 
 _EXPORTS = {
     "SimConfig": "spikeview.sim.config",
@@ -48,14 +47,4 @@ _EXPORTS = {
 __all__ = list(_EXPORTS)
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'spikeview.sim' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
