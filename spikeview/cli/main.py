@@ -37,6 +37,8 @@ def _add_geometry_flags(p: argparse.ArgumentParser) -> None:
                    help="columns are stored mirrored")
     g.add_argument("--tick-rate", type=float, help="readouts per second (default 20000)")
     g.add_argument("--layout", choices=["thw", "hwt"], help="axis order of .npy/.npz arrays")
+    g.add_argument("--tag-check", choices=["sequence", "lenient"],
+                   help="raw 1000x1000 streams: match the full tag sequence (default) or only the frame-start tag and valid line numbers")
 
 
 def _open_from_args(args: argparse.Namespace):
@@ -44,7 +46,7 @@ def _open_from_args(args: argparse.Namespace):
 
     kwargs = dict(format=args.format, width=args.width, height=args.height,
                   flip_vertical=args.flip_vertical, flip_horizontal=args.flip_horizontal,
-                  tick_rate=args.tick_rate, layout=args.layout)
+                  tick_rate=args.tick_rate, layout=args.layout, tag_check=args.tag_check)
     if args.cfa is not None:
         kwargs["cfa"] = args.cfa
     return open_source(args.input, **kwargs)

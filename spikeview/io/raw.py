@@ -421,7 +421,7 @@ class Raw1MSource(PackedFileSource):
         offsets, stats = scan_raw1m(buf, tag_check=tag_check)
         if offsets.size == 0:
             raise InputFileError(f"{path}: no complete raw 1000x1000 frame found (no run of 2000 blocks tagged from "
-                                 f"channel 0 line 500); check --format, or try tag_check='lenient'.")
+                                 f"channel 0 line 500); check --format, or try --tag-check lenient (tag_check='lenient').")
         self._buf = buf
         self._offsets = offsets
         self._row_bytes, self._n_rows = RAW1M_ROW_BYTES, RAW1M_HEIGHT
