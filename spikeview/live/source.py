@@ -25,6 +25,8 @@ implement ``_open``, ``_next`` and ``_close_device``; see :class:`LiveSource`.
 
 from __future__ import annotations
 
+from abc import abstractmethod
+
 import enum
 import os
 import threading
@@ -157,9 +159,9 @@ class LiveSource(SpikeSource):
     def _open(self) -> None:
         """Open the device (raise :class:`LiveFailure` on failure)."""
 
+    @abstractmethod
     def _next(self) -> np.ndarray:
-        """Next packed frames ``(n, frame_bytes)``; may block up to a device timeout."""
-        raise NotImplementedError
+        """Next packed frames ``(n, frame_bytes)``; may block up to a device timeout (every camera implements it)."""
 
     def _close_device(self) -> None:
         """Release the device."""
