@@ -73,7 +73,7 @@ def add_reconstruct_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="OUT",
                    help="output: .npy, .mp4, or an .exr/.png pattern with a frame number such as frame_%%04d.exr")
     p.add_argument("--demosaic", default=None, choices=["bilinear", "malvar2004"],
-                   help="demosaicking method for Bayer streams (default malvar2004; bilinear for the guided start estimate)")
+                   help="demosaicking method for Bayer streams (default malvar2004, also for the guided start estimate)")
     p.add_argument("--colour-cast", action=argparse.BooleanOptionalAction, default=True,
                    help="correct the sensor's colour cast with a gray-world estimate over the whole sequence")
     p.add_argument("--eta", type=float, default=None, help="range parameter of the colour-cast correction (X = Y*alpha/eta)")

@@ -12,7 +12,7 @@ Parts (diffusers style, each swappable):
 
 1. plan the window (:func:`~spikeview.guided.plan.make_plan`); a window that needs no diffusion
    returns the one-pass baseline or TFP, one whose counts did not change returns the previous result;
-2. ``Y₀`` = bilinear-demosaicked, colour-corrected TFP; σ_obs,c = its data-derived noise per
+2. ``Y₀`` = demosaicked (``params.demosaic``), colour-corrected TFP; σ_obs,c = its data-derived noise per
    channel (× ``sigma_scale``);
 3. start: ``Z = Y₀ + σ_add·z`` with ``σ_add = t_start`` (or the top-up ``sqrt(t_start² − σ_obs²)``),
    the prior told the total ``σ'_c = sqrt(σ_obs,c² + σ_add,c²)`` (capped at the prior's
