@@ -119,10 +119,9 @@ class Config:
         """Write as TOML atomically (temporary name, then rename)."""
         path = Path(path)
         text = self.to_toml()
-        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-        return path
+        from spikeview._files import write_atomic
+
+        return write_atomic(path, text, "the settings")
 
     @classmethod
     def load(cls: type[C], path: str | os.PathLike[str], table: str | None = None) -> C:

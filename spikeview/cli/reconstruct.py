@@ -154,7 +154,6 @@ def _write_preset(out: Path, args: argparse.Namespace, src, run_cfg: RunConfig, 
     for name, cfg in tables.items():
         data[name] = cfg.to_dict()
     path = preset_path(out)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(f"# spikeview reconstruct preset for {info.path}\n" + tomli_w.dumps(data), encoding="utf-8")
-    tmp.replace(path)
-    return path
+    from spikeview._files import write_atomic
+
+    return write_atomic(path, f"# spikeview reconstruct preset for {info.path}\n" + tomli_w.dumps(data), "the preset")

@@ -86,16 +86,9 @@ def save_preset(session: Session, path: str | os.PathLike[str]) -> Path:
     path = Path(path)
     text = "# spikeview parameter preset (read by the app and by `spikeview reconstruct --preset`)\n"
     text += tomli_w.dumps(preset_dict(session))
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    except OSError as e:
-        tmp.unlink(missing_ok=True)
-        from spikeview.errors import OutputFileError
+    from spikeview._files import write_atomic
 
-        raise OutputFileError(f"{path}: cannot write the preset ({e.strerror}); choose a folder you can write to.") from None
-    return path
+    return write_atomic(path, text, "the preset", "choose a folder you can write to")
 
 
 def params_from_preset(data: dict[str, Any], where: str = "preset") -> dict[str, Any]:

@@ -558,47 +558,34 @@ class Raw1MDecoder:
         return self.stats
 
 
+def _write_raw(path: str | os.PathLike[str], data: bytes, fmt: str, width: int, height: int, frame_bytes: int, *,
+               flip_vertical: bool, flip_horizontal: bool, cfa: str | None, tick_rate: float, sidecar: bool) -> Path:
+    from spikeview._files import write_atomic
+    from spikeview.io.sidecar import write_sidecar
+
+    path = Path(path)
+    write_atomic(path, data)
+    if sidecar:
+        info = StreamInfo(width=width, height=height, n_frames=len(data) // frame_bytes,
+                          tick_rate=check_tick_rate(tick_rate), cfa=cfa, format=fmt,
+                          flip_vertical=flip_vertical, flip_horizontal=flip_horizontal, path=path)
+        write_sidecar(path, info)
+    return path
+
+
 def write_raw1m(path: str | os.PathLike[str], frames: np.ndarray, *, flip_vertical: bool = False,
                 flip_horizontal: bool = False, cfa: str | None = None, tick_rate: float = DEFAULT_TICK_RATE,
                 sidecar: bool = True) -> Path:
     """Write ``(T, 1000, 1000)`` frames as a raw 1000×1000 file (with its sidecar); mainly for tests and mocks."""
-    from spikeview.io.sidecar import write_sidecar
-
-    path = Path(path)
     data = encode_raw1m(frames, flip_vertical=flip_vertical, flip_horizontal=flip_horizontal)
-    _atomic_write_bytes(path, data)
-    if sidecar:
-        info = StreamInfo(width=RAW1M_WIDTH, height=RAW1M_HEIGHT, n_frames=len(data) // RAW1M_FRAME_BYTES,
-                          tick_rate=check_tick_rate(tick_rate), cfa=cfa, format="raw1m",
-                          flip_vertical=flip_vertical, flip_horizontal=flip_horizontal, path=path)
-        write_sidecar(path, info)
-    return path
+    return _write_raw(path, data, "raw1m", RAW1M_WIDTH, RAW1M_HEIGHT, RAW1M_FRAME_BYTES, flip_vertical=flip_vertical,
+                      flip_horizontal=flip_horizontal, cfa=cfa, tick_rate=tick_rate, sidecar=sidecar)
 
 
 def write_raw400(path: str | os.PathLike[str], frames: np.ndarray, *, flip_vertical: bool = True,
                  flip_horizontal: bool = False, cfa: str | None = None, tick_rate: float = DEFAULT_TICK_RATE,
                  sidecar: bool = True) -> Path:
     """Write ``(T, 250, 400)`` frames as a raw 400×250 file (with its sidecar); mainly for tests and mocks."""
-    from spikeview.io.sidecar import write_sidecar
-
-    path = Path(path)
     data = encode_raw400(frames, flip_vertical=flip_vertical, flip_horizontal=flip_horizontal)
-    _atomic_write_bytes(path, data)
-    if sidecar:
-        info = StreamInfo(width=RAW400_WIDTH, height=RAW400_HEIGHT, n_frames=len(data) // RAW400_FRAME_BYTES,
-                          tick_rate=check_tick_rate(tick_rate), cfa=cfa, format="raw400",
-                          flip_vertical=flip_vertical, flip_horizontal=flip_horizontal, path=path)
-        write_sidecar(path, info)
-    return path
-
-
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    from spikeview.errors import OutputFileError
-
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    except OSError as e:
-        tmp.unlink(missing_ok=True)
-        raise OutputFileError(f"{path}: cannot write ({e.strerror or e}); check the folder exists and is writable.") from None
+    return _write_raw(path, data, "raw400", RAW400_WIDTH, RAW400_HEIGHT, RAW400_FRAME_BYTES, flip_vertical=flip_vertical,
+                      flip_horizontal=flip_horizontal, cfa=cfa, tick_rate=tick_rate, sidecar=sidecar)

@@ -30,7 +30,7 @@ from typing import Any
 
 from spikeview.cfa import cfa_to_str, parse_cfa
 from spikeview.config import Config, load_toml
-from spikeview.errors import InputFileError, OutputFileError, ParameterError, SpikeviewError
+from spikeview.errors import InputFileError, ParameterError, SpikeviewError
 from spikeview.io.source import DEFAULT_TICK_RATE, FORMATS, StreamInfo
 
 SIDECAR_SUFFIX = ".toml"
@@ -142,14 +142,9 @@ def write_sidecar(path: str | os.PathLike[str], info: StreamInfo | StreamSetting
         text = tomli_w.dumps(doc)
     except TypeError as e:
         raise ParameterError(f"a sidecar table holds a value TOML cannot store ({e}); use numbers, strings, lists or tables.") from None
-    tmp = side.with_name(f".{side.name}.tmp{os.getpid()}")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, side)
-    except OSError as e:
-        tmp.unlink(missing_ok=True)
-        raise OutputFileError(f"{side}: cannot write the sidecar ({e.strerror}); check the folder exists and is writable.") from None
-    return side
+    from spikeview._files import write_atomic
+
+    return write_atomic(side, text, "the sidecar")
 
 
 def _toml_ready(value: Any) -> Any:
