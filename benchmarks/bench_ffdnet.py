@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
         g = torch.Generator().manual_seed(size)
         x = torch.rand(1, 3, size, size, generator=g)
         y = torch.rand(1, 1, size, size, generator=g)
-        fm = ForwardModel("RGGB", 10, alpha=(2.0, 1.0, 2.5), eta=2.0, k=50.0, dense_grad=True, levels=3)
+        fm = ForwardModel("RGGB", 10, alpha=(2.0, 1.0, 2.5), eta=2.0, k=50.0, dense_grad=True, bands=3)
         sigma = torch.tensor([25 / 255])
 
         def fwd(x=x):

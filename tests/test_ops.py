@@ -61,7 +61,7 @@ def _cases() -> list[Case]:
             Case(f"ForwardModel-{cfa}", ops.ForwardModel(cfa, 10, alpha=alpha, eta=0.5, k=50.0, dense_grad=False), 3),
             Case(
                 f"ForwardModel.loss-{cfa}",
-                lambda x, c=cfa: ops.ForwardModel(c, 10, alpha=alpha, k=50.0, dense_grad=False, levels=2).loss(
+                lambda x, c=cfa: ops.ForwardModel(c, 10, alpha=alpha, k=50.0, dense_grad=False, bands=2).loss(
                     x, torch.full((x.shape[0], 1) + x.shape[-2:], 0.3, dtype=x.dtype)
                 ),
                 3,
@@ -179,7 +179,7 @@ def test_bad_settings_raise_parameter_error():
         ops.colour_cast(x, torch.ones(3), eta=0.0)
     with pytest.raises(ParameterError, match="k "):
         ops.soft_quantise(x, 10, -1.0)
-    with pytest.raises(ParameterError, match="levels"):
+    with pytest.raises(ParameterError, match="window"):
         ops.soft_quantise(x, 0, 1.0)
     with pytest.raises(ParameterError, match="weights"):
         ops.multiscale_loss(x, x, 2, (1.0,))
@@ -335,7 +335,7 @@ def test_soft_quantise_k50_jump_at_cell_boundary_is_documented_size():
 
 @pytest.mark.parametrize("size", [(8, 8), (7, 9), (13, 5), (1, 1), (2, 3)], ids=lambda s: f"{s[0]}x{s[1]}")
 def test_pyramid_shapes_synthesis_and_constants(size):
-    top = ops.max_pyramid_levels(*size)
+    top = ops.max_pyramid_bands(*size)
     x = _rand((2, 3) + size, 9)
     bands = ops.laplacian_pyramid(x, top)
     h, w = size
@@ -351,9 +351,9 @@ def test_pyramid_shapes_synthesis_and_constants(size):
 
 
 def test_pyramid_levels_validated_with_the_maximum():
-    assert ops.max_pyramid_levels(8, 8) == 4  # 8 → 4 → 2 → 1
-    assert ops.max_pyramid_levels(7, 100) == 4  # 7 → 4 → 2 → 1
-    assert ops.max_pyramid_levels(1, 9) == 1
+    assert ops.max_pyramid_bands(8, 8) == 4  # 8 → 4 → 2 → 1
+    assert ops.max_pyramid_bands(7, 100) == 4  # 7 → 4 → 2 → 1
+    assert ops.max_pyramid_bands(1, 9) == 1
     with pytest.raises(ParameterError, match="at most 4"):
         ops.laplacian_pyramid(torch.zeros(1, 3, 8, 9), 5)
     with pytest.raises(ParameterError, match="integer >= 1"):
@@ -460,7 +460,7 @@ def test_forward_model_composes_q_c_m():
 
 def test_forward_model_loss_is_zero_at_the_truth_and_guides_towards_it():
     x = _rand((1, 3, 16, 16), 13, 0.2, 0.8)
-    fm = ops.ForwardModel("RGGB", 10, k=None, levels=3, dense_grad=True)
+    fm = ops.ForwardModel("RGGB", 10, k=None, bands=3, dense_grad=True)
     y = fm(x).detach()
     assert float(fm.loss(x, y)) == 0.0
     # a gradient step from a perturbed scene reduces the loss (dense gradient included)
@@ -488,8 +488,8 @@ def test_cached_constants_survive_inference_mode():
     """Masks and pyramid normalisers first built under inference_mode must still work with autograd."""
     size = (11, 13)  # a size no other test uses, so the caches are cold
     with torch.inference_mode():
-        ops.ForwardModel("GBRG", 10, levels=3).loss(torch.rand((1, 3) + size), torch.rand((1, 1) + size))
+        ops.ForwardModel("GBRG", 10, bands=3).loss(torch.rand((1, 3) + size), torch.rand((1, 1) + size))
     x = torch.rand((1, 3) + size, requires_grad=True)
-    loss = ops.ForwardModel("GBRG", 10, levels=3).loss(x, torch.rand((1, 1) + size))
+    loss = ops.ForwardModel("GBRG", 10, bands=3).loss(x, torch.rand((1, 1) + size))
     (g,) = torch.autograd.grad(loss, x)
     assert torch.isfinite(g).all()

@@ -20,20 +20,20 @@ class ForwardModel(nn.Module):
     """``A(X) = Q(C · M · X)``: the camera seen by the guidance (monochrome: ``A = Q``).
 
     Each stage can be switched off for ablations (METHOD.md): ``cast=False`` drops C, ``k=None``
-    drops Q, ``dense_grad=False`` uses the exact mosaic gradient, ``levels=1`` a single-scale loss.
+    drops Q, ``dense_grad=False`` uses the exact mosaic gradient, ``bands=1`` a single-scale loss.
     The caller clamps ``X`` to [0, 1] before calling (METHOD.md, numerical care); nothing is
     clamped here, so gradients are not cut.
 
     Args:
         cfa: Bayer pattern of the observation's top-left 2×2, or ``None`` for monochrome.
-        window: Δτ, the TFP window in ticks (quantisation levels ``0, 1/Δτ, …, 1``).
+        window: Δτ, the TFP window in ticks (quantisation bands ``0, 1/Δτ, …, 1``).
         alpha: ``(3,)`` gray-world factors of the sequence (see :meth:`from_observation`);
             ``None`` means ``(1, 1, 1)`` (C is then a plain gain ``η``).
         eta: range parameter ``η`` of the cast.
         k: sharpness of Q, or ``None`` for no quantisation.
         dense_grad: bilinear-spread gradient of M (SpikeDiff) instead of the exact one.
         cast: apply C (ignored for monochrome).
-        levels: bands of the Laplacian pyramid in :meth:`loss` (1 = single scale).
+        bands: bands of the Laplacian pyramid in :meth:`loss` (1 = single scale).
         weights: per-band weights of the loss (finest first); default all 1.
         norm: ``"l2"`` (non-squared, DPS reference) or ``"l2sq"``.
         vst: compare :func:`~spikeview.ops.noise.binomial_vst` of both sides, so the residual is
@@ -52,7 +52,7 @@ class ForwardModel(nn.Module):
         k: float | None = 50.0,
         dense_grad: bool = True,
         cast: bool = True,
-        levels: int = 3,
+        bands: int = 3,
         weights: Sequence[float] | None = None,
         norm: str = "l2",
         vst: bool = False,
@@ -63,11 +63,11 @@ class ForwardModel(nn.Module):
         self.mosaic = Mosaic(self.cfa, dense_grad) if self.cfa is not None else None
         self.cast = ColourCast((1.0, 1.0, 1.0) if alpha is None else alpha, eta) if (cast and self.cfa is not None) else None
         self.quantise = SoftQuantise(self.window, k) if k is not None else None
-        if isinstance(levels, bool) or not isinstance(levels, int) or levels < 1:
-            raise ParameterError(f"levels must be an integer >= 1, got {levels!r}; use 1 for a single-scale loss.")
+        if isinstance(bands, bool) or not isinstance(bands, int) or bands < 1:
+            raise ParameterError(f"bands must be an integer >= 1, got {bands!r}; use 1 for a single-scale loss.")
         if norm not in ("l2", "l2sq"):
             raise ParameterError(f"norm must be 'l2' or 'l2sq', got {norm!r}.")
-        self.levels = levels
+        self.bands = bands
         self.weights = None if weights is None else tuple(float(w) for w in weights)
         self.norm = norm
         self.vst = bool(vst)
@@ -126,7 +126,7 @@ class ForwardModel(nn.Module):
             raise ParameterError(f"y_obs must have shape {tuple(pred.shape)} (that of A(x)), got {tuple(y_obs.shape)}.")
         if self.vst:
             pred, y_obs = binomial_vst(pred, self.window), binomial_vst(y_obs, self.window)
-        return multiscale_loss(pred, y_obs, self.levels, self.weights, self.norm, reduction)
+        return multiscale_loss(pred, y_obs, self.bands, self.weights, self.norm, reduction)
 
     def initial_estimate(self, y: torch.Tensor) -> torch.Tensor:
         """``Y₀``: bilinear-demosaicked, colour-corrected TFP (``(N, 1, H, W)`` → ``(N, C, H, W)``, unclipped).
@@ -153,4 +153,4 @@ class ForwardModel(nn.Module):
         return effective_sigma(y, self.cfa, self.window, self.cast.alpha, self.cast.eta, prior, per_pixel)
 
     def extra_repr(self) -> str:
-        return f"cfa={self.cfa!r}, window={self.window}, levels={self.levels}, norm={self.norm!r}, vst={self.vst}"
+        return f"cfa={self.cfa!r}, window={self.window}, bands={self.bands}, norm={self.norm!r}, vst={self.vst}"

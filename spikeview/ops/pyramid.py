@@ -30,8 +30,8 @@ from spikeview.ops._checks import check_image
 _BINOMIAL5 = (1.0, 4.0, 6.0, 4.0, 1.0)
 
 
-def max_pyramid_levels(height: int, width: int) -> int:
-    """Largest valid number of pyramid levels for an ``H × W`` frame: ``1 + ceil(log2(min(H, W)))``.
+def max_pyramid_bands(height: int, width: int) -> int:
+    """Largest valid number of pyramid bands for an ``H × W`` frame: ``1 + ceil(log2(min(H, W)))``.
 
     Each level halves the size (rounding up) until the shorter side is one pixel.
     """
@@ -42,15 +42,15 @@ def max_pyramid_levels(height: int, width: int) -> int:
     return n
 
 
-def _check_levels(levels: int, height: int, width: int) -> int:
-    if isinstance(levels, bool) or not isinstance(levels, int) or levels < 1:
-        raise ParameterError(f"levels must be an integer >= 1, got {levels!r}; use 1 for a single-scale loss.")
-    top = max_pyramid_levels(height, width)
-    if levels > top:
+def _check_bands_count(bands: int, height: int, width: int) -> int:
+    if isinstance(bands, bool) or not isinstance(bands, int) or bands < 1:
+        raise ParameterError(f"bands must be an integer >= 1, got {bands!r}; use 1 for a single-scale loss.")
+    top = max_pyramid_bands(height, width)
+    if bands > top:
         raise ParameterError(
-            f"levels={levels} is too many for a {height}x{width} frame: use at most {top} (each level halves the size down to 1 pixel)."
+            f"bands={bands} is too many for a {height}x{width} frame: use at most {top} (each level halves the size down to 1 pixel)."
         )
-    return levels
+    return bands
 
 
 def _blur(x: torch.Tensor) -> torch.Tensor:
@@ -131,35 +131,35 @@ def pyr_up_adjoint(r: torch.Tensor) -> torch.Tensor:
     return _blur(r / _norm_up(r.shape[-2], r.shape[-1], r))[..., ::2, ::2]
 
 
-def laplacian_pyramid(x: torch.Tensor, levels: int) -> list[torch.Tensor]:
-    """P: the Laplacian pyramid with ``levels`` bands (see the module docstring).
+def laplacian_pyramid(x: torch.Tensor, bands: int) -> list[torch.Tensor]:
+    """P: the Laplacian pyramid with ``bands`` bands (see the module docstring).
 
     Args:
         x: ``(N, C, H, W)`` float, any ``H, W >= 1`` (odd sizes fine).
-        levels: ``L >= 1``, at most :func:`max_pyramid_levels` ``(H, W)``; ``L = 1`` returns ``[x]``.
+        bands: ``L >= 1``, at most :func:`max_pyramid_bands` ``(H, W)``; ``L = 1`` returns ``[x]``.
 
     Returns:
         ``L`` tensors: band ``l`` has shape ``(N, C, H_l, W_l)`` with ``H_0 = H`` and
         ``H_{l+1} = ceil(H_l / 2)``; the last is the coarsest low-pass residual.
 
     Raises:
-        ParameterError: ``levels`` out of range (the message gives the maximum).
+        ParameterError: ``bands`` out of range (the message gives the maximum).
     """
     check_image(x, None)
-    _check_levels(levels, x.shape[-2], x.shape[-1])
-    bands: list[torch.Tensor] = []
+    _check_bands_count(bands, x.shape[-2], x.shape[-1])
+    out: list[torch.Tensor] = []
     cur = x
-    for _ in range(levels - 1):
+    for _ in range(bands - 1):
         low = pyr_down(cur)
-        bands.append(cur - pyr_up(low, (cur.shape[-2], cur.shape[-1])))
+        out.append(cur - pyr_up(low, (cur.shape[-2], cur.shape[-1])))
         cur = low
-    bands.append(cur)
-    return bands
+    out.append(cur)
+    return out
 
 
-def _band_sizes(size: tuple[int, int], levels: int) -> list[tuple[int, int]]:
+def _band_sizes(size: tuple[int, int], bands: int) -> list[tuple[int, int]]:
     sizes = [size]
-    for _ in range(levels - 1):
+    for _ in range(bands - 1):
         sizes.append(_coarse_size(sizes[-1]))
     return sizes
 
@@ -204,7 +204,7 @@ def laplacian_synthesis(bands: Sequence[torch.Tensor]) -> torch.Tensor:
 def multiscale_loss(
     a: torch.Tensor,
     b: torch.Tensor,
-    levels: int = 3,
+    bands: int = 3,
     weights: Sequence[float] | None = None,
     norm: str = "l2",
     reduction: str = "sum",
@@ -217,7 +217,7 @@ def multiscale_loss(
     Args:
         a: ``(N, C, H, W)`` float (e.g. ``A(X̂₀)``).
         b: same shape (e.g. the observation ``Y``).
-        levels: number of bands ``L`` (1 = plain single-scale loss); at most ``max_pyramid_levels(H, W)``.
+        bands: number of bands ``L`` (1 = plain single-scale loss); at most ``max_pyramid_bands(H, W)``.
         weights: ``L`` non-negative weights ``w_l`` (finest first); default all 1.
         norm: ``"l2"``, the Euclidean norm (non-squared, as in the DPS reference code; its gradient
             is 0 at zero residual), or ``"l2sq"``, its square.
@@ -231,19 +231,19 @@ def multiscale_loss(
     if not isinstance(b, torch.Tensor) or b.shape != a.shape:
         got = tuple(b.shape) if isinstance(b, torch.Tensor) else type(b).__name__
         raise ParameterError(f"b must have the shape of a, {tuple(a.shape)}, got {got}.")
-    _check_levels(levels, a.shape[-2], a.shape[-1])
+    _check_bands_count(bands, a.shape[-2], a.shape[-1])
     if weights is None:
-        w = [1.0] * levels
+        w = [1.0] * bands
     else:
         w = [float(v) for v in weights]
-        if len(w) != levels or any(not (v >= 0) for v in w):
-            raise ParameterError(f"weights must be {levels} non-negative numbers (one per pyramid level), got {list(weights)}.")
+        if len(w) != bands or any(not (v >= 0) for v in w):
+            raise ParameterError(f"weights must be {bands} non-negative numbers (one per pyramid level), got {list(weights)}.")
     if norm not in ("l2", "l2sq"):
         raise ParameterError(f"norm must be 'l2' or 'l2sq', got {norm!r}.")
     if reduction not in ("sum", "mean", "none"):
         raise ParameterError(f"reduction must be 'sum', 'mean' or 'none', got {reduction!r}.")
     total = a.new_zeros(a.shape[0])
-    for wl, band in zip(w, laplacian_pyramid(a - b, levels), strict=True):
+    for wl, band in zip(w, laplacian_pyramid(a - b, bands), strict=True):
         flat = band.flatten(1)
         per = torch.linalg.vector_norm(flat, dim=1) if norm == "l2" else (flat * flat).sum(dim=1)
         total = total + wl * per
@@ -255,20 +255,20 @@ def multiscale_loss(
 
 
 class LaplacianPyramid(nn.Module):
-    """Module form of P with ``levels`` bands; ``adjoint`` and ``inverse`` included.
+    """Module form of P with ``bands`` bands; ``adjoint`` and ``inverse`` included.
 
     Shape:
-        ``(N, C, H, W)`` → list of ``levels`` tensors ``(N, C, H_l, W_l)``.
+        ``(N, C, H, W)`` → list of ``bands`` tensors ``(N, C, H_l, W_l)``.
     """
 
-    def __init__(self, levels: int = 3):
+    def __init__(self, bands: int = 3):
         super().__init__()
-        if isinstance(levels, bool) or not isinstance(levels, int) or levels < 1:
-            raise ParameterError(f"levels must be an integer >= 1, got {levels!r}.")
-        self.levels = levels
+        if isinstance(bands, bool) or not isinstance(bands, int) or bands < 1:
+            raise ParameterError(f"bands must be an integer >= 1, got {bands!r}.")
+        self.bands = bands
 
     def forward(self, x: torch.Tensor) -> list[torch.Tensor]:
-        return laplacian_pyramid(x, self.levels)
+        return laplacian_pyramid(x, self.bands)
 
     def adjoint(self, bands: Sequence[torch.Tensor]) -> torch.Tensor:
         return laplacian_pyramid_adjoint(bands)
@@ -277,4 +277,4 @@ class LaplacianPyramid(nn.Module):
         return laplacian_synthesis(bands)
 
     def extra_repr(self) -> str:
-        return f"levels={self.levels}"
+        return f"bands={self.bands}"

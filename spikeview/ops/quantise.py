@@ -35,19 +35,19 @@ def _check_k(k: float) -> float:
     return k
 
 
-def soft_quantise(x: torch.Tensor, levels: int = 10, k: float = 50.0) -> torch.Tensor:
-    """Q: soft rounding to multiples of ``1/levels`` in [0, 1] (see the module docstring).
+def soft_quantise(x: torch.Tensor, window: int = 10, k: float = 50.0) -> torch.Tensor:
+    """Q: soft rounding to multiples of ``1/window`` in [0, 1] (see the module docstring).
 
     Args:
         x: float tensor of any shape (an SFR image, values nominally in [0, 1]; any real value works).
-        levels: Δτ, the TFP window in ticks; the levels are ``0, 1/Δτ, …, 1`` (Δτ = 10 gives 11 levels).
+        window: Δτ, the TFP window in ticks; the levels are ``0, 1/Δτ, …, 1`` (Δτ = 10 gives 11 levels).
         k: sharpness ``k >= 0`` in units of 1/SFR (``k = 50`` in the paper; ``k = 0`` is the
             cell midpoint, large k approaches hard rounding).
 
     Returns:
         Tensor shaped like ``x``, values in [0, 1], differentiable in ``x``.
     """
-    n = check_positive_int(levels, "levels")
+    n = check_positive_int(window, "window")
     k = _check_k(k)
     if not isinstance(x, torch.Tensor) or not x.is_floating_point():
         raise ParameterError(
@@ -62,17 +62,17 @@ def soft_quantise(x: torch.Tensor, levels: int = 10, k: float = 50.0) -> torch.T
     return lower + step * phi
 
 
-def hard_quantise(x: torch.Tensor, levels: int = 10) -> torch.Tensor:
-    """Round to the nearest multiple of ``1/levels`` and clip to [0, 1] (the ``k → ∞`` limit, ties up).
+def hard_quantise(x: torch.Tensor, window: int = 10) -> torch.Tensor:
+    """Round to the nearest multiple of ``1/window`` and clip to [0, 1] (the ``k → ∞`` limit, ties up).
 
     Args:
         x: float tensor of any shape.
-        levels: Δτ in ticks.
+        window: Δτ in ticks.
 
     Returns:
         Tensor shaped like ``x`` with values in ``{0, 1/Δτ, …, 1}`` (no gradient).
     """
-    n = check_positive_int(levels, "levels")
+    n = check_positive_int(window, "window")
     return (torch.floor(x * n + 0.5) / n).clamp(0.0, 1.0)
 
 
@@ -80,20 +80,20 @@ class SoftQuantise(nn.Module):
     """Module form of Q.
 
     Args:
-        levels: Δτ in ticks (levels ``0, 1/Δτ, …, 1``).
+        window: Δτ in ticks (levels ``0, 1/Δτ, …, 1``).
         k: sharpness ``k >= 0``.
 
     Shape:
         any → same.
     """
 
-    def __init__(self, levels: int = 10, k: float = 50.0):
+    def __init__(self, window: int = 10, k: float = 50.0):
         super().__init__()
-        self.levels = check_positive_int(levels, "levels")
+        self.window = check_positive_int(window, "window")
         self.k = _check_k(k)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return soft_quantise(x, self.levels, self.k)
+        return soft_quantise(x, self.window, self.k)
 
     def extra_repr(self) -> str:
-        return f"levels={self.levels}, k={self.k}"
+        return f"window={self.window}, k={self.k}"
