@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from spikeview.config import Config
-from spikeview.errors import Cancelled
+from spikeview.errors import Cancelled, OutputFileError
 from spikeview.export import ExportConfig, ExportMetadata, export_frames, open_exporter, read_export_metadata
 from spikeview.export.atomic import PARTIAL_MARKER
 
@@ -150,8 +150,10 @@ def test_exr_failure_while_writing_a_frame_leaves_no_temporary(tmp_path, monkeyp
         raise OSError("disk full")  # … but the write is reported as failed
 
     monkeypatch.setattr(_oiio, "write_image", half_written)
-    with pytest.raises(OSError, match="disk full"):
-        export_frames(frames(2), tmp_path / "frame_%04d.exr")
+    with pytest.raises(OutputFileError, match="already exists.*--overwrite"):
+        export_frames(frames(2), tmp_path / "frame_%04d.exr")  # never replaced without overwrite
+    with pytest.raises(OutputFileError, match="frame 0 failed: disk full"):
+        export_frames(frames(2), tmp_path / "frame_%04d.exr", overwrite=True)
     assert stray_temporaries(tmp_path) == []
     # the file of the same name is untouched: a failed frame never replaces it
     assert (tmp_path / "frame_0000.exr").read_bytes() == b"older file"

@@ -147,7 +147,7 @@ def test_mp4_cancel_before_any_frame_leaves_nothing(tmp_path):
 def test_mp4_error_mid_export_leaves_nothing(tmp_path):
     (tmp_path / "v.mp4").write_bytes(b"previous video")
     with pytest.raises(ZeroDivisionError):
-        with open_exporter(tmp_path / "v.mp4", 4, (H, W, 3)) as ex:
+        with open_exporter(tmp_path / "v.mp4", 4, (H, W, 3), overwrite=True) as ex:
             ex.write(flat(COLOURS[0]))
             ex.write(flat(COLOURS[1]))
             1 / 0  # noqa: B018 - the failure under test

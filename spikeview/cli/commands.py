@@ -41,6 +41,12 @@ def progress(total: int, desc: str, unit: str = "frame"):
                 disable=total <= 1 or not sys.stderr.isatty())
 
 
+def add_overwrite_flag(p: argparse.ArgumentParser) -> None:
+    """``--overwrite``: replace existing outputs (inputs are never replaced)."""
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace output files that already exist (an input file is never replaced)")
+
+
 # ----------------------------------------------------------------------------------- info
 @geometry
 def add_info_args(p: argparse.ArgumentParser) -> None:
@@ -80,6 +86,7 @@ def add_reconstruct_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fps", type=float, default=30.0, help="output frame rate of .mp4 files (default 30)")
     p.add_argument("--compression", default="zip", choices=["zip", "piz", "none"], help="EXR compression (default zip)")
     p.add_argument("--preset", metavar="FILE", help="a TOML parameter file (written beside earlier outputs) to re-run")
+    add_overwrite_flag(p)
     from spikeview.cli.guided import add_args as add_guided_args
 
     add_guided_args(p)

@@ -75,7 +75,8 @@ def reconstruct_guided(args: argparse.Namespace, src, run_cfg, preset: dict[str,
         print(f"{len(centres)} frames, one per {step} ticks, at {ecfg.fps:g} fps: "
               f"{describe_slow_motion(slow_motion_factor(src.tick_rate, step, ecfg.fps))}", file=sys.stderr)
     sampler = GuidedSampler(params)
-    with open_exporter(out, len(centres), frame_shape, ecfg, meta) as ex, \
+    with open_exporter(out, len(centres), frame_shape, ecfg, meta, overwrite=getattr(args, "overwrite", False),
+                       inputs=[getattr(args, "preset", None)], extra_outputs=[preset_path(out)]) as ex, \
             progress(len(centres) * max(1, params.steps), f"guided → {out.name}", unit="step") as bar:
         def on_step(fi: int, n: int, step_i: int, total: int, preview) -> None:
             bar.update(1)

@@ -88,6 +88,8 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     src = _open_from_args(args)
+    for note in src.info.warnings:  # wrong geometry, truncated file ...: say so before the work
+        print(f"spikeview: warning: {note}", file=sys.stderr)
     with src:
         if run_cfg.method == "guided":
             from spikeview.cli.guided import reconstruct_guided
@@ -129,7 +131,8 @@ def run(args: argparse.Namespace) -> int:
         if out.suffix.lower() == ".mp4":
             factor = slow_motion_factor(src.tick_rate, step, ecfg.fps)
             print(f"{len(centres)} frames, one per {step} ticks, at {ecfg.fps:g} fps: {describe_slow_motion(factor)}", file=sys.stderr)
-        with open_exporter(out, len(centres), frame_shape, ecfg, meta) as ex, \
+        with open_exporter(out, len(centres), frame_shape, ecfg, meta, overwrite=args.overwrite,
+                           inputs=[args.preset], extra_outputs=[preset_path(out)]) as ex, \
                 progress(len(centres), f"{ccfg.method} → {out.name}") as bar:
             for c, frame in zip(centres, reconstruct_frames(src, centres, ccfg, alpha=alpha)):
                 ex.write(frame, window=window_range(c, window, src.n_frames), centre_tick=c)

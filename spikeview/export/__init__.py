@@ -26,7 +26,9 @@ Conventions:
       :func:`read_export_metadata`.
     * **Atomicity**: nothing appears under a final name until it is complete; see
       :mod:`spikeview.export.base` for what survives a cancel or an error. Existing files of
-      the same name are replaced.
+      the same name are **not** replaced unless ``overwrite=True`` (checked for every output
+      file before the first frame is written), and an input of the run (the source named in the
+      metadata, its sidecar and ground truth, anything in ``inputs``) never is.
     * **Display formats** (PNG, MP4) use fixed levels and the sRGB curve
       (:mod:`spikeview.export.display`), never auto-levels; EXR and npy keep linear values.
 
@@ -103,6 +105,9 @@ def open_exporter(
     *,
     cancel: CancelCheck | None = None,
     progress: ProgressCallback | None = None,
+    overwrite: bool = False,
+    inputs: Iterable[str | os.PathLike[str] | None] = (),
+    extra_outputs: Iterable[str | os.PathLike[str]] = (),
 ) -> Exporter:
     """Open an exporter for ``n_frames`` frames, choosing the format from the suffix of ``out``.
 
@@ -116,13 +121,20 @@ def open_exporter(
         cancel: polled before each frame; returning true makes ``write`` raise
             :class:`~spikeview.errors.Cancelled`.
         progress: called after each frame as ``progress(frames_done, n_frames)``.
+        overwrite: replace existing output files (``--overwrite``); without it an existing file
+            is an error, raised before anything is written.
+        inputs: files the run reads, never overwritten (the metadata's source, its sidecar and
+            ground truth are always included).
+        extra_outputs: other files the caller writes beside the output (e.g. the preset),
+            checked by the same rules up front.
 
     Returns:
         An :class:`Exporter`; use it as a context manager, or call ``close()``/``abort()``.
 
     Raises:
         ParameterError: unknown suffix, bad pattern, bad shape or settings.
-        OutputFileError: the folder is missing or not writable, or the file cannot be created.
+        OutputFileError: the folder is missing or not writable, an output exists (without
+            ``overwrite``) or is an input, the disk cannot hold it, or the file cannot be created.
     """
     path = Path(out)
     cls = _exporter_class(path)
@@ -134,7 +146,8 @@ def open_exporter(
         metadata = ExportMetadata()
     elif isinstance(metadata, Mapping):
         metadata = ExportMetadata.from_dict(dict(metadata), where="export metadata")
-    return cls(path, n_frames, frame_shape, config, metadata, cancel=cancel, progress=progress)
+    return cls(path, n_frames, frame_shape, config, metadata, cancel=cancel, progress=progress,
+               overwrite=overwrite, inputs=inputs, extra_outputs=extra_outputs)
 
 
 def export_frames(
@@ -146,13 +159,15 @@ def export_frames(
     n_frames: int | None = None,
     cancel: CancelCheck | None = None,
     progress: ProgressCallback | None = None,
+    overwrite: bool = False,
+    inputs: Iterable[str | os.PathLike[str] | None] = (),
 ) -> list[Path]:
     """Write every frame of ``frames`` to ``out`` and return the files written.
 
     Args:
         frames: float32 frames of one shape (a sequence, an ``(N, H, W[, 3])`` array, or an
             iterator/generator, then with ``n_frames``).
-        out, config, metadata, cancel, progress: as for :func:`open_exporter`.
+        out, config, metadata, cancel, progress, overwrite, inputs: as for :func:`open_exporter`.
         n_frames: number of frames; defaults to ``len(frames)``.
 
     Raises:
@@ -171,7 +186,8 @@ def export_frames(
     if first is None:
         raise ParameterError(f"{out}: there are no frames to export.")
     shape = np.shape(first)
-    with open_exporter(out, n_frames, shape, config, metadata, cancel=cancel, progress=progress) as ex:
+    with open_exporter(out, n_frames, shape, config, metadata, cancel=cancel, progress=progress,
+                       overwrite=overwrite, inputs=inputs) as ex:
         for frame in itertools.chain([first], it):
             ex.write(frame)
         return ex.close()

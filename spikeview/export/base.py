@@ -25,15 +25,16 @@ from __future__ import annotations
 import os
 import re
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from types import TracebackType
 from typing import Any, ClassVar
 
 import numpy as np
 
+from spikeview._files import check_writable, os_error_sentence
 from spikeview.errors import Cancelled, OutputFileError, ParameterError
-from spikeview.export.atomic import atomic_path
+from spikeview.export.atomic import PARTIAL_MARKER, atomic_path
 from spikeview.export.settings import ExportConfig, ExportMetadata, tomlable
 
 #: a printf-style frame-number field: %d or %0Nd
@@ -71,6 +72,32 @@ def check_output_folder(path: Path) -> None:
         raise OutputFileError(f"{path}: {folder} is not a folder; choose another output path.")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise OutputFileError(f"{path}: no permission to write in {folder}; choose a folder you can write to.")
+    # access() does not see everything (read-only mounts under root, ACLs, network shares):
+    # create and remove a probe file so an unwritable place is reported now, not after encoding
+    probe = folder / f".{path.stem}{PARTIAL_MARKER}probe{os.getpid()}"
+    try:
+        fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except FileExistsError:
+        return
+    except OSError as e:
+        raise OutputFileError(f"{path}: cannot create files in {folder}: {os_error_sentence(e)}.") from None
+    os.close(fd)
+    try:
+        os.remove(probe)
+    except OSError:
+        pass
+
+
+def source_files(source: str | os.PathLike[str] | None) -> list[Path]:
+    """The files that belong to input capture ``source``: itself, its sidecar and its ground truth.
+
+    (The naming rules of :mod:`spikeview.io.sidecar` and :mod:`spikeview.sim.write`, repeated
+    here because the export layer imports neither.)
+    """
+    if not source:
+        return []
+    p = Path(source)
+    return [p, p.with_name(p.name + ".toml"), p.with_name(p.stem + ".gt.npz")]
 
 
 def check_frame_shape(frame_shape: Any) -> tuple[int, ...]:
@@ -101,6 +128,13 @@ class Exporter(ABC):
         cancel: called before each frame; when it returns true, :meth:`write` raises
             :class:`~spikeview.errors.Cancelled`.
         progress: called after each frame as ``progress(frames_done, n_frames)``.
+        overwrite: replace output files that already exist (otherwise that is an
+            :class:`~spikeview.errors.OutputFileError`, raised before anything is written).
+        inputs: files the run reads; no output may be one of them, even with ``overwrite``.
+            The source named in ``metadata`` (with its sidecar and ground truth) is always
+            protected.
+        extra_outputs: further files the caller will write beside the output (a preset):
+            checked by the same rules, up front.
 
     Attributes:
         frames_written: frames accepted so far.
@@ -122,6 +156,9 @@ class Exporter(ABC):
         *,
         cancel: CancelCheck | None = None,
         progress: ProgressCallback | None = None,
+        overwrite: bool = False,
+        inputs: Iterable[str | os.PathLike[str] | None] = (),
+        extra_outputs: Iterable[str | os.PathLike[str]] = (),
     ):
         self.path = Path(path)
         if isinstance(n_frames, bool) or not isinstance(n_frames, (int, np.integer)) or n_frames < 1:
@@ -149,6 +186,10 @@ class Exporter(ABC):
                 "frame-number field; remove the %d part."
             )
         check_output_folder(self.path)
+        self.overwrite = bool(overwrite)
+        protected = [*source_files(self.metadata.source), *(p for p in inputs if p)]
+        for out in [*self.output_files(), *map(Path, extra_outputs)]:
+            check_writable(out, self.overwrite, protected)
         self._open()
 
     # -- what subclasses implement -------------------------------------------------------------
@@ -165,6 +206,12 @@ class Exporter(ABC):
 
     def _discard(self) -> None:  # noqa: B027 - optional hook
         """Remove every temporary; finished sequence frames stay."""
+
+    def output_files(self) -> list[Path]:
+        """Every file this export will create (checked against existing files before writing)."""
+        if self.sequence:
+            return [self.frame_path(i) for i in range(self.n_frames)]
+        return [self.path]
 
     # -- shared --------------------------------------------------------------------------------
 
@@ -293,7 +340,10 @@ class Exporter(ABC):
                 "pass the right n_frames."
             )
         frame = self._check_frame(frame, index)
-        self._write(frame, index, self.frame_record(index, window, centre_tick))
+        try:
+            self._write(frame, index, self.frame_record(index, window, centre_tick))
+        except OSError as e:
+            raise OutputFileError(f"{self.path}: writing frame {index} failed: {os_error_sentence(e)}.") from None
         self.frames_written += 1
         if self.progress is not None:
             self.progress(self.frames_written, self.n_frames)
@@ -323,6 +373,9 @@ class Exporter(ABC):
             return []
         try:
             self._finish()
+        except OSError as e:
+            self.abort()
+            raise OutputFileError(f"{self.path}: finishing the file failed: {os_error_sentence(e)}.") from None
         except BaseException:
             self.abort()
             raise

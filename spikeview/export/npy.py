@@ -3,14 +3,17 @@
 Conventions:
     * One array of float32, shape ``(N, H, W, 3)`` for colour or ``(N, H, W)`` for mono, the
       linear values exactly as given (no levels, no clipping, no transfer curve).
-    * Written through :func:`numpy.lib.format.open_memmap` into a hidden temporary file, so a
-      long sequence never has to be in memory; renamed into place on close.
+    * Written with ordinary file writes (no memory map: writing to a memory map on a full disk
+      kills the process with a bus error) into a hidden temporary file whose full size is
+      reserved up front (``posix_fallocate``), so a disk too small for the array is reported
+      before the first frame; a long sequence never has to be in memory; renamed into place on
+      close.
     * Sidecar ``<file>.toml`` (``frames.npy`` → ``frames.npy.toml``), written atomically just
       before the array is renamed: the export record (source, method, tick rate, first window,
       step, ``[params]``, ``[export]``), ``n_frames``, ``shape``, ``dtype``, and one
       ``[[frames]]`` entry per frame with its index and, where known, window and centre tick.
-    * On cancel (``close(allow_partial=True)``) the finished ``k`` frames are copied into a
-      ``(k, …)`` array (a memory map's shape is fixed in its header) and kept with their
+    * On cancel (``close(allow_partial=True)``) the header is rewritten in place for the ``k``
+      finished frames and the file truncated after them; they are kept with their
       sidecar; with none finished, or on an error, no file is left.
 """
 
@@ -22,12 +25,10 @@ from typing import Any
 
 import numpy as np
 
+from spikeview._files import os_error_sentence
 from spikeview.errors import InputFileError, OutputFileError
 from spikeview.export.atomic import AtomicFile
 from spikeview.export.base import Exporter
-
-#: frames copied at a time when shortening a cancelled export
-_COPY_CHUNK = 64
 
 
 def sidecar_path(path: str | os.PathLike[str]) -> Path:
@@ -46,26 +47,69 @@ def read_sidecar(path: str | os.PathLike[str]) -> dict[str, Any]:
     return load_toml(side)
 
 
+def _header(shape: tuple[int, ...]) -> bytes:
+    """The ``.npy`` header of a C-order little-endian float32 array of ``shape``.
+
+    NumPy pads the header so that the first axis can grow or shrink without changing its
+    length, which lets a cancelled export rewrite it in place.
+    """
+    import io
+
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        buf, {"descr": np.lib.format.dtype_to_descr(np.dtype("<f4")), "fortran_order": False, "shape": shape})
+    return buf.getvalue()
+
+
 class NpyExporter(Exporter):
     """A float32 ``.npy`` stack plus ``<file>.toml`` (see module docstring)."""
 
     format = "npy"
 
+    def output_files(self) -> list[Path]:
+        return [self.path, sidecar_path(self.path)]
+
+    @property
+    def nbytes(self) -> int:
+        """Size of the finished file in bytes (header plus every frame)."""
+        return len(_header((self.n_frames, *self.frame_shape))) + self.n_frames * self._frame_bytes
+
     def _open(self) -> None:
+        from spikeview._files import check_free_space, human_bytes, preallocate
+
+        self._frame_bytes = int(np.prod(self.frame_shape)) * 4
+        self._head = _header((self.n_frames, *self.frame_shape))
         self._file = AtomicFile(self.path)
         self._frames: list[dict[str, Any]] = []
+        check_free_space(self.path.parent, self.nbytes, f"{self.n_frames} frames of {self.path.name} "
+                         f"({human_bytes(self.nbytes)})")
         try:
-            self._array = np.lib.format.open_memmap(
-                self._file.tmp, mode="w+", dtype=np.float32, shape=(self.n_frames, *self.frame_shape)
-            )
+            self._fd = os.open(self._file.tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         except OSError as e:
             self._file.discard()
-            raise OutputFileError(
-                f"{self.path}: could not create the file ({e}); check the folder and free space."
-            ) from None
+            raise OutputFileError(f"{self.path}: could not create the file: {os_error_sentence(e)}.") from None
+        try:
+            preallocate(self._fd, self.nbytes, self.path)
+            self._pwrite(self._head, 0)
+        except BaseException:
+            self._close_fd()
+            self._file.discard()
+            raise
+
+    def _pwrite(self, data: bytes | memoryview, offset: int) -> None:
+        view = memoryview(data).cast("B")
+        while len(view):
+            n = os.pwrite(self._fd, view, offset)
+            view, offset = view[n:], offset + n
+
+    def _close_fd(self) -> None:
+        fd = self.__dict__.pop("_fd", None)
+        if fd is not None:
+            os.close(fd)
 
     def _write(self, frame: np.ndarray, index: int, record: dict[str, Any]) -> None:
-        self._array[index] = frame
+        data = np.ascontiguousarray(frame, dtype="<f4")
+        self._pwrite(memoryview(data).cast("B"), len(self._head) + index * self._frame_bytes)
         entry = {"index": index}
         for key in ("window", "centre_tick"):
             if key in record:
@@ -78,10 +122,14 @@ class NpyExporter(Exporter):
         k = self.frames_written
         side = AtomicFile(sidecar_path(self.path))
         try:
-            self._array.flush()
             if k < self.n_frames:
-                self._shorten(k)
-            self.__dict__.pop("_array", None)  # unmap before the rename
+                head = _header((k, *self.frame_shape))
+                if len(head) != len(self._head):  # pragma: no cover - numpy always pads the shape
+                    raise OutputFileError(f"{self.path}: cannot shorten the array header; export the range again.")
+                self._pwrite(head, 0)
+                os.ftruncate(self._fd, len(head) + k * self._frame_bytes)
+            os.fsync(self._fd)
+            self._close_fd()
             record = self.export_record()
             record["n_frames"] = k
             record["shape"] = [k, *self.frame_shape]
@@ -98,29 +146,12 @@ class NpyExporter(Exporter):
                 raise
         except OSError as e:
             side.discard()
-            raise OutputFileError(f"{self.path}: finishing the file failed ({e}); check free disk space.") from None
+            raise OutputFileError(f"{self.path}: finishing the file failed: {os_error_sentence(e)}.") from None
         except BaseException:
             side.discard()
             raise
         self.paths += [self.path, side.path]
 
-    def _shorten(self, k: int) -> None:
-        """Replace the temporary by one holding only the first ``k`` frames."""
-        short = AtomicFile(self.path)
-        try:
-            out = np.lib.format.open_memmap(short.tmp, mode="w+", dtype=np.float32, shape=(k, *self.frame_shape))
-            for i in range(0, k, _COPY_CHUNK):
-                out[i : min(k, i + _COPY_CHUNK)] = self._array[i : min(k, i + _COPY_CHUNK)]
-            out.flush()
-            del out
-        except BaseException:
-            short.discard()
-            raise
-        del self._array
-        self._file.discard()
-        self._file = short
-
     def _discard(self) -> None:
-        # drop the memory map before deleting its file (Windows cannot delete a mapped file)
-        self.__dict__.pop("_array", None)
+        self._close_fd()
         self._file.discard()
