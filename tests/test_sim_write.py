@@ -87,7 +87,9 @@ def test_simulate_to_file_matches_the_in_memory_capture(tmp_path, flip):
     assert np.array_equal(gt.ticks, np.arange(0, 500, 37))
     assert gt.frames.shape == (14, 16, 24, 3) and gt.frames.dtype == np.float32
     for t in (0, 37, 481):
-        np.testing.assert_array_equal(gt.at(t), cap.gt_at(t))
+        # stored as float16: round to nearest keeps the value within 2**-11 relative (IEEE 754 half)
+        np.testing.assert_allclose(gt.at(t), cap.gt_at(t), rtol=2.0**-11, atol=2.0**-25)
+        assert not np.array_equal(gt.at(t), gt.at(t).astype(np.float16).astype(np.float32) + 2.0**-10)
     assert gt.tick_rate == 20000.0
     with pytest.raises(ParameterError, match="ticks \\[37, 74\\]"):
         gt.at(40)
@@ -112,8 +114,32 @@ def test_simulate_to_file_errors_leave_no_files(tmp_path):
         simulate_to_file(_scene(), SimConfig(n_ticks=100), tmp_path / "c.dat", cancel=lambda: True)
     assert list(tmp_path.iterdir()) == []
     simulate_to_file(_scene(), SimConfig(n_ticks=10), tmp_path / "c.dat")
-    with pytest.raises(OutputFileError, match="exists"):
-        simulate_to_file(_scene(), SimConfig(n_ticks=10), tmp_path / "c.dat", overwrite=False)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    with pytest.raises(OutputFileError, match="already exists.*--overwrite"):
+        simulate_to_file(_scene(), SimConfig(n_ticks=10, seed=1), tmp_path / "c.dat")
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    simulate_to_file(_scene(), SimConfig(n_ticks=10, seed=1), tmp_path / "c.dat", overwrite=True)
+    assert (tmp_path / "c.dat").read_bytes() != before["c.dat"]
+
+
+def test_simulate_never_overwrites_its_input_even_with_overwrite(tmp_path):
+    still = tmp_path / "still.gt.npz"  # an input named like the ground truth of the output
+    still.write_bytes(b"precious")
+    with pytest.raises(OutputFileError, match="input of the run"):
+        simulate_to_file(_scene(), SimConfig(n_ticks=10), tmp_path / "still.dat", overwrite=True, inputs=[still])
+    assert still.read_bytes() == b"precious" and not (tmp_path / "still.dat").exists()
+
+
+def test_ground_truth_is_compressed_half_precision_and_no_larger_than_the_capture_by_default(tmp_path):
+    files = simulate_to_file(_scene(h=32, w=32), SimConfig(n_ticks=500, seed=2), tmp_path / "c.dat")
+    assert SimConfig().gt_every == 50
+    with np.load(files.ground_truth) as z:
+        assert z["frames"].dtype == np.float16 and z["frames"].shape == (10, 32, 32, 3)
+    import zipfile
+
+    with zipfile.ZipFile(files.ground_truth) as zf:
+        assert zf.getinfo("frames.npy").compress_type == zipfile.ZIP_DEFLATED
+    assert files.ground_truth.stat().st_size <= files.dat.stat().st_size
 
 
 def test_load_ground_truth_errors(tmp_path):

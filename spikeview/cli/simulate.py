@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import glob
+import re
 import sys
 from pathlib import Path
 
-from spikeview.errors import ParameterError
+from spikeview.errors import InputFileError, ParameterError
 
 NOISE_TERMS = ("dark_current", "prnu", "threshold_fpn", "shot_noise", "threshold_jitter", "reset_slowdown")
 
@@ -18,6 +20,9 @@ def add_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="OUT.dat",
                    help="spike file to write; OUT.dat.toml (sidecar) and OUT.gt.npz (ground truth) go beside it")
     p.add_argument("--config", metavar="FILE", help="a TOML simulation config (e.g. the [simulation] table of a sidecar)")
+    from spikeview.cli.commands import add_overwrite_flag
+
+    add_overwrite_flag(p)
     g = p.add_argument_group("sensor")
     g.add_argument("--ticks", type=int, help="number of readouts to simulate (default 2000 = 0.1 s at 20 kHz)")
     g.add_argument("--size", type=int, metavar="N", help="output N x N pixels (--width/--height for other shapes)")
@@ -27,7 +32,7 @@ def add_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--cfa", metavar="{RGGB,BGGR,GRBG,GBRG,none}", help="colour filter of the simulated sensor (default RGGB)")
     g.add_argument("--tick-rate", type=float, help="readouts per second (default 20000)")
     g.add_argument("--seed", type=int, help="random seed (same seed, same bytes)")
-    g.add_argument("--gt-every", type=int, help="ticks between ground-truth frames (default 10)")
+    g.add_argument("--gt-every", type=int, help="ticks between ground-truth frames (default 50, which keeps the ground truth smaller than the capture)")
     g.add_argument("--fps", type=float, help="frame rate of an image-sequence input (frames per second)")
     g.add_argument("--flip-vertical", action=argparse.BooleanOptionalAction, default=None,
                    help="store rows upside down like the camera toolkits (default on)")
@@ -43,10 +48,40 @@ def add_args(p: argparse.ArgumentParser) -> None:
     m.add_argument("--fan", type=float, metavar="REV_PER_S", help="add a rotating three-blade fan at the centre (revolutions per second)")
 
 
+#: SimConfig keys set by a flag of their own, and that flag
+FLAG_OF = {"n_ticks": "--ticks", "width": "--width", "height": "--height", "rate": "--rate", "cfa": "--cfa",
+           "tick_rate": "--tick-rate", "seed": "--seed", "gt_every": "--gt-every", "flip_vertical": "--flip-vertical"}
+_SETTING_ERROR = re.compile(r"^Simulation setting '(\w+)' = (.*?) is invalid: (.*)$", re.S)
+
+
+def _in_user_words(e: ParameterError, args: argparse.Namespace, given: dict[str, object]) -> ParameterError:
+    """Name the flag (``--ticks 0``) or the config file the user wrote, not the internal key."""
+    m = _SETTING_ERROR.match(str(e))
+    if not m:
+        return e
+    key, value, fix = m.groups()
+    if key in given and key in FLAG_OF:
+        return ParameterError(f"{FLAG_OF[key]} {given[key]} is not valid: {fix}")
+    if args.config:
+        return ParameterError(f"{args.config}: '{key}' = {value} is not valid: {fix}")
+    return e
+
+
 def _config(args: argparse.Namespace):
     from spikeview.sim import SimConfig
 
-    cfg = SimConfig.load(args.config) if args.config else SimConfig()
+    if args.config:
+        from spikeview.config import load_toml
+
+        if not load_toml(args.config):
+            raise ParameterError(f"{args.config}: the simulation config is empty; add settings such as "
+                                 "n_ticks = 2000, or drop --config.")
+        try:
+            cfg = SimConfig.load(args.config)
+        except ParameterError as e:
+            raise _in_user_words(e, args, {}) from None
+    else:
+        cfg = SimConfig()
     changes: dict[str, object] = {}
     if args.size is not None:
         changes["width"] = changes["height"] = args.size
@@ -64,7 +99,10 @@ def _config(args: argparse.Namespace):
         value = getattr(args, term)
         if value is not None:
             changes[term] = value
-    return SimConfig.from_dict({**cfg.to_dict(), **changes}, where="simulation settings")
+    try:
+        return SimConfig.from_dict({**cfg.to_dict(), **changes}, where="simulation settings")
+    except ParameterError as e:
+        raise _in_user_words(e, args, changes) from None
 
 
 def _scene(args: argparse.Namespace, cfg):
@@ -81,14 +119,43 @@ def _scene(args: argparse.Namespace, cfg):
     if not args.input:
         raise ParameterError("no input: give a video, an image folder/glob or an image, or use --demo.")
     path = Path(args.input)
+    if not path.exists() and not glob.has_magic(str(args.input)):
+        raise InputFileError(f"{path}: not found; check the path of the video, image or image folder.")
     if motion:
         if not path.is_file():
-            raise ParameterError(f"{path}: synthetic motion (--pan/--zoom/--rotation/--fan) needs one still image file.")
+            raise ParameterError(f"{path}: synthetic motion (--pan/--zoom/--rotation/--fan) needs one still image "
+                                 "file, not a folder or pattern.")
         size = (cfg.height, cfg.width) if cfg.width and cfg.height else None
         fans = [Fan(rev_per_s=args.fan)] if args.fan is not None else []
         return MotionScene(path, size, pan=tuple(args.pan or (0.0, 0.0)), zoom=args.zoom or 1.0,
                            rotation=args.rotation or 0.0, fans=fans)
+    if path.is_dir():
+        return _image_folder(path, args.fps)
     return open_scene(path, fps=args.fps)
+
+
+def _image_folder(folder: Path, fps: float | None):
+    """An image sequence from the image files of ``folder`` (by suffix), saying which files were skipped."""
+    from spikeview.sim.scenes import ImageSequenceScene, list_image_files
+
+    if fps is None:
+        raise ParameterError(f"{folder}: an image sequence needs its frame rate; pass --fps (frames per second).")
+    files = list_image_files(folder)  # only image suffixes; an error naming the folder when there are none
+    used = set(files)
+    by_suffix: dict[str, int] = {}
+    for f in files:
+        by_suffix[f.suffix.lower()] = by_suffix.get(f.suffix.lower(), 0) + 1
+    if len(by_suffix) > 1:
+        # frames of one sequence share a format; a different one is usually an export written there
+        main = max(by_suffix, key=lambda k: (by_suffix[k], k))
+        files = [f for f in files if f.suffix.lower() == main]
+        used = set(files)
+    skipped = sorted(f.name for f in folder.iterdir() if f.is_file() and f not in used and not f.name.startswith("."))
+    if skipped:
+        shown = ", ".join(skipped[:5]) + (f" and {len(skipped) - 5} more" if len(skipped) > 5 else "")
+        print(f"spikeview: note: {folder}: read {len(files)} {files[0].suffix.lower()} images and skipped "
+              f"{len(skipped)} other file{'s' if len(skipped) != 1 else ''}: {shown}", file=sys.stderr)
+    return ImageSequenceScene(files, fps=fps)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -107,10 +174,19 @@ def run(args: argparse.Namespace) -> int:
         bar.update(done - last[0])
         last[0] = done
 
+    inputs = [args.input, args.config] if args.input else [args.config]
+
+    def announce(sentence: str) -> None:
+        print(f"spikeview: {sentence}", file=sys.stderr)
+
     with bar:
-        files = simulate_to_file(scene, cfg, out, progress=on_progress)
+        files = simulate_to_file(scene, cfg, out, progress=on_progress, overwrite=args.overwrite,
+                                 inputs=inputs, announce=announce)
     info = files.info
+    from spikeview._files import human_bytes
+
     print(f"wrote {files.dat} ({info.width}x{info.height}, {info.n_frames} ticks = {info.duration_s * 1e3:.1f} ms, "
-          f"CFA {info.cfa or 'none'}), sidecar {files.sidecar.name}, ground truth {files.ground_truth.name}",
+          f"CFA {info.cfa or 'none'}, {human_bytes(files.dat.stat().st_size)}), sidecar {files.sidecar.name}, "
+          f"ground truth {files.ground_truth.name} ({human_bytes(files.ground_truth.stat().st_size)})",
           file=sys.stdout)
     return 0

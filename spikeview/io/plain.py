@@ -9,12 +9,14 @@ reported in ``info.warnings``.
 
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from spikeview._files import os_error_sentence, preallocate
 from spikeview.cfa import parse_cfa
 from spikeview.errors import GeometryError, OutputFileError, ParameterError
 from spikeview.io._base import PackedFileSource, check_dims, check_tick_rate, open_bytes
@@ -147,11 +149,19 @@ class PlainDatWriter:
         sidecar: write ``<path>.toml`` (on open and on close).
         extra_tables: initial free-form sidecar tables (``{"simulation": {...}}``); see :attr:`tables`.
         append: add to an existing file instead of replacing it.
+        reserve_frames: reserve the disk space of this many frames up front
+            (``posix_fallocate``): a disk too small is reported here, before any frame, and
+            writes into the reservation cannot run out of space. :meth:`close` trims the file to
+            the frames actually written.
+
+    A failed write (a full disk) raises :class:`~spikeview.errors.OutputFileError` and trims
+    the file back to the whole frames written before it, so the file stays readable.
     """
 
     def __init__(self, path: str | os.PathLike[str], width: int, height: int, *, flip_vertical: bool = True,
                  flip_horizontal: bool = False, cfa: str | None = None, tick_rate: float = DEFAULT_TICK_RATE,
-                 sidecar: bool = True, extra_tables: dict[str, dict[str, Any]] | None = None, append: bool = False):
+                 sidecar: bool = True, extra_tables: dict[str, dict[str, Any]] | None = None, append: bool = False,
+                 reserve_frames: int = 0):
         self.width, self.height = check_dims(width, height)
         if (self.width * self.height) % 8:
             raise ParameterError(f"a {self.width}x{self.height} frame has {self.width * self.height} pixels, not a "
@@ -173,16 +183,30 @@ class PlainDatWriter:
                                       f"{self.width}x{self.height} frames; write to a new file.")
             self._n_bytes = size
         try:
-            self._f = open(self.path, "ab" if append else "wb")
+            # unbuffered: every byte counted in _n_bytes is on its way to the disk, so a failed
+            # write can be trimmed back to whole frames
+            self._f = open(self.path, "ab" if append else "wb", buffering=0)
         except FileNotFoundError:
             raise OutputFileError(f"{self.path}: the folder does not exist; create it first.") from None
         except IsADirectoryError:
             raise OutputFileError(f"{self.path}: is a folder; give a file name such as capture.dat.") from None
         except OSError as e:
-            raise OutputFileError(f"{self.path}: cannot write ({e.strerror or e}); check the folder is writable.") from None
+            raise OutputFileError(f"{self.path}: cannot write: {os_error_sentence(e)}.") from None
         self._closed = False
+        self._reserved = False
+        if reserve_frames > 0 and not append:
+            try:
+                preallocate(self._f.fileno(), int(reserve_frames) * self.frame_bytes, self.path)
+            except OutputFileError:
+                self.discard()
+                raise
+            self._reserved = True
         if self._sidecar:
-            self._write_sidecar()
+            try:
+                self._write_sidecar()
+            except OutputFileError:
+                self.discard()
+                raise
 
     # --------------------------------------------------------------------------------- state
     @property
@@ -230,10 +254,24 @@ class PlainDatWriter:
         if self._closed:
             raise ParameterError(f"{self.path.name}: the writer is closed; open a new PlainDatWriter to add frames.")
         try:
-            self._f.write(view)
+            done = 0
+            while done < len(view):
+                n = self._f.write(view[done:])
+                if not n:
+                    raise OSError(errno.ENOSPC, "No space left on device")
+                done += n
         except OSError as e:
-            raise OutputFileError(f"{self.path}: write failed ({e.strerror or e}); check free disk space.") from None
+            self._trim()
+            raise OutputFileError(f"{self.path}: writing frame {self.n_frames} failed: {os_error_sentence(e)}.") from None
         self._n_bytes += len(view)
+
+    def _trim(self) -> None:
+        """Cut the file back to the whole frames written (after a failed write, or a reservation)."""
+        try:
+            os.ftruncate(self._f.fileno(), self._n_bytes)
+            self._f.seek(self._n_bytes)
+        except (OSError, ValueError):  # nothing more can be done; readers report a partial frame
+            pass
 
     def flush(self, fsync: bool = False) -> None:
         """Push buffered bytes to the OS (and to the disk with ``fsync=True``)."""
@@ -244,7 +282,7 @@ class PlainDatWriter:
             if fsync:
                 os.fsync(self._f.fileno())
         except OSError as e:
-            raise OutputFileError(f"{self.path}: flush failed ({e.strerror or e}); check free disk space.") from None
+            raise OutputFileError(f"{self.path}: saving the file failed: {os_error_sentence(e)}.") from None
 
     def write_sidecar(self) -> Path | None:
         """(Re)write ``<path>.toml`` now with the current tables; returns its path (``None`` if disabled)."""
@@ -260,12 +298,30 @@ class PlainDatWriter:
         if self._closed:
             return
         try:
+            if self._reserved:
+                self._trim()
             self.flush(fsync=True)
         finally:
             self._closed = True
             self._f.close()
         if self._sidecar:
             self._write_sidecar()
+
+    def discard(self) -> None:
+        """Close without saving and delete the file and its sidecar (for a run that failed)."""
+        if not self._closed:
+            self._closed = True
+            try:
+                self._f.close()
+            except OSError:
+                pass
+        from spikeview.io.sidecar import sidecar_path
+
+        for p in (self.path, *([sidecar_path(self.path)] if self._sidecar else [])):
+            try:
+                p.unlink(missing_ok=True)
+            except OSError:
+                pass
 
     def __enter__(self) -> PlainDatWriter:
         return self
@@ -304,8 +360,7 @@ def write_plain(path: str | os.PathLike[str], spikes: np.ndarray, *, flip_vertic
         writer.close()
         os.replace(tmp, path)
     except BaseException:
-        writer.close()
-        tmp.unlink(missing_ok=True)
+        writer.discard()
         raise
     if sidecar:
         from spikeview.io.sidecar import write_sidecar

@@ -9,27 +9,36 @@ For ``out/capture.dat`` :func:`simulate_to_file` writes
   reader's flips, flips), ``[simulation]`` (every :class:`SimConfig` setting; reload it with
   ``SimConfig.load(path, table="simulation")``), ``[scene]`` (what was simulated) and
   ``[ground_truth]`` (file name and ticks);
-* ``out/capture.gt.npz`` — ``frames`` (N, H, W, 3) float32 linear RGB in display orientation
-  (not flipped), ``ticks`` (N,) int64 and ``tick_rate`` (float64 scalar); frame ``i`` is the clean
-  scene at tick ``ticks[i]`` (every ``config.gt_every`` ticks from 0). Read it with
-  :func:`load_ground_truth`.
+* ``out/capture.gt.npz`` — a compressed (deflate) ``.npz`` holding ``frames`` (N, H, W, 3)
+  **float16** linear RGB in display orientation (not flipped; half precision keeps 11
+  significant bits, far below the sensor's noise), ``ticks`` (N,) int64 and ``tick_rate``
+  (float64 scalar); frame ``i`` is the clean scene at tick ``ticks[i]`` (every
+  ``config.gt_every`` ticks from 0, 50 by default). Read it with :func:`load_ground_truth`.
+
+Sizes: the capture takes ``H·W/8`` bytes per tick, a ground-truth frame at most ``6·H·W`` bytes
+before compression, so with the default ``gt_every = 50`` the ground truth is never larger than
+the capture (at most 48/50 of it, usually far less after compression). :func:`planned_sizes`
+gives both figures; :func:`simulate_to_file` refuses to start when the disk cannot hold them and
+reserves the capture's full size up front, so a full disk is reported before any work.
 
 Everything streams: spikes are packed chunk by chunk and ground-truth frames are appended as
 they are rendered, so memory stays at one chunk whatever ``n_ticks`` is. Files appear under their
-final names only when complete (written under temporary names, then renamed).
+final names only when complete (written under temporary names, then renamed); on any failure
+(a full disk included) no temporary and no half-written file is left.
 """
 
 from __future__ import annotations
 
 import os
 import zipfile
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
 
 import numpy as np
 
-from spikeview.errors import Cancelled, InputFileError, OutputFileError, ParameterError
+from spikeview.errors import Cancelled, InputFileError, OutputFileError, ParameterError, SpikeviewError
 from spikeview.io.plain import PlainDatWriter
 from spikeview.io.sidecar import sidecar_path, write_sidecar
 from spikeview.io.source import StreamInfo
@@ -59,20 +68,37 @@ class SimulationFiles:
     info: StreamInfo
 
 
+#: dtype of the stored ground-truth frames
+GT_DTYPE = np.dtype("<f2")
+#: deflate level of the ground truth (1: fast; smooth frames still shrink several times)
+GT_COMPRESSLEVEL = 1
+
+
+def planned_sizes(config: SimConfig, height: int, width: int) -> tuple[int, int]:
+    """``(capture_bytes, ground_truth_bytes_at_most)`` of a simulation to file.
+
+    The ground-truth figure is before compression (plus the archive's few hundred bytes), so
+    the file is usually smaller.
+    """
+    n_gt = len(range(0, config.n_ticks, config.gt_every))
+    return config.n_ticks * (height * width // 8), n_gt * height * width * 3 * GT_DTYPE.itemsize + 4096
+
+
 class _GroundTruthWriter:
-    """Appends (H, W, 3) float32 frames to the ``frames`` array of an ``.npz`` without holding them."""
+    """Appends (H, W, 3) frames as float16 to the ``frames`` array of a compressed ``.npz`` without holding them."""
 
     def __init__(self, fileobj: BinaryIO, n: int, height: int, width: int):
-        self._zip = zipfile.ZipFile(fileobj, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True)
+        self._zip = zipfile.ZipFile(fileobj, mode="w", compression=zipfile.ZIP_DEFLATED, allowZip64=True,
+                                    compresslevel=GT_COMPRESSLEVEL)
         self._expected = n
         self._written = 0
         self._entry = self._zip.open("frames.npy", mode="w", force_zip64=True)
         np.lib.format.write_array_header_2_0(
-            self._entry, {"descr": np.lib.format.dtype_to_descr(np.dtype("<f4")), "fortran_order": False,
+            self._entry, {"descr": np.lib.format.dtype_to_descr(GT_DTYPE), "fortran_order": False,
                           "shape": (n, height, width, 3)})
 
     def append(self, frame: np.ndarray) -> None:
-        self._entry.write(np.ascontiguousarray(frame, dtype="<f4").tobytes())
+        self._entry.write(np.ascontiguousarray(frame, dtype=GT_DTYPE).tobytes())
         self._written += 1
 
     def finish(self, ticks: np.ndarray, tick_rate: float) -> None:
@@ -96,9 +122,27 @@ def _temp(path: Path) -> Path:
     return path.with_name(f".{path.name}.tmp{os.getpid()}")
 
 
+def scene_inputs(scene: Scene | str | Path) -> list[Path]:
+    """The files a scene reads (a video, a still, the frames of a sequence), which outputs may not replace."""
+    if isinstance(scene, (str, Path)):
+        p = Path(scene)
+        return [p] if p.is_file() else []
+    out: list[Path] = []
+    for obj in (scene, getattr(scene, "scene", None), getattr(scene, "base", None)):
+        if obj is None:
+            continue
+        for attr in ("path", "source", "image_path"):
+            v = getattr(obj, attr, None)
+            if isinstance(v, (str, Path)):
+                out.append(Path(v))
+        out += [Path(f) for f in getattr(obj, "files", None) or []]
+    return out
+
+
 def simulate_to_file(scene: Scene | str | Path, config: SimConfig, out_path: str | Path, *,
                      progress: ProgressCallback | None = None, cancel: CancelCheck | None = None,
-                     overwrite: bool = True) -> SimulationFiles:
+                     overwrite: bool = False, inputs: Iterable[str | Path | None] = (),
+                     announce: Callable[[str], None] | None = None) -> SimulationFiles:
     """Simulate ``config.n_ticks`` ticks of ``scene`` into a plain ``.dat``, sidecar and ground truth.
 
     Args:
@@ -110,7 +154,12 @@ def simulate_to_file(scene: Scene | str | Path, config: SimConfig, out_path: str
         progress: ``progress(done_ticks, total_ticks)`` after each chunk.
         cancel: polled between chunks; returning True removes the partial files and raises
             :class:`~spikeview.errors.Cancelled`.
-        overwrite: replace existing files (default); when False an existing file is an error.
+        overwrite: replace existing output files; when False (the default) an existing file is
+            an error, raised before any work.
+        inputs: files the run reads (the scene's own files are added); an output may never be
+            one of them, even with ``overwrite``.
+        announce: called with one sentence stating the sizes before a large write
+            (:data:`~spikeview._files.LARGE_WRITE_BYTES` or more); the CLI prints it.
 
     Returns:
         The :class:`SimulationFiles` written.
@@ -118,17 +167,19 @@ def simulate_to_file(scene: Scene | str | Path, config: SimConfig, out_path: str
     Raises:
         ParameterError: bad settings, a scene shorter than the run, or ``width · height`` not a
             multiple of 8 (plain frames must be whole bytes).
-        OutputFileError: the folder is missing or not writable, or a file exists and
-            ``overwrite`` is False.
+        OutputFileError: the folder is missing or not writable, a file exists and ``overwrite``
+            is False, an output is an input, the disk cannot hold the files (checked first), or
+            a write failed (the disk filled up): then nothing is left behind.
     """
+    from spikeview._files import LARGE_WRITE_BYTES, check_free_space, check_writable, human_bytes, os_error_sentence
+
     out_path = Path(out_path)
     targets = [out_path, sidecar_path(out_path), ground_truth_path(out_path)]
     if not out_path.parent.is_dir():
         raise OutputFileError(f"{out_path.parent}: output folder does not exist; create it or choose another path.")
-    if not overwrite:
-        for t in targets:
-            if t.exists():
-                raise OutputFileError(f"{t}: file exists; delete it, choose another name, or allow overwriting.")
+    protected = [*scene_inputs(scene), *(Path(p) for p in inputs if p)]
+    for t in targets:
+        check_writable(t, overwrite, protected)
     sim = SpikeSimulator(scene, config)
     h, w = sim.height, sim.width
     if (h * w) % 8:
@@ -138,15 +189,27 @@ def simulate_to_file(scene: Scene | str | Path, config: SimConfig, out_path: str
             f"A plain .dat frame must be whole bytes but {w}x{h} = {w * h} pixels is not a multiple of 8: "
             "set width/height (or crop) so that width·height divides by 8."
         )
+    dat_bytes, gt_bytes = planned_sizes(config, h, w)
+    try:
+        check_free_space(out_path.parent, dat_bytes + gt_bytes,
+                         f"{out_path.name} ({human_bytes(dat_bytes)}) and its ground truth (up to {human_bytes(gt_bytes)})")
+    except OutputFileError:
+        if not isinstance(scene, Scene):
+            sim.close()
+        raise
+    if announce is not None and dat_bytes + gt_bytes >= LARGE_WRITE_BYTES:
+        announce(f"writing {out_path.name} ({human_bytes(dat_bytes)}) and {targets[2].name} (up to "
+                 f"{human_bytes(gt_bytes)}, one frame every {config.gt_every} ticks; --gt-every changes it)")
     gt_ticks = np.arange(0, config.n_ticks, config.gt_every, dtype=np.int64)
     dat, side, gt_path = targets
     tmp_dat, tmp_gt = _temp(dat), _temp(gt_path)
     gt_writer: _GroundTruthWriter | None = None
     writer: PlainDatWriter | None = None
     fgt: BinaryIO | None = None
+    renamed: list[Path] = []
     try:
         writer = PlainDatWriter(tmp_dat, w, h, flip_vertical=config.flip_vertical, cfa=config.cfa_or_none,
-                                tick_rate=config.tick_rate, sidecar=False)
+                                tick_rate=config.tick_rate, sidecar=False, reserve_frames=config.n_ticks)
         fgt = open(tmp_gt, "wb")
         gt_writer = _GroundTruthWriter(fgt, len(gt_ticks), h, w)
         buf = np.empty((sim.chunk_ticks, h, w), dtype=np.uint8)
@@ -172,38 +235,46 @@ def simulate_to_file(scene: Scene | str | Path, config: SimConfig, out_path: str
                 progress(sim.tick, total)
         gt_writer.finish(gt_ticks, config.tick_rate)
         gt_writer = None
+        fgt.flush()
+        os.fsync(fgt.fileno())
         fgt.close()
+        fgt = None
         writer.close()
         info = writer.info.replace(path=dat)
         tables: dict[str, Any] = {
             "simulation": config.to_dict(),
             "scene": sim.scene.describe(),
             "ground_truth": {"file": gt_path.name, "n_frames": int(len(gt_ticks)), "every_ticks": config.gt_every,
-                             "first_tick": 0},
+                             "first_tick": 0, "dtype": "float16"},
         }
         os.replace(tmp_dat, dat)
+        renamed.append(dat)
         os.replace(tmp_gt, gt_path)
-        try:
-            write_sidecar(dat, info, tables)
-        except BaseException:
-            # a .dat without its sidecar cannot be read back correctly: leave nothing half-done
-            dat.unlink(missing_ok=True)
-            gt_path.unlink(missing_ok=True)
-            raise
+        renamed.append(gt_path)
+        # a .dat without its sidecar cannot be read back correctly: on failure nothing stays
+        write_sidecar(dat, info, tables)
     except BaseException as e:
-        if gt_writer is not None:
-            gt_writer.abort()
-        if fgt is not None:
-            fgt.close()
-        if writer is not None:
+        # clean up without letting a second failure (a full disk fails the flush in close()
+        # too) hide the first one or leave temporaries behind
+        for step in (
+            (lambda: gt_writer.abort()) if gt_writer is not None else None,
+            (lambda: fgt.close()) if fgt is not None else None,
+            (lambda: writer.discard()) if writer is not None else None,
+        ):
+            if step is not None:
+                try:
+                    step()
+                except (OSError, ValueError, RuntimeError, SpikeviewError):
+                    pass
+        for tmp in (tmp_dat, tmp_gt, *renamed):
             try:
-                writer.close()
-            except OutputFileError:  # already failing; the partial file is removed below
+                tmp.unlink(missing_ok=True)
+            except OSError:
                 pass
-        for tmp in (tmp_dat, tmp_gt):
-            tmp.unlink(missing_ok=True)
         if isinstance(e, OSError):
-            raise OutputFileError(f"{out_path}: could not write the simulation ({e.strerror or e}); check the folder and free space.") from None
+            raise OutputFileError(f"{out_path}: could not write the simulation: {os_error_sentence(e)}.") from None
+        if isinstance(e, OutputFileError) and out_path.name not in str(e):
+            raise OutputFileError(f"{out_path}: {e}") from None
         raise
     finally:
         if not isinstance(scene, Scene):
@@ -220,7 +291,7 @@ class GroundTruth:
     """Ground-truth frames of a simulated capture.
 
     Attributes:
-        frames: (N, H, W, 3) float32 linear RGB in [0, 1], display orientation.
+        frames: (N, H, W, 3) float32 linear RGB in [0, 1], display orientation (stored as float16).
         ticks: (N,) int64 tick of each frame (increasing).
         tick_rate: ticks per second.
     """
