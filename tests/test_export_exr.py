@@ -5,14 +5,13 @@ from __future__ import annotations
 import tomllib
 
 import numpy as np
+import OpenImageIO as oiio  # a required dependency: a broken install fails here, it is not skipped
 import pytest
 
 from spikeview.config import Config
 from spikeview.errors import Cancelled, OutputFileError
 from spikeview.export import ExportConfig, ExportMetadata, export_frames, open_exporter, read_export_metadata
 from spikeview.export.atomic import PARTIAL_MARKER
-
-oiio = pytest.importorskip("OpenImageIO")
 
 H, W = 32, 48
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import tomllib
 from fractions import Fraction
 
+import av  # a required dependency: a broken install fails here, it is not skipped
 import numpy as np
 import pytest
 
@@ -19,8 +20,6 @@ from spikeview.export import (
 )
 from spikeview.export.atomic import PARTIAL_MARKER
 from spikeview.export.display import to_display
-
-av = pytest.importorskip("av")
 
 H, W = 32, 48
 # flat test colours in linear light; saturated primaries are the hardest for 4:2:0 + BT.709

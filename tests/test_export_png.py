@@ -5,14 +5,13 @@ from __future__ import annotations
 import tomllib
 
 import numpy as np
+import OpenImageIO as oiio  # a required dependency: a broken install fails here, it is not skipped
 import pytest
 
 from spikeview.errors import ParameterError
 from spikeview.export import ExportConfig, ExportMetadata, export_frames, read_export_metadata
 from spikeview.export.atomic import PARTIAL_MARKER
 from spikeview.export.display import srgb_encode
-
-oiio = pytest.importorskip("OpenImageIO")
 
 H, W = 32, 48
 

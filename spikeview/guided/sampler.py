@@ -143,7 +143,7 @@ class GuidedSampler:
         alpha = obs.alpha if (plan.cast and obs.alpha is not None) else None
         return ForwardModel(obs.cfa if plan.mosaic else None, obs.window, alpha=alpha,
                             eta=obs.eta if alpha is not None else 1.0, k=params.k if params.quantise else None,
-                            dense_grad=params.dense_gradient, cast=alpha is not None, levels=plan.levels + 1, norm="l2")
+                            dense_grad=params.dense_gradient, cast=alpha is not None, bands=plan.levels + 1, norm="l2")
 
     @classmethod
     def data_term(cls, obs: Observation, plan: Plan, params: GuidedConfig) -> DataTerm:
@@ -266,15 +266,21 @@ class GuidedSampler:
                 sigma = schedule.sigma(i, x)
                 transform = ((i + 3 * chain) % 8) if p.self_ensemble else None
                 x, x0 = rule.step(prior, schedule, data, x, i, sigma, zeta=p.zeta, generator=gen, transform=transform)
+                if not (bool(torch.isfinite(x).all()) and bool(torch.isfinite(x0).all())):
+                    raise ParameterError(_diverged(p, done + 1, total))
                 self.info.steps = done + 1
                 if callback is not None:
                     callback(done + 1, total, to_image((acc + x0) / (chain + 1)))
             acc = acc + x0
         x0 = acc / p.chains
-        out = to_image(x0)
-        if not np.all(np.isfinite(out)):  # pragma: no cover - guarded by clamps; never return NaN
-            out = np.nan_to_num(out, nan=0.0)
-        return out
+        return to_image(x0)
+
+
+def _diverged(p: GuidedConfig, step: int, total: int) -> str:
+    """The one sentence of a diverged pixel-space run (non-finite sample at ``step`` of ``total``)."""
+    how = f"lower s (now {p.s:g}) or use more steps" if p.guidance == "dps" else f"raise lam (now {p.lam:g}) or use fewer data_steps"
+    return (f"the guided sample diverged (non-finite values at step {step} of {total}, guidance = {p.guidance}); "
+            f"{how}, or use method tfp for this stream.")
 
 
 def reconstruct_frame(source, center: int, params: GuidedConfig | None = None, *, alpha: np.ndarray | None = None,
