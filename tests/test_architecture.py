@@ -46,7 +46,8 @@ def test_nothing_imports_gui_or_cli():
     assert offenders == [], f"core modules import the GUI/CLI: {offenders}"
 
 
-@pytest.mark.parametrize("argv", [["--help"], ["info", "--help"], ["reconstruct", "--help"], ["simulate", "--help"]])
+@pytest.mark.parametrize("argv", [["--help"], ["info", "--help"], ["reconstruct", "--help"], ["simulate", "--help"],
+                                  ["export", "--help"]])
 def test_help_does_not_import_heavy_modules(argv):
     code = (
         "import sys\n"
@@ -55,10 +56,20 @@ def test_help_does_not_import_heavy_modules(argv):
         f"    main({argv!r})\n"
         "except SystemExit:\n"
         "    pass\n"
-        "heavy = [m for m in ('torch', 'PySide6', 'pyqtgraph', 'OpenImageIO', 'av', 'numba') if m in sys.modules]\n"
+        "heavy = [m for m in ('torch', 'PySide6', 'pyqtgraph', 'OpenImageIO', 'av', 'numba', 'dask', 'distributed',\n"
+        "                     'zarr') if m in sys.modules]\n"
         "print('HEAVY=' + ','.join(heavy))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "usage:" in out.stdout
     assert out.stdout.strip().splitlines()[-1] == "HEAVY=", out.stdout[-300:]
+
+
+def test_base_import_does_not_load_the_cluster_extra():
+    """``spikeview[cluster]`` (dask, zarr) is optional: importing the package and its core must not need it."""
+    code = ("import sys, spikeview, spikeview.cluster, spikeview.io, spikeview.classical, spikeview.guided, spikeview.export\n"
+            "print('LOADED=' + ','.join(m for m in ('dask', 'distributed', 'zarr') if m in sys.modules))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "LOADED=", out.stdout[-300:]

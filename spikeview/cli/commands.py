@@ -18,21 +18,6 @@ def geometry(fn):
     return fn
 
 
-def parse_range(text: str, default_step: int) -> tuple[int, int, int]:
-    """Parse ``A:B[:STEP]`` (ticks) into ``(a, b, step)``; ``B`` is exclusive."""
-    parts = text.split(":")
-    try:
-        if len(parts) not in (2, 3):
-            raise ValueError
-        a, b = int(parts[0]), int(parts[1])
-        step = int(parts[2]) if len(parts) == 3 and parts[2] else default_step
-    except ValueError:
-        raise ParameterError(f"--range {text!r} is not A:B or A:B:STEP in ticks (e.g. 0:2000:20).") from None
-    if step < 1 or b <= a:
-        raise ParameterError(f"--range {text!r} needs B > A and STEP >= 1 (e.g. 0:2000:20).")
-    return a, b, step
-
-
 def progress(total: int, desc: str, unit: str = "frame"):
     """A tqdm progress bar on stderr (hidden for a single item and when stderr is not a terminal)."""
     from tqdm import tqdm
@@ -69,31 +54,38 @@ def run_info(args: argparse.Namespace) -> int:
 @geometry
 def add_reconstruct_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", metavar="INPUT", help="spike file (.dat, raw camera stream, .npy/.npz)")
-    p.add_argument("--method", choices=["tfp", "tfi", "guided"], default="tfp", help="reconstruction method (default tfp)")
-    p.add_argument("--window", type=int, default=None, metavar="N",
-                   help="window length in ticks (TFP window / TFI search span; default 10 for tfp and guided, 64 for tfi)")
     when = p.add_mutually_exclusive_group()
     when.add_argument("--at", type=int, metavar="T", help="reconstruct the one window centred on tick T")
     when.add_argument("--range", metavar="A:B[:STEP]",
                       help="windows centred on A, A+STEP, ... below B (STEP defaults to the window length)")
     p.add_argument("--out", required=True, metavar="OUT",
                    help="output: .npy, .mp4, or an .exr/.png pattern with a frame number such as frame_%%04d.exr")
-    p.add_argument("--demosaic", default=None, choices=["bilinear", "malvar2004"],
-                   help="demosaicking method for Bayer streams (default malvar2004, also for the guided start estimate)")
-    p.add_argument("--colour-cast", action=argparse.BooleanOptionalAction, default=True,
-                   help="correct the sensor's colour cast with a gray-world estimate over the whole sequence")
-    p.add_argument("--eta", type=float, default=None, help="range parameter of the colour-cast correction (X = Y*alpha/eta)")
-    p.add_argument("--fps", type=float, default=30.0, help="output frame rate of .mp4 files (default 30)")
-    p.add_argument("--compression", default="zip", choices=["zip", "piz", "none"], help="EXR compression (default zip)")
-    p.add_argument("--preset", metavar="FILE", help="a TOML parameter file (written beside earlier outputs) to re-run")
+    p.add_argument("--preset", metavar="FILE",
+                   help="a recipe TOML (written beside earlier outputs, or saved by the app) to re-run; flags given override it")
     add_overwrite_flag(p)
-    from spikeview.cli.guided import add_args as add_guided_args
+    from spikeview.recipe import add_flags
 
-    add_guided_args(p)
+    add_flags(p, ("run", "classical", "guided", "export"))
+    from spikeview.cli.batch import add_args as add_batch_args
+
+    add_batch_args(p)
 
 
 def run_reconstruct(args: argparse.Namespace) -> int:
     from spikeview.cli.reconstruct import run
+
+    return run(args)
+
+
+# ----------------------------------------------------------------------------------- export
+def add_export_args(p: argparse.ArgumentParser) -> None:
+    from spikeview.cli.export_cmd import add_args
+
+    add_args(p)
+
+
+def run_export(args: argparse.Namespace) -> int:
+    from spikeview.cli.export_cmd import run
 
     return run(args)
 
@@ -153,6 +145,7 @@ COMMANDS = {
     "simulate": ("simulate a chromatic spike capture (with ground truth) from a video, images or the demo scene",
                  add_simulate_args, run_simulate),
     "reconstruct": ("reconstruct frames from spikes and export them (.npy, .exr, .png, .mp4)", add_reconstruct_args, run_reconstruct),
+    "export": ("export a .zarr store of a long capture to .mp4, .npy, .exr or .png", add_export_args, run_export),
     "bench": ("error against run time of TFP, TFI, the strong baseline and the guided sampler (PSNR/SSIM vs. ground truth)",
               add_bench_args, run_bench),
 }
@@ -167,5 +160,7 @@ EPILOGS = {
         "  spikeview reconstruct demo.dat --method guided --at 1000 --out guided.exr\n"
         "  spikeview reconstruct demo.dat --method guided --guidance dps --s 0.5 --steps 20 --range 0:400:40 --out g_%04d.exr\n"
         "  spikeview reconstruct demo.dat --preset guided.exr.preset.toml --out again.exr\n"
+        "  spikeview reconstruct demo.dat --range 0:40000:20 --out clip.zarr --cluster local:2   (then --resume)\n"
     ),
+    "export": "example:\n  spikeview export clip.zarr --out clip.mp4 --fps 30\n",
 }

@@ -1,37 +1,28 @@
 """``spikeview reconstruct``: spikes → frames → export, with a reproducible preset.
 
-Every run writes its full parameter set as TOML beside the outputs (``<out>.preset.toml``);
-``--preset FILE`` loads such a file, and flags given explicitly on the command line override it.
+The settings are one :class:`~spikeview.recipe.Recipe`: the defaults, then ``--preset FILE`` (a
+recipe TOML, e.g. the ``<out>.preset.toml`` every run writes beside its outputs, or one the app
+saved), then the flags given on the command line (generated from :data:`spikeview.recipe.PARAMS`).
+The frames come from :func:`spikeview.pipeline.write_sequence`, the same function the app's export
+calls, so the same recipe gives the same pixels in both.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import re
 import sys
 from pathlib import Path
 from typing import Any
 
-from spikeview.config import Config, load_toml
 from spikeview.errors import ParameterError
+from spikeview.recipe import BY_PATH, PARAMS, Recipe, RunTable, StreamTable, apply_flags, given_flags
 
 _PATTERN = re.compile(r"[_.\-]?%0?\d*d")
-
-
-@dataclasses.dataclass
-class RunConfig(Config):
-    """Which windows a reconstruction covers and by what method.
-
-    Attributes:
-        method: ``"tfp"``, ``"tfi"`` or ``"guided"``.
-        at: centre tick of a single window (exclusive with ``range``).
-        range: ``"A:B[:STEP]"`` in ticks: windows centred on A, A+STEP, … below B.
-    """
-
-    method: str = "tfp"
-    at: int | None = None
-    range: str | None = None
+#: kept for the batch path: the ``[run]`` table
+RunConfig = RunTable
+#: geometry flags that fill the recipe's ``[stream]`` table
+STREAM_FLAGS = ("format", "width", "height", "cfa", "flip_vertical", "flip_horizontal", "tick_rate", "layout")
 
 
 def preset_path(out: Path) -> Path:
@@ -39,124 +30,120 @@ def preset_path(out: Path) -> Path:
     return out.with_name(_PATTERN.sub("", out.name) + ".preset.toml")
 
 
-def _centres(run_cfg: RunConfig, n_frames: int, window: int) -> tuple[list[int], int]:
-    from spikeview.cli.commands import parse_range
-
-    if run_cfg.at is not None:
-        if not 0 <= run_cfg.at < n_frames:
-            raise ParameterError(f"--at {run_cfg.at} is outside the stream, which holds ticks [0, {n_frames}).")
-        return [run_cfg.at], window
-    if run_cfg.range is not None:
-        a, b, step = parse_range(run_cfg.range, default_step=window)
-        if a < 0 or a >= n_frames:
-            raise ParameterError(f"--range {run_cfg.range}: start {a} is outside the stream, which holds ticks [0, {n_frames}).")
-        b = min(b, n_frames)
-        return list(range(a, b, step)), step
-    return [n_frames // 2], window
-
-
 def _load_preset(path: str | None) -> dict[str, Any]:
+    """The preset file as a dict (``{}`` without one); validated as a recipe."""
     if path is None:
         return {}
-    data = load_toml(path)
-    known = {"run", "stream", "classical", "guided", "export"}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise ParameterError(f"{path}: unknown table(s) {', '.join(unknown)}; a preset holds {', '.join(sorted(known))}.")
-    return data
+    recipe = Recipe.load(path)
+    return recipe.to_dict()
+
+
+def recipe_from_args(args: argparse.Namespace) -> Recipe:
+    """Defaults ← ``--preset`` ← the flags given (errors name the flag or the file)."""
+    recipe = Recipe.load(args.preset) if getattr(args, "preset", None) else Recipe()
+    stream = {k: getattr(args, k) for k in STREAM_FLAGS if getattr(args, k, None) is not None}
+    if stream:
+        recipe = recipe.with_values({f"stream.{k}": v for k, v in stream.items()})
+    recipe = apply_flags(recipe, args)
+    if getattr(args, "at", None) is not None or getattr(args, "range", None) is not None:
+        recipe = recipe.with_values({"run.at": args.at, "run.range": args.range})
+    return recipe
+
+
+def _centres(run_cfg: RunTable, n_frames: int, window: int) -> tuple[list[int], int]:
+    """Centre ticks of a ``[run]`` table (see :func:`spikeview.pipeline.window_centres`)."""
+    from spikeview.pipeline import window_centres
+
+    probe = Recipe(run=run_cfg)
+    probe = probe.with_values({"classical.window": window}) if run_cfg.method != "tfi" else probe
+    return window_centres(probe, n_frames)
+
+
+def open_stream(args: argparse.Namespace, recipe: Recipe):
+    """The source, read with the recipe's ``[stream]`` (flags already folded in)."""
+    from spikeview.cli.main import _open_from_args
+
+    for key, value in recipe.stream.open_kwargs().items():
+        setattr(args, key, value)
+    return _open_from_args(args)
+
+
+def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre: int, state: Any) -> list[str]:
+    """One sentence for every flag the user gave that cannot act on this run (and why)."""
+    given = given_flags(args)
+    notes = []
+    if recipe.run.method != "guided":
+        for path in sorted(given):
+            if path.startswith("guided."):
+                notes.append(f"{BY_PATH[path].flag} applies to --method guided only; it is ignored by --method {recipe.run.method}.")
+        return notes
+    from spikeview.guided import Observation, make_plan
+    from spikeview.guided.knobs import knob_status
+
+    obs = Observation.from_source(source, centre, recipe.guided.window, alpha=state.alpha, eta=recipe.guided.eta)
+    plan = make_plan(obs, recipe.guided)
+    print(plan, file=sys.stderr)
+    for path, why in knob_status(recipe.guided, plan).items():
+        if why and path in given:
+            notes.append(f"{BY_PATH[path].flag} has no effect here: {why}.")
+    return notes
 
 
 def run(args: argparse.Namespace) -> int:
-    from spikeview.classical.reconstruct import ClassicalConfig, reconstruct_frames, resolve_alpha
+    from spikeview.cli.batch import run_zarr, wants_zarr
+
+    if wants_zarr(args):  # a .zarr output: the chunked, resumable batch path
+        return run_zarr(args)
     from spikeview.cli.commands import progress
-    from spikeview.cli.main import _open_from_args
-    from spikeview.export import ExportConfig, ExportMetadata, describe_slow_motion, open_exporter, slow_motion_factor
+    from spikeview.export import describe_slow_motion, slow_motion_factor
+    from spikeview.pipeline import prepare_sequence, recipe_for_state, window_centres, write_sequence
 
-    preset = _load_preset(args.preset)
-    # stream geometry: the preset's [stream] fills flags that were not given
-    for key, value in preset.get("stream", {}).items():
-        if getattr(args, key, None) is None and key in ("format", "width", "height", "cfa", "flip_vertical",
-                                                          "flip_horizontal", "tick_rate", "layout"):
-            setattr(args, key, value)
-
-    run_cfg = RunConfig.from_dict(preset.get("run", {}), where=f"{args.preset} [run]") if preset else RunConfig()
-    argv_given = set(getattr(args, "_given", ()))
-    if not preset or "method" in argv_given:
-        run_cfg.method = args.method
-    if args.at is not None or args.range is not None:
-        run_cfg.at, run_cfg.range = args.at, args.range
-
+    recipe = recipe_from_args(args)
     out = Path(args.out)
-    src = _open_from_args(args)
-    for note in src.info.warnings:  # wrong geometry, truncated file ...: say so before the work
-        print(f"spikeview: warning: {note}", file=sys.stderr)
+    src = open_stream(args, recipe)
     with src:
-        if run_cfg.method == "guided":
-            from spikeview.cli.guided import reconstruct_guided
-
-            return reconstruct_guided(args, src, run_cfg, preset, out)
-
-        cdict = dict(preset.get("classical", {}))
-        cdict["method"] = run_cfg.method
-        if "demosaic" not in cdict and args.demosaic is None:
-            cdict["demosaic"] = "malvar2004"
-        for flag, key in (("window", "window"), ("demosaic", "demosaic"), ("eta", "eta")):
-            value = getattr(args, flag)
-            if value is not None and (not preset or flag in argv_given or key not in cdict):
-                cdict[key] = value
-        if not preset or "colour_cast" in argv_given:
-            cdict["colour_cast"] = args.colour_cast
-        if run_cfg.method == "tfi" and "window" in cdict and "tfi_half_window" not in cdict:
-            cdict["tfi_half_window"] = max(1, cdict.pop("window") // 2)
-        ccfg = ClassicalConfig.from_dict(cdict, where="reconstruction settings")
-        window = ccfg.window if ccfg.method == "tfp" else 2 * ccfg.tfi_half_window
-        centres, step = _centres(run_cfg, src.n_frames, window)
-
-        edict = dict(preset.get("export", {}))
-        if not preset or "fps" in argv_given or "fps" not in edict:
-            edict["fps"] = args.fps
-        if not preset or "compression" in argv_given or "compression" not in edict:
-            edict["compression"] = args.compression
-        ecfg = ExportConfig.from_dict(edict, where="export settings")
-
-        alpha = resolve_alpha(src, ccfg)
-        if alpha is not None and ccfg.alpha is None:
-            ccfg = ccfg.replace(alpha=[float(v) for v in alpha])  # record the estimate: the preset reproduces it
-        from spikeview.classical.windows import window_range
-
-        first = window_range(centres[0], window, src.n_frames)
-        meta = ExportMetadata(source=str(src.info.path or ""), method=ccfg.method, tick_rate=src.tick_rate,
-                              window=first, centre_tick=centres[0], step_ticks=step, params=ccfg.to_dict())
-        frame_shape = (src.height, src.width, 3) if src.cfa is not None else (src.height, src.width)
+        recipe = recipe.with_values({f"stream.{k}": v for k, v in StreamTable.from_info(src.info, getattr(args, "layout", None)).to_dict().items()})
+        centres, step = window_centres(recipe, src.n_frames)
+        if recipe.run.range is not None:
+            a, b, _ = _parse(recipe.run.range, step)
+            if b > src.n_frames:
+                print(f"note: --range {recipe.run.range} ends past the stream's last tick ({src.n_frames - 1}); "
+                      f"the last window is centred on tick {centres[-1]}.", file=sys.stderr)
+        state = prepare_sequence(src, recipe)
+        recipe = recipe_for_state(recipe, state)
+        for note in inactive_notes(recipe, args, src, centres[0], state):
+            print(f"note: {note}", file=sys.stderr)
         if out.suffix.lower() == ".mp4":
-            factor = slow_motion_factor(src.tick_rate, step, ecfg.fps)
-            print(f"{len(centres)} frames, one per {step} ticks, at {ecfg.fps:g} fps: {describe_slow_motion(factor)}", file=sys.stderr)
-        with open_exporter(out, len(centres), frame_shape, ecfg, meta, overwrite=args.overwrite,
-                           inputs=[args.preset], extra_outputs=[preset_path(out)]) as ex, \
-                progress(len(centres), f"{ccfg.method} → {out.name}") as bar:
-            for c, frame in zip(centres, reconstruct_frames(src, centres, ccfg, alpha=alpha)):
-                ex.write(frame, window=window_range(c, window, src.n_frames), centre_tick=c)
+            factor = slow_motion_factor(src.tick_rate, step, recipe.export.fps)
+            print(f"{len(centres)} frames, one per {step} ticks, at {recipe.export.fps:g} fps: {describe_slow_motion(factor)}",
+                  file=sys.stderr)
+        guided = recipe.run.method == "guided"
+        total = len(centres) * (max(1, recipe.guided.steps) if guided else 1)
+        with progress(total, f"{recipe.run.method} → {out.name}", unit="step" if guided else "frame") as bar:
+            def on_step(fi: int, n: int, step_i: int, steps: int, preview: Any) -> None:
                 bar.update(1)
-        _write_preset(out, args, src, run_cfg, classical=ccfg, export=ecfg)
+
+            write_sequence(src, recipe, centres, out, state=state, step=step, callback=on_step,
+                           overwrite=bool(getattr(args, "overwrite", False)))
+        _write_preset(out, recipe, src, overwrite=bool(getattr(args, "overwrite", False)))
     print(f"wrote {len(centres)} frame{'s' if len(centres) != 1 else ''} to {out}; settings in {preset_path(out)}")
     return 0
 
 
-def _write_preset(out: Path, args: argparse.Namespace, src, run_cfg: RunConfig, **tables: Config) -> Path:
-    import tomli_w
+def _parse(text: str, step: int) -> tuple[int, int, int]:
+    from spikeview.pipeline import parse_range
 
-    from spikeview.cfa import cfa_to_str
+    return parse_range(text, step)
 
-    info = src.info
-    data: dict[str, Any] = {"run": run_cfg.to_dict()}
-    data["stream"] = {"format": info.format, "width": info.width, "height": info.height, "cfa": cfa_to_str(info.cfa),
-                      "flip_vertical": info.flip_vertical, "flip_horizontal": info.flip_horizontal,
-                      "tick_rate": info.tick_rate}
-    if info.format == "npz" and getattr(args, "layout", None):
-        data["stream"]["layout"] = args.layout
-    for name, cfg in tables.items():
-        data[name] = cfg.to_dict()
+
+def _write_preset(out: Path, recipe: Recipe, src: Any, overwrite: bool = False) -> Path:
+    """The recipe beside the output (``<out>.preset.toml``); ``--preset`` re-runs it exactly."""
+    from spikeview._files import check_writable
+
     path = preset_path(out)
-    from spikeview._files import write_atomic
+    # the preset belongs to the output just written: it is replaced with it, but never an input
+    check_writable(path, overwrite=True, inputs=[getattr(src.info, "path", None)])
+    return recipe.save(path, header=f"# spikeview reconstruct preset for {src.info.path}")
 
-    return write_atomic(path, f"# spikeview reconstruct preset for {info.path}\n" + tomli_w.dumps(data), "the preset")
+
+__all__ = ["PARAMS", "RunConfig", "preset_path", "recipe_from_args", "run"]

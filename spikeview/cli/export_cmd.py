@@ -1,0 +1,87 @@
+"""``spikeview export OUT.zarr --out clip.mp4 | frames_%04d.exr | frames.npy``: a batch store to the usual formats.
+
+The export settings (fps, levels, compression…) come from the recipe stored in the Zarr store;
+flags given on the command line override them. Frames are read chunk by chunk (bounded memory).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from spikeview.errors import ParameterError
+
+
+def add_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("store", metavar="STORE", help="a .zarr store written by spikeview reconstruct … --out STORE.zarr")
+    p.add_argument("--out", required=True, metavar="OUT",
+                   help="output: .mp4, .npy, or an .exr/.png pattern with a frame number such as frame_%%04d.exr")
+    p.add_argument("--fps", type=float, help="output frame rate of .mp4 files (default: the store's recipe)")
+    p.add_argument("--compression", choices=["zip", "piz", "none"], help="EXR compression (default: the store's recipe)")
+    from spikeview.cli.commands import add_overwrite_flag
+
+    add_overwrite_flag(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    from spikeview.cli.batch import _require_extra
+
+    _require_extra()
+    import tomllib
+
+    from spikeview.cli.commands import progress
+    from spikeview.cli.reconstruct import preset_path
+    from spikeview.cluster.store import done_mask, open_store, store_attrs
+    from spikeview.export import ExportConfig, ExportMetadata, describe_slow_motion, open_exporter, slow_motion_factor
+
+    store = Path(args.store)
+    if store.suffix.lower() != ".zarr":
+        raise ParameterError(f"{store}: spikeview export reads a .zarr store; other files are exported by spikeview reconstruct.")
+    group = open_store(store)
+    attrs = store_attrs(group)
+    done = done_mask(group)
+    if not done.all():
+        raise ParameterError(f"{store.name} is incomplete ({int(done.sum())} of {done.size} chunks done); "
+                             f"finish it with spikeview reconstruct {attrs.get('input', 'INPUT')} --out {store} --resume.")
+    recipe_text = attrs["recipe"]
+    recipe = tomllib.loads(recipe_text)
+    edict = dict(recipe.get("export", {}))
+    for key in ("fps", "compression"):
+        if getattr(args, key) is not None:
+            edict[key] = getattr(args, key)
+    ecfg = ExportConfig.from_dict(edict, where="export settings")
+    method = attrs["method"]
+    table = recipe.get("guided" if method == "guided" else "classical", {})
+    windows = group["window"][:]
+    centres = group["centre_tick"][:]
+    step = int(attrs["step"])
+    meta = ExportMetadata(source=attrs["input"], method=method, tick_rate=float(attrs["tick_rate"]),
+                          window=tuple(int(v) for v in windows[0]), centre_tick=int(centres[0]), step_ticks=step,
+                          params=table)
+    frames = group["frames"]
+    n, h, w, c = frames.shape
+    shape = (h, w, 3) if c == 3 else (h, w)
+    out = Path(args.out)
+    if out.suffix.lower() == ".mp4":
+        print(f"{n} frames, one per {step} ticks, at {ecfg.fps:g} fps: "
+              f"{describe_slow_motion(slow_motion_factor(float(attrs['tick_rate']), step, ecfg.fps))}", file=sys.stderr)
+    chunk = int(attrs["chunk"])
+    with open_exporter(out, n, shape, ecfg, meta, overwrite=args.overwrite, inputs=[store],
+                       extra_outputs=[preset_path(out)]) as ex, progress(n, f"{store.name} → {out.name}") as bar:
+        for lo in range(0, n, chunk):
+            block = frames[lo:lo + chunk]
+            for i, f in enumerate(block):
+                ex.write(f if c == 3 else f[..., 0], window=tuple(int(v) for v in windows[lo + i]),
+                         centre_tick=int(centres[lo + i]))
+                bar.update(1)
+    from spikeview._files import write_atomic
+
+    recipe_out = dict(recipe)
+    recipe_out["export"] = ecfg.to_dict()
+    import tomli_w
+
+    write_atomic(preset_path(out), f"# spikeview reconstruct preset for {attrs['input']}\n" + tomli_w.dumps(recipe_out),
+                 "the preset")
+    print(f"wrote {n} frame{'s' if n != 1 else ''} to {out}; settings in {preset_path(out)}")
+    return 0

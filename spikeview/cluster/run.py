@@ -1,0 +1,267 @@
+"""The batch driver: split the windows into chunks, run them in-process or on Dask, resume, report.
+
+::
+
+    job = BatchJob(input=..., open_kwargs=..., recipe=..., centres=..., chunk=16, store="out.zarr")
+    report = run_batch(job, state, cluster="local:2", progress=bar.update)
+
+Each work chunk is one task: the worker opens the source from ``job.input`` (once per process, see
+:func:`spikeview.cluster._compute.worker_resources`), computes the chunk's frames and writes them
+straight into the store on the shared file system, then marks the chunk done. Only the small job
+description and a small result go through the scheduler.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from spikeview.cluster._compute import (
+    DEFAULT_KEYFRAME,
+    SequenceState,
+    chained,
+    compute_chunk,
+    worker_resources,
+)
+from spikeview.errors import Cancelled, ParameterError, SpikeviewError
+
+#: how often Dask retries a chunk whose task raised (a worker that dies is rescheduled by Dask itself)
+RETRIES = 2
+
+
+@dataclasses.dataclass(frozen=True)
+class BatchJob:
+    """Everything a worker needs for any chunk (small: it travels with every task).
+
+    Attributes:
+        input: absolute path of the spike file, readable by every worker.
+        open_kwargs: :func:`spikeview.io.open_source` arguments (format, geometry, CFA, flips…).
+        recipe: the preset tables (``run``, ``stream``, ``classical`` / ``guided``, ``export``).
+        centres: centre tick of every window, in output order.
+        chunk: windows per work chunk (= the Zarr chunk along the window axis).
+        store: absolute path of the ``.zarr`` store.
+        keyframe: guided reuse / warm-start chains restart at window indices that are multiples of it.
+    """
+
+    input: str
+    open_kwargs: dict[str, Any]
+    recipe: dict[str, Any]
+    centres: tuple[int, ...]
+    chunk: int
+    store: str
+    keyframe: int = DEFAULT_KEYFRAME
+
+    @property
+    def n_chunks(self) -> int:
+        return -(-len(self.centres) // self.chunk)
+
+    def bounds(self, index: int) -> tuple[int, int]:
+        """Window indices ``[lo, hi)`` of work chunk ``index``."""
+        lo = index * self.chunk
+        return lo, min(lo + self.chunk, len(self.centres))
+
+    def chain_start(self, lo: int) -> int:
+        """First window to compute for a chunk starting at ``lo``: the previous keyframe when windows chain."""
+        return (lo // self.keyframe) * self.keyframe if chained(self.recipe) else lo
+
+
+@dataclasses.dataclass
+class BatchReport:
+    """What a run did: chunks and windows computed now, wall time, per-chunk results."""
+
+    chunks_done: int = 0
+    chunks_skipped: int = 0
+    windows: int = 0
+    seconds: float = 0.0
+    results: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+
+    @property
+    def windows_per_second(self) -> float:
+        return self.windows / self.seconds if self.seconds > 0 else float("nan")
+
+
+def _in_dask_worker() -> bool:
+    if "distributed" not in sys.modules:
+        return False
+    from distributed import get_worker
+
+    try:
+        get_worker()
+    except ValueError:
+        return False
+    return True
+
+
+_TORCH_THREADS_SET = False
+
+
+def run_chunk(job: BatchJob, index: int, state: dict[str, Any]) -> dict[str, Any]:
+    """Compute and store work chunk ``index`` (runs on a worker, or in-process); returns a small report."""
+    global _TORCH_THREADS_SET
+    from spikeview.cluster.store import write_chunk
+
+    if not _TORCH_THREADS_SET and _in_dask_worker():
+        # one task per worker thread: torch must not spawn its own pool on top (the issue's "one thread each")
+        if job.recipe.get("run", {}).get("method") == "guided":
+            import torch
+
+            torch.set_num_threads(1)
+        _TORCH_THREADS_SET = True
+    source, sampler = worker_resources(job.input, job.open_kwargs, job.recipe)
+    lo, hi = job.bounds(index)
+    start = job.chain_start(lo)
+    t0 = time.perf_counter()
+    frames = compute_chunk(source, job.centres[start:hi], job.recipe, SequenceState.from_dict(state), sampler=sampler)
+    frames = frames[lo - start:]
+    seconds = time.perf_counter() - t0
+    write_chunk(job.store, index, lo, frames, seconds)
+    return {"index": index, "windows": hi - lo, "lead_in": lo - start, "seconds": seconds, "pid": os.getpid(),
+            "max_rss_mb": _max_rss_mb()}
+
+
+def _max_rss_mb() -> float:
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - Windows
+        return float("nan")
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return rss / 1024.0 if sys.platform != "darwin" else rss / (1024.0 * 1024.0)
+
+
+# ------------------------------------------------------------------------------------ clients
+def parse_cluster(text: str) -> tuple[str, Any]:
+    """``"local:N"`` → ``("local", N)``; ``"tcp://HOST:PORT"`` (or another Dask scheme) → ``("address", text)``."""
+    t = text.strip()
+    if t.startswith("local:") or t == "local":
+        try:
+            n = int(t.partition(":")[2] or os.cpu_count() or 1)
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise ParameterError(f"--cluster {text!r}: local:N needs a whole number of workers >= 1, e.g. local:2.")
+        return "local", n
+    if "://" in t and t.split("://", 1)[1]:
+        return "address", t
+    raise ParameterError(f"--cluster {text!r} is neither local:N nor a scheduler address such as tcp://HOST:8786.")
+
+
+def connect(cluster: str, timeout: float = 10.0):
+    """A Dask client for ``cluster`` and a function that closes it (and the local cluster it started).
+
+    Raises:
+        ParameterError: bad ``--cluster`` text, or no scheduler answering at the address.
+    """
+    kind, value = parse_cluster(cluster)
+    import logging
+
+    from distributed import Client, LocalCluster
+
+    if kind == "local":
+        lc = LocalCluster(n_workers=value, threads_per_worker=1, processes=True, dashboard_address=None,
+                          silence_logs=logging.ERROR)
+        client = Client(lc)
+
+        def close() -> None:
+            client.close()
+            lc.close()
+
+        return client, close
+    try:
+        client = Client(value, timeout=timeout)
+    except (OSError, TimeoutError) as e:
+        raise ParameterError(
+            f"cannot reach a Dask scheduler at {value} within {timeout:g} s ({type(e).__name__}); "
+            "check the address (dask scheduler prints it) and that the scheduler is running."
+        ) from None
+    return client, client.close
+
+
+def run_batch(job: BatchJob, state: SequenceState, *, cluster: str | None = None,
+              progress: Callable[[int], Any] | None = None, cancel: Callable[[], bool] | None = None,
+              client: Any = None) -> BatchReport:
+    """Run every chunk of ``job`` that the store does not yet mark done.
+
+    Args:
+        job: the work (its store must exist, see :func:`spikeview.cluster.store.create_store`).
+        state: the sequence-wide state, computed once before the split.
+        cluster: ``None`` (in-process, chunk after chunk), ``"local:N"`` or a scheduler address.
+        progress: called with the number of windows each finished chunk adds.
+        cancel: polled after every finished chunk; true stops the run (:class:`Cancelled`) leaving the
+            finished chunks marked, so ``--resume`` continues from them.
+        client: an existing Dask client to use instead of ``cluster`` (left open).
+
+    Raises:
+        Cancelled: ``cancel`` fired.
+        ParameterError: bad ``cluster``, or a worker died repeatedly on one chunk.
+    """
+    from spikeview.cluster.store import done_mask, open_store
+
+    done = done_mask(open_store(job.store))
+    pending = [i for i in range(job.n_chunks) if not done[i]]
+    report = BatchReport(chunks_skipped=job.n_chunks - len(pending))
+    sd = state.to_dict()
+    t0 = time.perf_counter()
+
+    def finished(res: dict[str, Any]) -> None:
+        report.results.append(res)
+        report.chunks_done += 1
+        report.windows += res["windows"]
+        if progress is not None:
+            progress(res["windows"])
+
+    if cluster is None and client is None:
+        from spikeview.cluster._compute import clear_cache
+
+        try:
+            for i in pending:
+                finished(run_chunk(job, i, sd))
+                if cancel is not None and cancel():
+                    raise Cancelled()
+        finally:
+            clear_cache()
+        report.seconds = time.perf_counter() - t0
+        return report
+
+    close = None
+    if client is None:
+        client, close = connect(cluster)
+    from distributed import as_completed
+
+    futures = [client.submit(run_chunk, job, i, sd, pure=False, retries=RETRIES, key=f"spikeview-chunk-{i}-{os.urandom(4).hex()}")
+               for i in pending]
+    try:
+        for fut in as_completed(futures):
+            try:
+                finished(fut.result())
+            except SpikeviewError:
+                raise
+            except Exception as e:
+                if type(e).__name__ == "KilledWorker":
+                    raise ParameterError(
+                        f"a Dask worker died {RETRIES + 1} or more times on one chunk ({e}); the finished chunks are "
+                        "kept: look for out-of-memory kills, give workers more memory or use a smaller --chunk, then --resume."
+                    ) from None
+                raise
+            if cancel is not None and cancel():
+                raise Cancelled()
+    finally:
+        for f in futures:
+            if not f.done():
+                f.cancel()
+        if close is not None:
+            close()
+    report.seconds = time.perf_counter() - t0
+    return report
+
+
+def assemble(job: BatchJob) -> np.ndarray:
+    """All frames of a finished store (tests, small runs)."""
+    from spikeview.cluster.store import open_store, read_frames
+
+    return read_frames(open_store(job.store))

@@ -1,0 +1,216 @@
+"""The chunked, resumable batch path: ``spikeview reconstruct … --out OUT.zarr`` and ``spikeview export``.
+
+Tiny captures (32×32, a few windows); one shared two-process LocalCluster for the Dask cases (its
+scheduler address also exercises ``--cluster tcp://…``), one CLI run that starts its own ``local:2``.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+
+import numpy as np
+import pytest
+
+pytest.importorskip("distributed")
+zarr = pytest.importorskip("zarr")
+
+from spikeview.cli.main import main  # noqa: E402
+from spikeview.errors import Cancelled  # noqa: E402
+from spikeview.io.plain import write_plain  # noqa: E402
+
+GEOM = ["--width", "32", "--height", "32", "--cfa", "RGGB"]
+GUIDED = ["--method", "guided", "--steps", "2", "--seed", "5"]
+
+
+def _capture(path, seed=7, ticks=240):
+    rng = np.random.default_rng(seed)
+    ramp = np.linspace(0.05, 0.9, 32, dtype=np.float32)[None, None, :]
+    spikes = (rng.random((ticks, 32, 32)) < ramp).astype(np.uint8)
+    spikes[ticks // 2:, 8:16, 8:16] = 1  # a change half-way: guided reuse and re-sampling both happen
+    write_plain(path, spikes)
+    return path
+
+
+@pytest.fixture
+def cap(tmp_path):
+    return _capture(tmp_path / "cap.dat")
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """Two single-threaded worker processes, shared by the Dask tests of this module."""
+    from distributed import Client, LocalCluster
+
+    lc = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40)
+    client = Client(lc)
+    yield lc, client
+    client.close()
+    lc.close()
+
+
+def _frames(store):
+    g = zarr.open_group(str(store), mode="r")
+    assert np.asarray(g["done"][:]).all()
+    return np.asarray(g["frames"][:])
+
+
+def _reconstruct(*argv) -> int:
+    return main(["reconstruct", *map(str, argv)])
+
+
+# ------------------------------------------------------------------------------ bit identity
+def test_tfp_chunk3_on_local2_matches_in_process_and_file_output(cap, tmp_path, capsys):
+    common = [cap, *GEOM, "--range", "5:200:10"]
+    assert _reconstruct(*common, "--out", tmp_path / "a.zarr") == 0
+    assert _reconstruct(*common, "--out", tmp_path / "b.zarr", "--chunk", "3", "--cluster", "local:2") == 0
+    assert _reconstruct(*common, "--out", tmp_path / "ref.npy") == 0
+    a, b = _frames(tmp_path / "a.zarr"), _frames(tmp_path / "b.zarr")
+    assert a.shape == (20, 32, 32, 3) and a.dtype == np.float32 and np.isfinite(a).all()
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(a, np.load(tmp_path / "ref.npy"))  # the file path makes the same frames
+    g = zarr.open_group(str(tmp_path / "b.zarr"), mode="r")
+    assert g["frames"].chunks == (3, 32, 32, 3)
+    np.testing.assert_array_equal(g["centre_tick"][:], np.arange(5, 200, 10))
+    np.testing.assert_array_equal(g["window"][:2], [[0, 10], [10, 20]])
+    meta = g.attrs["spikeview"]
+    assert meta["method"] == "tfp" and len(meta["alpha"]) == 3 and "[classical]" in meta["recipe"]
+    assert "alpha = [" in meta["recipe"]  # the estimate is recorded: the recipe reproduces it
+    err = capsys.readouterr().err
+    assert "20 windows in 7 chunks of 3 (tfp, on local:2)" in err and "windows/s" in err
+
+
+def test_guided_chunk3_on_scheduler_address_matches_in_process(cap, tmp_path, cluster):
+    _, client = cluster
+    common = [cap, *GEOM, *GUIDED, "--range", "5:240:40"]  # 6 windows: reuse chain across the chunk border
+    assert _reconstruct(*common, "--out", tmp_path / "a.zarr") == 0
+    assert _reconstruct(*common, "--out", tmp_path / "b.zarr", "--chunk", "4",
+                        "--cluster", client.scheduler.address) == 0
+    a, b = _frames(tmp_path / "a.zarr"), _frames(tmp_path / "b.zarr")
+    assert a.shape == (6, 32, 32, 3) and np.isfinite(a).all()
+    np.testing.assert_array_equal(a, b)
+    # with the default chunk (16 >= 6 windows) the store equals one plain sequence run
+    assert _reconstruct(*common, "--out", tmp_path / "ref.npy") == 0
+    np.testing.assert_array_equal(a, np.load(tmp_path / "ref.npy"))
+
+
+def test_killed_worker_is_retried_and_the_run_completes(cap, tmp_path, cluster):
+    from spikeview.cli import batch
+
+    _, client = cluster
+    common = [cap, *GEOM, "--range", "5:200:10"]
+    assert _reconstruct(*common, "--out", tmp_path / "ref.zarr") == 0
+    pids = sorted(client.run(os.getpid).values())
+    killed = []
+
+    class Kill:
+        def __call__(self) -> bool:  # polled after each finished chunk
+            if not killed:
+                os.kill(pids[0], signal.SIGKILL)
+                killed.append(pids[0])
+            return False
+
+    from spikeview.cli.main import build_parser
+
+    p = build_parser()
+    args = p.parse_args(["reconstruct", *map(str, common), "--out", str(tmp_path / "k.zarr"), "--chunk", "1"])
+    assert batch.run_zarr(args, cancel=Kill(), client=client) == 0
+    assert killed
+    np.testing.assert_array_equal(_frames(tmp_path / "k.zarr"), _frames(tmp_path / "ref.zarr"))
+    client.wait_for_workers(2, timeout=60)  # the nanny restarts it for the next test
+
+
+# ----------------------------------------------------------------------------------- resume
+def test_resume_after_an_interrupted_run_gives_identical_frames(cap, tmp_path):
+    from spikeview.cli import batch
+    from spikeview.cli.main import build_parser
+
+    common = [str(cap), *GEOM, "--range", "5:200:10", "--chunk", "4"]
+    assert _reconstruct(*common, "--out", tmp_path / "full.zarr") == 0
+    out = tmp_path / "part.zarr"
+    calls = []
+
+    def cancel_after_two() -> bool:
+        calls.append(1)
+        return len(calls) >= 2
+
+    args = build_parser().parse_args(["reconstruct", *common, "--out", str(out)])
+    with pytest.raises(Cancelled):
+        batch.run_zarr(args, cancel=cancel_after_two)
+    g = zarr.open_group(str(out), mode="r+")
+    assert list(g["done"][:]) == [1, 1, 0, 0, 0]
+    assert np.isnan(g["frames"][8:]).all()
+    g["frames"][8:12] = 7.0  # a chunk whose worker died after writing frames but before its marker
+    assert _reconstruct(*common, "--out", out) == 1  # exists: --resume needed
+    assert _reconstruct(cap, *GEOM, "--out", out, "--resume") == 0  # settings come from the store
+    np.testing.assert_array_equal(_frames(out), _frames(tmp_path / "full.zarr"))
+
+
+@pytest.mark.parametrize("change, needle", [
+    (["--window", "12"], "was written with other settings (classical.window = 10 there, 12 now)"),
+    (["--chunk", "5"], "was written in chunks of 4 windows, not 5"),
+    (["--other-input"], "belongs to another input"),
+])
+def test_resume_refuses_a_store_of_other_settings_or_input(cap, tmp_path, capsys, change, needle):
+    out = tmp_path / "s.zarr"
+    assert _reconstruct(cap, *GEOM, "--range", "5:100:10", "--chunk", "4", "--out", out) == 0
+    src = cap
+    if change == ["--other-input"]:
+        src, change = _capture(tmp_path / "other.dat", seed=8), []
+    capsys.readouterr()
+    assert _reconstruct(src, *GEOM, "--range", "5:100:10", "--out", out, "--resume", *change) == 1
+    err = capsys.readouterr().err.strip()
+    assert needle in err and err.count("\n") == 0 and "Traceback" not in err
+
+
+def test_bad_cluster_and_flag_errors_are_one_sentence(cap, tmp_path, capsys):
+    from spikeview.cluster.run import connect
+
+    with pytest.raises(Exception, match="cannot reach a Dask scheduler at tcp://127.0.0.1:9"):
+        connect("tcp://127.0.0.1:9", timeout=0.5)
+    cases = [
+        (["--cluster", "lokal:2", "--out", tmp_path / "x.zarr"], "neither local:N nor a scheduler address"),
+        (["--cluster", "local:0", "--out", tmp_path / "x.zarr"], "local:N needs a whole number"),
+        (["--chunk", "3", "--out", tmp_path / "x.npy"], "end --out with .zarr"),
+        (["--chunk", "0", "--out", tmp_path / "x.zarr"], "--chunk 0"),
+    ]
+    for extra, needle in cases:
+        assert _reconstruct(cap, *GEOM, "--range", "5:50:10", *extra) == 1
+        err = capsys.readouterr().err.strip()
+        assert needle in err and "Traceback" not in err, err
+    assert not (tmp_path / "x.zarr").exists()
+
+
+# ----------------------------------------------------------------------------------- export
+def test_export_store_to_npy_and_mp4_with_the_stores_settings(cap, tmp_path, capsys):
+    store = tmp_path / "c.zarr"
+    assert _reconstruct(cap, *GEOM, "--range", "5:100:10", "--fps", "24", "--out", store) == 0
+    assert main(["export", str(store), "--out", str(tmp_path / "f.npy")]) == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "f.npy"), _frames(store))
+    assert main(["export", str(store), "--out", str(tmp_path / "c.mp4")]) == 0
+    assert (tmp_path / "c.mp4").stat().st_size > 0
+    assert "at 24 fps" in capsys.readouterr().err  # the recipe's export settings
+    from spikeview.export import read_export_metadata
+
+    rec = read_export_metadata(tmp_path / "f.npy")
+    assert rec["method"] == "tfp" and rec["params"]["window"] == 10
+
+
+def test_export_refuses_an_incomplete_store(cap, tmp_path, capsys):
+    store = tmp_path / "c.zarr"
+    assert _reconstruct(cap, *GEOM, "--range", "5:100:10", "--chunk", "4", "--out", store) == 0
+    zarr.open_group(str(store), mode="r+")["done"][1] = 0
+    assert main(["export", str(store), "--out", str(tmp_path / "f.npy")]) == 1
+    err = capsys.readouterr().err
+    assert "incomplete (2 of 3 chunks done)" in err and "--resume" in err
+
+
+def test_monochrome_store_has_one_channel_and_exports_2d_frames(tmp_path):
+    path = tmp_path / "mono.dat"
+    rng = np.random.default_rng(1)
+    write_plain(path, (rng.random((80, 32, 32)) < 0.3).astype(np.uint8))
+    geom = ["--width", "32", "--height", "32", "--cfa", "none"]
+    assert _reconstruct(path, *geom, "--range", "5:80:10", "--chunk", "3", "--out", tmp_path / "m.zarr") == 0
+    assert _frames(tmp_path / "m.zarr").shape == (8, 32, 32, 1)
+    assert main(["export", str(tmp_path / "m.zarr"), "--out", str(tmp_path / "m.npy")]) == 0
+    assert np.load(tmp_path / "m.npy").shape == (8, 32, 32)
