@@ -31,10 +31,7 @@ from spikeview.classical.tfp import window_counts
 from spikeview.errors import ParameterError
 from spikeview.io.source import SpikeSource
 
-#: default range parameter η: each channel's sequence mean maps to 1/η = 0.5
-DEFAULT_ETA = 2.0
-#: default number of windows :func:`estimate_alpha` samples from a long stream
-DEFAULT_ALPHA_WINDOWS = 64
+from spikeview.classical.config import DEFAULT_ALPHA_WINDOWS, DEFAULT_ETA  # noqa: E402  (one home: the settings)
 
 
 class ColourCastWarning(UserWarning):

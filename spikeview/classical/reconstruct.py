@@ -31,61 +31,9 @@ from spikeview.classical.display import Gamma, _check_gamma, _check_levels, enco
 from spikeview.classical.tfi import DEFAULT_HALF_WINDOW, tfi
 from spikeview.classical.tfp import counts_to_sfr, tfp, window_counts
 from spikeview.classical.windows import window_range
-from spikeview.config import Config
+from spikeview.classical.config import CLASSICAL_METHODS, ClassicalConfig  # noqa: F401 (re-exported)
 from spikeview.errors import ParameterError
 from spikeview.io.source import SpikeSource
-
-#: valid values of :attr:`ClassicalConfig.method`
-CLASSICAL_METHODS = ("tfp", "tfi")
-
-
-@dataclasses.dataclass
-class ClassicalConfig(Config):
-    """Settings of a classical reconstruction (saved to / loaded from TOML).
-
-    Attributes:
-        method: ``"tfp"`` (spike count over a window) or ``"tfi"`` (inter-spike interval).
-        window: TFP window Δτ in ticks (10 ticks = 0.5 ms at 20 kHz, the SpikeDiff observation).
-        tfi_half_window: TFI search half-window in ticks (missing spikes cap the interval at twice it).
-        demosaic: one of ``"bilinear"``, ``"malvar2004"``, ``"menon2007"`` (Bayer streams only).
-        colour_cast: undo the sensor's colour cast with gray-world gains (Bayer streams only;
-            monochrome frames are returned uncorrected).
-        eta: range parameter η: after correction each channel's sequence mean is ``1/η``.
-        alpha: fixed gray-world gains ``[α_R, α_G, α_B]``; ``None`` estimates them once per
-            sequence with :func:`estimate_alpha`.
-        alpha_window, alpha_max_windows: how :func:`estimate_alpha` samples the sequence.
-        clip: clip frames to ``[0, 1]`` (the package's frame convention); turn off to keep
-            values above 1 (bright regions after the gains) and Malvar/Menon overshoot.
-    """
-
-    method: str = "tfp"
-    window: int = 10
-    tfi_half_window: int = DEFAULT_HALF_WINDOW
-    demosaic: str = "bilinear"
-    colour_cast: bool = True
-    eta: float = DEFAULT_ETA
-    alpha: list[float] | None = None
-    alpha_window: int = 10
-    alpha_max_windows: int = DEFAULT_ALPHA_WINDOWS
-    clip: bool = True
-
-    def __post_init__(self) -> None:
-        self.method = str(self.method).strip().lower()
-        if self.method not in CLASSICAL_METHODS:
-            raise ParameterError(f"Unknown classical method {self.method!r}: use one of {', '.join(CLASSICAL_METHODS)}.")
-        self.demosaic = check_method(self.demosaic)
-        for name in ("window", "tfi_half_window", "alpha_window", "alpha_max_windows"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ParameterError(f"{name} must be a whole number >= 1, got {value!r}; fix the setting.")
-        if not (np.isfinite(self.eta) and self.eta > 0):
-            raise ParameterError(f"eta must be a finite positive number, got {self.eta!r}; use e.g. {DEFAULT_ETA}.")
-        if self.alpha is not None:
-            a = [float(v) for v in self.alpha]
-            if len(a) != 3 or not all(np.isfinite(v) and v > 0 for v in a):
-                raise ParameterError(f"alpha must be three finite positive gains [R, G, B], got {self.alpha!r}; or leave it unset to estimate it.")
-            self.alpha = a
-
 
 def resolve_alpha(source: SpikeSource, config: ClassicalConfig, alpha: np.ndarray | list[float] | None = None) -> np.ndarray | None:
     """The α a reconstruction of ``source`` uses: ``alpha`` if given, else ``config.alpha``, else

@@ -26,8 +26,7 @@ import numpy as np
 from spikeview.errors import ParameterError
 from spikeview.io.source import SpikeSource
 
-#: default search half-window in ticks (1.6 ms at 20 kHz): the window read is ``[t-32, t+32]``
-DEFAULT_HALF_WINDOW = 32
+from spikeview.classical.config import DEFAULT_HALF_WINDOW  # noqa: E402  (one home: the settings)
 
 
 @numba.njit(cache=True, nogil=True)

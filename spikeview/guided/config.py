@@ -34,19 +34,19 @@ PRIORS = ("ffdnet", "sd")
 GUIDANCES = ("dps", "hqs")
 DIFFUSION_MODES = ("auto", "always", "never")
 FALLBACKS = ("baseline", "tfp")
-DEMOSAICS = ("bilinear", "malvar2004")
+DEMOSAICS = ("bilinear", "malvar2004", "menon2007")
 
 #: the FFDNet prior was trained for noise levels up to about 75/255 (METHOD.md)
 SIGMA_MAX = 75.0 / 255.0
 
 
 def _check_range(name: str, value: float, lo: float, hi: float, *, lo_open: bool = False) -> None:
-    check_range(f"GuidedConfig.{name}", value, lo, hi, lo_open=lo_open)
+    check_range(f"guided.{name}", value, lo, hi, lo_open=lo_open)
 
 
 def _check_choice(name: str, value: str, choices: tuple[str, ...]) -> None:
     if value not in choices:
-        raise ParameterError(f"GuidedConfig.{name} = {value!r} is not valid: use one of {', '.join(choices)}.")
+        raise ParameterError(f"guided.{name} = {value!r} is not valid: use one of {', '.join(choices)}.")
 
 
 @dataclasses.dataclass
@@ -69,8 +69,9 @@ class GuidedConfig(Config):
             that the total is ``max(t_start, σ_obs)``). ``t_start = 0`` starts from Y₀ itself.
         top_up: add only the noise missing to reach ``t_start`` (see ``t_start``).
         sigma_end: the last non-zero noise level of the schedule, in ``(0, t_start]``.
-        s: DPS step size (the gradient of ‖P(Y) − P(A(x̂₀))‖ with respect to x_t is scaled by ``s``),
-            >= 0. Ignored by HQS.
+        s: weight of the data against the prior, >= 0: the DPS step size (the gradient of
+            ‖P(Y) − P(A(x̂₀))‖ with respect to x_t is scaled by ``s``), or under HQS the fraction of
+            the data step taken (``x̂₀ + s·(prox(x̂₀) − x̂₀)``; 1 = the full step, 0 = prior only).
         lam: HQS data weight λ: ρ_t = λ·σ_n²/σ_t² weighs the prior against the data, > 0.
         data_steps: HQS preconditioned gradient steps on x̂₀ per sampler step (>= 0; 0 = no data
             step, i.e. unguided; the first step is the closed-form proximal point when the
@@ -83,7 +84,8 @@ class GuidedConfig(Config):
             noise); ``False`` weighs them equally (same mean noise level).
         k: soft-quantisation sharpness of Q (tanh slope, >= 0; METHOD.md: 50 best; ``k = 0`` is a
             flat staircase that gives no gradient, use ``quantise=False`` for no Q).
-        quantise: include Q in the forward model.
+        quantise: include Q in the forward model; ``None`` (default) lets the plan decide
+            (:func:`spikeview.guided.plan.make_plan`: on for DPS, off for HQS, with the reason).
         levels: band-pass levels L of the Laplacian pyramid of the multiscale loss (the pyramid has
             ``L + 1`` bands: L differences ``X_l − U(D(X_l))`` and the coarse residual; 0 = plain
             single-scale residual). Capped by the frame size by the plan (``str(plan)`` says so).
@@ -118,6 +120,8 @@ class GuidedConfig(Config):
         reuse: let the plan reuse the previous result when the window did not change (``None`` =
             on for video, decided by a count test).
         reuse_alpha: significance level of that count test (smaller = reuse more often).
+        device, dtype: where and in what precision the sd prior runs (``"auto"`` = CUDA when
+            available; ``float16``/``bfloat16`` need CUDA).
     """
 
     guidance: str = "hqs"
@@ -134,7 +138,7 @@ class GuidedConfig(Config):
     renoise: bool = False
     noise_weights: bool = True
     k: float = 50.0
-    quantise: bool = False
+    quantise: bool | None = None
     levels: int = 0
     dense_gradient: bool = True
     eta: float = 2.0
@@ -156,8 +160,13 @@ class GuidedConfig(Config):
     cast_tolerance: float = 0.05
     reuse: bool | None = None
     reuse_alpha: float = 1e-3
+    device: str = "auto"
+    dtype: str = "float32"
 
     def __post_init__(self) -> None:
+        from spikeview.recipe import check_table
+
+        check_table("guided", self)  # the ranges the CLI and the app show (spikeview.recipe.PARAMS)
         _check_choice("guidance", self.guidance, GUIDANCES)
         _check_choice("prior", self.prior, PRIORS)
         _check_choice("diffusion", self.diffusion, DIFFUSION_MODES)
@@ -167,24 +176,24 @@ class GuidedConfig(Config):
         for name in ("steps", "window", "levels", "data_steps", "seed", "alpha_max_windows", "chains"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int):
-                raise ParameterError(f"GuidedConfig.{name} = {v!r} must be a whole number.")
+                raise ParameterError(f"guided.{name} = {v!r} must be a whole number.")
         if self.alpha is not None:
             a = [float(v) for v in self.alpha]
             if len(a) != 3 or not all(math.isfinite(v) and v > 0 for v in a):
-                raise ParameterError(f"GuidedConfig.alpha = {self.alpha!r} must be three finite positive gains [R, G, B], or unset.")
+                raise ParameterError(f"guided.alpha = {self.alpha!r} must be three finite positive gains [R, G, B], or unset.")
             self.alpha = a
         if not 1 <= self.chains <= 16:
-            raise ParameterError(f"GuidedConfig.chains = {self.chains} is out of range: use 1 to 16 chains.")
+            raise ParameterError(f"guided.chains = {self.chains} is out of range: use 1 to 16 chains.")
         if self.alpha_max_windows < 1:
-            raise ParameterError(f"GuidedConfig.alpha_max_windows = {self.alpha_max_windows} is out of range: use at least 1.")
+            raise ParameterError(f"guided.alpha_max_windows = {self.alpha_max_windows} is out of range: use at least 1.")
         if self.steps < 1:
-            raise ParameterError(f"GuidedConfig.steps = {self.steps} is out of range: use at least 1 step.")
+            raise ParameterError(f"guided.steps = {self.steps} is out of range: use at least 1 step.")
         if self.window < 1:
-            raise ParameterError(f"GuidedConfig.window = {self.window} is out of range: use a window of at least 1 tick.")
+            raise ParameterError(f"guided.window = {self.window} is out of range: use a window of at least 1 tick.")
         if self.levels < 0:
-            raise ParameterError(f"GuidedConfig.levels = {self.levels} is out of range: use 0 (no pyramid) or more.")
+            raise ParameterError(f"guided.levels = {self.levels} is out of range: use 0 (no pyramid) or more.")
         if self.data_steps < 0:
-            raise ParameterError(f"GuidedConfig.data_steps = {self.data_steps} is out of range: use 0 or more.")
+            raise ParameterError(f"guided.data_steps = {self.data_steps} is out of range: use 0 or more.")
         _check_range("t_start", self.t_start, 0.0, SIGMA_MAX + 1e-9)
         _check_range("sigma_end", self.sigma_end, 0.0, SIGMA_MAX + 1e-9, lo_open=True)
         _check_range("s", self.s, 0.0, math.inf)
@@ -196,3 +205,6 @@ class GuidedConfig(Config):
         _check_range("noise_target", self.noise_target, 0.0, 1.0)
         _check_range("cast_tolerance", self.cast_tolerance, 0.0, math.inf)
         _check_range("reuse_alpha", self.reuse_alpha, 0.0, 1.0, lo_open=True)
+        _check_choice("dtype", self.dtype, ("float32", "float16", "bfloat16"))
+        if self.device != "auto" and self.device.split(":")[0] not in ("cpu", "cuda"):
+            raise ParameterError(f"guided.device = {self.device!r} is not valid: use auto, cpu or cuda.")

@@ -99,12 +99,16 @@ class HQSGuidance:
         lam: λ > 0 in ``ρ_t = λ σ_n² / σ_t²`` (larger = trust the prior more).
         data_steps: preconditioned gradient steps of the data sub-problem per sampler step (0 = none:
             unguided).
+        renoise: re-noise x̂₀ to σ_{t-1} between steps (DiffPIR) or hand x̂₀ on (DPIR).
+        s: weight of the data step against the prior: ``x̂₀ ← x̂₀ + s·(prox(x̂₀) − x̂₀)`` (1 = the
+            full proximal step, 0 = the prior's estimate alone, > 1 over-relaxed).
     """
 
     needs_grad = False
 
-    def __init__(self, lam: float = 1.0, data_steps: int = 1, renoise: bool = True):
+    def __init__(self, lam: float = 1.0, data_steps: int = 1, renoise: bool = True, s: float = 1.0):
         self.lam = float(lam)
+        self.s = float(s)
         self.data_steps = int(data_steps)
         self.renoise = bool(renoise)
 
@@ -115,12 +119,14 @@ class HQSGuidance:
         # (the residual is in sensor units, x̂₀ in image units: the cast gain sits inside A).
         sig = sigma.mean(dim=(2, 3), keepdim=True) if sigma.shape[-2:] != (1, 1) else sigma
         rho = self.lam * data.sigma_n2 / sig.clamp_min(1e-6) ** 2
-        x0 = data.prox(x0, rho, self.data_steps)
+        x_data = data.prox(x0, rho, self.data_steps)
+        # s weighs the data step against the prior: 1 takes it fully, 0 keeps the prior's estimate
+        x0 = x_data if self.s == 1.0 else (x0.clamp(0.0, 1.0) + self.s * (x_data - x0.clamp(0.0, 1.0))).clamp(0.0, 1.0)
         if not self.renoise:  # DPIR: hand x̂₀ itself to the next, lower noise level
             return x0, x0
         prev = schedule.step(x0, index, x_t.detach(), zeta=zeta, generator=generator).prev_sample
         return prev.detach(), x0
 
     def __repr__(self) -> str:
-        return f"HQSGuidance(lam={self.lam:g}, data_steps={self.data_steps})"
+        return f"HQSGuidance(lam={self.lam:g}, data_steps={self.data_steps}, s={self.s:g})"
 

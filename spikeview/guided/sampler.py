@@ -60,17 +60,37 @@ def _load_ffdnet(color: bool, path: str | None) -> DenoiserPrior:
     return FFDNetDenoiser(color=color, weights=path)
 
 
-def load_prior(params: GuidedConfig, channels: int) -> DenoiserPrior:
-    """The pixel-space denoiser for ``channels`` (3 RGB, 1 gray); loaded once and cached.
+@functools.lru_cache(maxsize=2)
+def _load_sd(path: str, device: str, dtype: str) -> Any:
+    from spikeview.guided.priors.sd import LatentDiffusionPrior
 
-    ``params.model_path`` replaces the packaged FFDNet weights when ``params.prior == "ffdnet"``;
-    with ``prior="sd"`` the denoiser is only used for the one-pass fallback, with the packaged
-    weights (the latent model itself is run by :class:`spikeview.guided.latent.LatentGuidedSampler`).
+    return LatentDiffusionPrior.from_pretrained(path, device=device, dtype=dtype)
+
+
+def load_prior(params: GuidedConfig, channels: int) -> Any:
+    """The prior of ``params`` (the one place that picks it), loaded once and cached.
+
+    ``"ffdnet"``: the pixel-space denoiser for ``channels`` (3 RGB, 1 gray), the packaged weights or
+    ``params.model_path``. ``"sd"``: the latent model in the diffusers folder ``params.model_path``
+    on ``params.device`` in ``params.dtype``.
 
     Raises:
         PriorUnavailableError: the weights are missing.
+        ParameterError: ``prior = "sd"`` without a model folder.
     """
-    return _load_ffdnet(channels == 3, params.model_path if params.prior == "ffdnet" else None)
+    if params.prior == "sd":
+        if not params.model_path:
+            raise ParameterError(
+                "the sd prior needs its weights: pass --model (in the app: Model weights) pointing to a local "
+                "diffusers-format Stable Diffusion 2.x folder (unet/, vae/, scheduler/)."
+            )
+        return _load_sd(str(params.model_path), params.device, params.dtype)
+    return _load_ffdnet(channels == 3, params.model_path)
+
+
+def is_latent(prior: Any) -> bool:
+    """A latent-diffusion prior (it has a VAE) rather than a pixel-space denoiser."""
+    return getattr(prior, "vae_factor", None) is not None
 
 
 def _cancelled(cancel: Any) -> bool:
@@ -117,13 +137,12 @@ class GuidedSampler:
         self.params = params if params is not None else GuidedConfig()
         self._prior = prior
         self._guidance = guidance
-        self._latent: Any = None
         self.info = RunInfo()
 
     # -------------------------------------------------------------------------------- parts
-    def prior_for(self, channels: int, params: GuidedConfig) -> DenoiserPrior:
+    def prior_for(self, channels: int, params: GuidedConfig) -> Any:
         if self._prior is not None:
-            if getattr(self._prior, "channels", channels) != channels:
+            if not is_latent(self._prior) and getattr(self._prior, "channels", channels) != channels:
                 raise ParameterError(
                     f"the given prior works on {self._prior.channels} channel(s) but these frames have {channels}; "
                     "pass a matching prior (RGB for Bayer streams, gray for monochrome)."
@@ -132,17 +151,26 @@ class GuidedSampler:
         return load_prior(params, channels)
 
     @staticmethod
-    def guidance_for(params: GuidedConfig) -> GuidanceRule:
+    def guidance_for(params: GuidedConfig, prior: Any = None, size: tuple[int, int] = (0, 0)) -> Any:
+        """The guidance rule: DPS or HQS for a pixel prior, latent DPS for a latent prior."""
+        if is_latent(prior):
+            if params.guidance != "dps":
+                raise ParameterError(
+                    "guidance 'hqs' needs a denoiser prior: with the sd prior use guidance dps (--guidance dps)."
+                )
+            from spikeview.guided.latent import LatentDPSGuidance
+
+            return LatentDPSGuidance(params.s, size)
         if params.guidance == "dps":
             return DPSGuidance(params.s)
-        return HQSGuidance(params.lam, params.data_steps, params.renoise)
+        return HQSGuidance(params.lam, params.data_steps, params.renoise, params.s)
 
     @classmethod
     def forward_model(cls, obs: Observation, plan: Plan, params: GuidedConfig) -> ForwardModel:
-        """A = Q∘C∘M for the plan (M off = gray frame, C off = no cast)."""
+        """A = Q∘C∘M for the plan (M off = gray frame, C off = no cast, Q as the plan decided)."""
         alpha = obs.alpha if (plan.cast and obs.alpha is not None) else None
         return ForwardModel(obs.cfa if plan.mosaic else None, obs.window, alpha=alpha,
-                            eta=obs.eta if alpha is not None else 1.0, k=params.k if params.quantise else None,
+                            eta=obs.eta if alpha is not None else 1.0, k=params.k if plan.quantise else None,
                             dense_grad=params.dense_gradient, cast=alpha is not None, bands=plan.levels + 1, norm="l2")
 
     @classmethod
@@ -201,32 +229,16 @@ class GuidedSampler:
             if callback is not None:
                 callback(1, 1, out)
             return out
-        if p.prior == "sd":
-            out = self._sample_latent(observation, p, plan, callback, cancel, init)
-        else:
-            out = self._sample(observation, p, plan, channels, callback, cancel, init)
+        out = self._sample(observation, p, plan, channels, callback, cancel, init)
         info.mode, info.seconds = "diffusion", time.perf_counter() - t0
-        return out
-
-    def _sample_latent(self, obs: Observation, p: GuidedConfig, plan: Plan, callback: Callback | None, cancel: Any,
-                       init: np.ndarray | None) -> np.ndarray:
-        """``prior="sd"``: the latent-diffusion DPS sampler (optional extra ``spikeview[sd]``)."""
-        from spikeview.guided.latent import LatentGuidedSampler
-
-        if not plan.mosaic:
-            raise ParameterError("prior = 'sd' needs a Bayer stream (a 3-channel frame); use prior = 'ffdnet' for monochrome.")
-        if self._latent is None:
-            self._latent = LatentGuidedSampler(self._prior if getattr(self._prior, "vae_factor", None) else None)
-        y0 = init if init is not None else start_estimate(obs, plan.mosaic, plan.cast, p.demosaic)
-        fm = self.forward_model(obs, plan, p)
-        out = self._latent.run(obs, p, callback, cancel, y0=y0, forward=fm)
-        self.info.steps = p.steps
         return out
 
     def _sample(self, obs: Observation, p: GuidedConfig, plan: Plan, channels: int, callback: Callback | None,
                 cancel: Any, init: np.ndarray | None) -> np.ndarray:
+        """The one sampling loop, for a pixel-space denoiser (VE schedule) and a latent model (DDIM) alike."""
         prior = self.prior_for(channels, p)
-        rule = self._guidance if self._guidance is not None else self.guidance_for(p)
+        latent = is_latent(prior)
+        rule = self._guidance if self._guidance is not None else self.guidance_for(p, prior, obs.shape)
         gen = torch.Generator().manual_seed(int(p.seed))
         data = self.data_term(obs, plan, p)
 
@@ -246,34 +258,48 @@ class GuidedSampler:
             sigma_add = np.sqrt(np.maximum(t_s ** 2 - sigma_obs ** 2, 0.0))
         else:
             sigma_add = np.full(channels, t_s)
-        sigma_first = np.minimum(np.sqrt(sigma_obs ** 2 + sigma_add ** 2), getattr(prior, "sigma_max", math.inf))
-        sigma_first = np.maximum(sigma_first, 1e-4)
-        self.info.sigma_start = sigma_first.tolist()
-
-        schedule = VESchedule(tuple(sigma_first), p.sigma_end)
-        schedule.set_timesteps(p.steps)
         start = to_tensor(x_start)
-        add = torch.as_tensor(sigma_add, dtype=start.dtype).view(1, -1, 1, 1)
+
+        if latent:
+            from spikeview.guided.latent import LatentSpace, make_ladder
+
+            schedule: Any = make_ladder(prior, p.steps, t_s)
+            space = LatentSpace(prior, obs.shape, channels)
+            self.info.sigma_start = [float(t_s)] * channels
+            _to_device(data, prior.device)
+        else:
+            sigma_first = np.minimum(np.sqrt(sigma_obs ** 2 + sigma_add ** 2), getattr(prior, "sigma_max", math.inf))
+            sigma_first = np.maximum(sigma_first, 1e-4)
+            self.info.sigma_start = sigma_first.tolist()
+            schedule = VESchedule(tuple(sigma_first), p.sigma_end)
+            schedule.set_timesteps(p.steps)
+            add = torch.as_tensor(sigma_add, dtype=start.dtype).view(1, -1, 1, 1)
         total = p.steps * p.chains
         acc = torch.zeros_like(start)
         for chain in range(p.chains):
             # chains differ in their start noise and in the order of the dihedral transforms
-            x = schedule.add_noise(start, add, gen)
+            x = space.start(start, schedule, gen) if latent else schedule.add_noise(start, add, gen)
             for i in range(p.steps):
                 done = chain * p.steps + i
                 if _cancelled(cancel):
                     raise Cancelled(f"guided reconstruction cancelled at step {done + 1} of {total}")
                 sigma = schedule.sigma(i, x)
-                transform = ((i + 3 * chain) % 8) if p.self_ensemble else None
+                transform = ((i + 3 * chain) % 8) if (p.self_ensemble and not latent) else None
                 x, x0 = rule.step(prior, schedule, data, x, i, sigma, zeta=p.zeta, generator=gen, transform=transform)
                 if not (bool(torch.isfinite(x).all()) and bool(torch.isfinite(x0).all())):
                     raise ParameterError(_diverged(p, done + 1, total))
+                x0 = x0.float().cpu()
                 self.info.steps = done + 1
                 if callback is not None:
                     callback(done + 1, total, to_image((acc + x0) / (chain + 1)))
-            acc = acc + x0
-        x0 = acc / p.chains
-        return to_image(x0)
+            acc = acc + (space.finish(x) if latent else x0)
+        return to_image(acc / p.chains)
+
+
+def _to_device(data: DataTerm, device: Any) -> None:
+    """Move a data term to the prior's device (a latent model on CUDA)."""
+    data.forward = data.forward.to(device)
+    data.y, data.w, data.sqrt_w = data.y.to(device), data.w.to(device), data.sqrt_w.to(device)
 
 
 def _diverged(p: GuidedConfig, step: int, total: int) -> str:

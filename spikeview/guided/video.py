@@ -70,10 +70,24 @@ def _crop_obs(obs: Observation, y0: int, y1: int, x0: int, x1: int) -> Observati
     return Observation(obs.y[y0:y1, x0:x1], obs.cfa, obs.window, obs.alpha, obs.eta, obs.ticks, obs.center)
 
 
+def _crop_to_roi(obs: Observation, roi: tuple[int, int, int, int]) -> Observation:
+    """The observation (and its previous window) on ``roi = (x, y, w, h)``, origin on even pixels."""
+    from spikeview.pipeline import crop_roi
+
+    y, (y0, x0) = crop_roi(obs.y, roi)
+    if min(y.shape) < 8:
+        raise ParameterError("The region of interest is too small for a guided reconstruction: draw one of at least 8x8 pixels.")
+    out = _crop_obs(obs, y0, y0 + y.shape[0], x0, x0 + y.shape[1])
+    if obs.previous is not None:
+        out.previous = _crop_obs(obs.previous, y0, y0 + y.shape[0], x0, x0 + y.shape[1])
+    return out
+
+
 def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: GuidedConfig | None = None, *,
                          alpha: np.ndarray | list[float] | None = None, callback: SequenceCallback | None = None,
                          cancel: Any = None, sampler: GuidedSampler | None = None,
-                         infos: list | None = None) -> Iterator[np.ndarray]:
+                         infos: list | None = None, roi: tuple[int, int, int, int] | None = None,
+                         resolve: bool = True) -> Iterator[np.ndarray]:
     """Guided frames at each centre tick (see the module docstring).
 
     Args:
@@ -87,12 +101,16 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
             :class:`~spikeview.errors.Cancelled`).
         sampler: a sampler to reuse (keeps the prior loaded).
         infos: if given, the :class:`~spikeview.guided.sampler.RunInfo` of every frame is appended.
+        roi: ``(x, y, w, h)``: sample only this region (its origin rounded down to even pixels so
+            the CFA phase is kept); frames are the region's size.
+        resolve: estimate α when ``alpha`` is None (False: ``alpha=None`` means no colour cast, as
+            :func:`spikeview.pipeline.prepare_sequence` decided).
 
     Yields:
         ``(H, W, 3)`` float32 frames in [0, 1] (``(H, W)`` for monochrome).
     """
     p = params if params is not None else GuidedConfig()
-    a = resolve_alpha(source, p, alpha)
+    a = resolve_alpha(source, p, alpha) if resolve else (None if alpha is None else np.asarray(alpha, dtype=np.float64))
     smp = sampler if sampler is not None else GuidedSampler(p)
     centers = list(centers)
     n = len(centers)
@@ -100,6 +118,8 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
     for fi, c in enumerate(centers):
         want_prev = prev is not None and p.reuse is not False
         obs = Observation.from_source(source, c, p.window, alpha=a, eta=p.eta, previous=want_prev)
+        if roi is not None:
+            obs = _crop_to_roi(obs, roi)
         plan = make_plan(obs, p)
         cb = None
         if callback is not None:

@@ -1,0 +1,199 @@
+"""One pipeline for every front end: a recipe and a source in, frames (and files) out.
+
+The CLI's ``reconstruct``, the app's reconstruct and export, the benchmark and the batch path all
+call these functions::
+
+    state = prepare_sequence(source, recipe)               # sequence-wide: colour cast α (once)
+    for frame in reconstruct_windows(source, centers, recipe, state):
+        ...
+    write_sequence(source, recipe, centers, out)           # the same, straight into an exporter
+
+* :func:`prepare_sequence` resolves what must not change from frame to frame (the gray-world gains α)
+  once per sequence; :func:`recipe_for_state` records it in the recipe, so a saved preset re-runs to
+  the same pixels.
+* :func:`reconstruct_windows` runs the recipe's method (``tfp``/``tfi``: :mod:`spikeview.classical`;
+  ``guided``: :func:`spikeview.guided.video.reconstruct_sequence`, with its plan, reuse and warm start
+  as configured) on every centre tick, optionally on a region of interest.
+* :func:`window_centres` turns ``[run] at / range`` into centre ticks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spikeview.errors import ParameterError
+from spikeview.recipe import Recipe
+
+#: ``callback(frame_index, n_frames, step, n_steps, preview)`` (guided: every sampler step; classical: every frame)
+Callback = Callable[[int, int, int, int, np.ndarray], Any]
+
+
+@dataclass
+class SequenceState:
+    """What a whole sequence shares, computed once before the first frame.
+
+    Attributes:
+        alpha: ``(3,)`` float64 gray-world gains, or ``None`` (monochrome stream, colour cast off).
+    """
+
+    alpha: np.ndarray | None = None
+
+    def attrs(self) -> dict[str, Any]:
+        """Plain values for metadata (Zarr attributes, logs)."""
+        return {"alpha": None if self.alpha is None else [float(v) for v in self.alpha]}
+
+
+def window_centres(recipe: Recipe, n_frames: int) -> tuple[list[int], int]:
+    """Centre ticks of ``[run] at`` / ``range`` (default: the middle of the stream) and the tick step.
+
+    Raises:
+        ParameterError: a tick outside ``[0, n_frames)`` (the message names the flag).
+    """
+    run = recipe.run
+    span = recipe.span()
+    if run.at is not None:
+        if not 0 <= run.at < n_frames:
+            raise ParameterError(f"--at {run.at} is outside the stream, which holds ticks [0, {n_frames}).")
+        return [run.at], span
+    if run.range is not None:
+        a, b, step = parse_range(run.range, default_step=span)
+        if a < 0 or a >= n_frames:
+            raise ParameterError(f"--range {run.range}: start {a} is outside the stream, which holds ticks [0, {n_frames}).")
+        return list(range(a, min(b, n_frames), step)), step
+    return [n_frames // 2], span
+
+
+def parse_range(text: str, default_step: int) -> tuple[int, int, int]:
+    """Parse ``A:B[:STEP]`` (ticks) into ``(a, b, step)``; ``B`` is exclusive."""
+    parts = text.split(":")
+    try:
+        if len(parts) not in (2, 3):
+            raise ValueError
+        a, b = int(parts[0]), int(parts[1])
+        step = int(parts[2]) if len(parts) == 3 and parts[2] else default_step
+    except ValueError:
+        raise ParameterError(f"--range {text!r} is not A:B or A:B:STEP in ticks (e.g. 0:2000:20).") from None
+    if step < 1 or b <= a:
+        raise ParameterError(f"--range {text!r} needs B > A and STEP >= 1 (e.g. 0:2000:20).")
+    return a, b, step
+
+
+def prepare_sequence(source: Any, recipe: Recipe) -> SequenceState:
+    """The sequence-wide state: α from ``[classical] alpha`` or one gray-world estimate of the stream."""
+    c = recipe.classical
+    if source.cfa is None or not c.colour_cast:
+        return SequenceState(None)
+    if c.alpha is not None:
+        return SequenceState(np.asarray(c.alpha, dtype=np.float64))
+    from spikeview.classical.colour_cast import estimate_alpha
+
+    a = estimate_alpha(source, window=min(c.alpha_window, source.n_frames), max_windows=c.alpha_max_windows)
+    return SequenceState(np.asarray(a, dtype=np.float64))
+
+
+def recipe_for_state(recipe: Recipe, state: SequenceState) -> Recipe:
+    """``recipe`` with the sequence's α recorded (a saved preset then reproduces the frames exactly)."""
+    if state.alpha is None or recipe.classical.alpha is not None:
+        return recipe
+    return recipe.with_values({"classical.alpha": [float(v) for v in state.alpha]})
+
+
+def crop_roi(img: np.ndarray, roi: tuple[int, int, int, int] | None) -> tuple[np.ndarray, tuple[int, int]]:
+    """``img[y:y+h, x:x+w]`` for ``roi = (x, y, w, h)`` with ``x, y`` rounded down to even pixels (the
+    CFA phase stays that of the full frame); returns the crop and its ``(y, x)`` origin."""
+    if roi is None:
+        return img, (0, 0)
+    x, y, w, h = (int(v) for v in roi)
+    x0, y0 = max(0, x) & ~1, max(0, y) & ~1
+    x1, y1 = min(img.shape[1], x + w), min(img.shape[0], y + h)
+    if x1 - x0 < 2 or y1 - y0 < 2:
+        raise ParameterError("The region of interest is empty: draw a rectangle inside the frame.")
+    return img[y0:y1, x0:x1], (y0, x0)
+
+
+def reconstruct_windows(source: Any, centers: Iterable[int], recipe: Recipe, state: SequenceState | None = None, *,
+                        roi: tuple[int, int, int, int] | None = None, callback: Callback | None = None,
+                        cancel: Any = None, sampler: Any = None, infos: list | None = None) -> Iterator[np.ndarray]:
+    """The recipe's frames at each centre tick (see the module docstring).
+
+    Args:
+        source: the spike stream.
+        centers: centre ticks, in output order.
+        recipe: the settings (``recipe.run.method`` picks the method).
+        state: the sequence's state (default: :func:`prepare_sequence`).
+        roi: ``(x, y, w, h)`` region of interest (frames are cropped; guided samples only the region).
+        callback: progress (see :data:`Callback`).
+        cancel: ``threading.Event``-like or callable, checked before every frame/step
+            (:class:`~spikeview.errors.Cancelled`).
+        sampler: a :class:`~spikeview.guided.sampler.GuidedSampler` to reuse (keeps the prior loaded).
+        infos: guided only: the run info of every frame is appended.
+
+    Yields:
+        float32 frames ``(H, W, 3)`` (``(H, W)`` for monochrome): TFP/TFI in [0, 1] unless
+        ``classical.clip`` is off; guided in [0, 1].
+    """
+    state = state if state is not None else prepare_sequence(source, recipe)
+    centers = list(centers)
+    n = len(centers)
+    if recipe.run.method == "guided":
+        from spikeview.guided.video import reconstruct_sequence
+
+        yield from reconstruct_sequence(source, centers, recipe.guided, alpha=state.alpha, callback=callback,
+                                        cancel=cancel, sampler=sampler, infos=infos, roi=roi,
+                                        resolve=False)
+        return
+    from spikeview.classical.reconstruct import reconstruct_frames
+    from spikeview.errors import Cancelled
+    from spikeview.guided.sampler import _cancelled
+
+    cfg = recipe.classical.replace(method=recipe.run.method)
+    for i, frame in enumerate(reconstruct_frames(source, centers, cfg, alpha=state.alpha)):
+        if _cancelled(cancel):
+            raise Cancelled(f"reconstruction cancelled at frame {i + 1} of {n}")
+        out = crop_roi(frame, roi)[0] if roi is not None else frame
+        if callback is not None:
+            callback(i, n, 1, 1, out)
+        yield out
+
+
+def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str | Path, *,
+                   state: SequenceState | None = None, roi: tuple[int, int, int, int] | None = None,
+                   step: int | None = None, callback: Callback | None = None, cancel: Any = None,
+                   sampler: Any = None, progress: Callable[[int, int], Any] | None = None,
+                   overwrite: bool = False, source_name: str | None = None) -> list[Path]:
+    """Reconstruct ``centers`` and write them to ``out`` (format from its suffix), with the recipe in the metadata.
+
+    Returns:
+        The files written (one for MP4/npy, one per frame for EXR/PNG patterns).
+    """
+    from spikeview.classical.windows import window_range
+    from spikeview.export import ExportMetadata, open_exporter
+
+    state = state if state is not None else prepare_sequence(source, recipe)
+    recipe = recipe_for_state(recipe, state)
+    span = recipe.span()
+    centers = list(centers)
+    first = window_range(centers[0], span, source.n_frames)
+    meta = ExportMetadata(source=source_name if source_name is not None else str(getattr(source.info, "path", "") or ""),
+                          method=recipe.run.method, tick_rate=float(source.tick_rate), window=first,
+                          centre_tick=int(centers[0]), step_ticks=step if len(centers) > 1 else None,
+                          params=recipe.to_dict())
+    frames = reconstruct_windows(source, centers, recipe, state, roi=roi, callback=callback, cancel=cancel, sampler=sampler)
+    head = next(frames)
+    kwargs: dict[str, Any] = {}
+    if progress is not None:
+        kwargs["progress"] = progress
+    if cancel is not None:
+        kwargs["cancel"] = cancel.is_set if hasattr(cancel, "is_set") else cancel
+    ex = open_exporter(Path(out), len(centers), head.shape, recipe.export, meta, overwrite=overwrite,
+                       inputs=[getattr(source.info, "path", None)], **kwargs)
+    with ex:
+        ex.write(head, window=first, centre_tick=int(centers[0]))
+        for c, frame in zip(centers[1:], frames):
+            ex.write(frame, window=window_range(c, span, source.n_frames), centre_tick=int(c))
+        return ex.close()
