@@ -1,7 +1,29 @@
 import os
+import sys
+
+import pytest
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 os.environ.setdefault("NUMBA_NUM_THREADS", "2")
 # torch ops in these tiny tests run fastest single-threaded; with pytest-xdist workers and other
 # jobs sharing the cores, torch's default thread pool oversubscribes them (10x slower measured).
 os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+@pytest.fixture(autouse=True)
+def _isolated_qt_settings(request, tmp_path_factory):
+    """Every test that touches Qt gets its own, empty QSettings folder (never the user's, never another test's).
+
+    ``QSettings("spikeview", "spikeview")`` (what the app uses when no settings object is passed) then
+    reads and writes a fresh folder, so parameters, layout or recent files saved by one test cannot
+    change the next, whatever the order. Tests that do not use Qt do not import it.
+    """
+    if "qtbot" not in request.fixturenames and "PySide6.QtCore" not in sys.modules:
+        yield
+        return
+    from PySide6 import QtCore
+
+    folder = str(tmp_path_factory.mktemp("qsettings"))
+    for fmt in (QtCore.QSettings.Format.NativeFormat, QtCore.QSettings.Format.IniFormat):
+        QtCore.QSettings.setPath(fmt, QtCore.QSettings.Scope.UserScope, folder)
+    yield

@@ -560,8 +560,7 @@ def test_the_spikeview_command_opens_the_window_on_the_demo(qtbot, monkeypatch, 
     """``spikeview`` with no argument: the CLI's ``app`` command → run_app(None) → the demo capture."""
     from spikeview.cli.main import main
 
-    QtCore.QSettings.setPath(QtCore.QSettings.Format.NativeFormat, QtCore.QSettings.Scope.UserScope, str(tmp_path))
-    QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat, QtCore.QSettings.Scope.UserScope, str(tmp_path))
+    # (QSettings are isolated per test by tests/conftest.py)
     monkeypatch.setattr(core, "demo_stream", lambda size, n_ticks: demo_stream())  # the tiny capture, not 256×256
     monkeypatch.setattr(sys, "excepthook", sys.excepthook)
     app = QtWidgets.QApplication.instance()
@@ -577,5 +576,14 @@ def test_the_spikeview_command_opens_the_window_on_the_demo(qtbot, monkeypatch, 
             QtCore.QTimer.singleShot(50, poll)
 
     QtCore.QTimer.singleShot(50, poll)
+    before = [x for x in app.topLevelWidgets() if isinstance(x, MainWindow)]
     assert main([]) == 0
     assert seen == {"label": "test capture", "live": True}
+    # Nothing of the app is left to disturb what runs next in this process: closing its window posted a
+    # Quit event after exec() returned; delivered later, it made every event loop return at once (-1), so
+    # the next window froze (issue 10, item 10: three live tests timed out after this one).
+    app.processEvents()
+    assert [x for x in app.topLevelWidgets() if isinstance(x, MainWindow)] == before  # its window was deleted
+    loop = QtCore.QEventLoop()
+    QtCore.QTimer.singleShot(20, lambda: loop.exit(7))
+    assert loop.exec() == 7

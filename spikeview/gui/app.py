@@ -72,6 +72,8 @@ def _excepthook(window: Any) -> Any:
 def run_app(path: str | os.PathLike[str] | None = None) -> int:
     """Open the main window on ``path`` (or the built-in demo) and run the event loop; returns the exit status."""
     app = make_application()
+    from PySide6 import QtCore
+
     from spikeview.gui.main_window import MainWindow
 
     window = MainWindow()
@@ -90,6 +92,12 @@ def run_app(path: str | os.PathLike[str] | None = None) -> int:
     status = int(app.exec())
     window.close()  # after app.quit() the window may still be open: stop its workers, save the settings
     sys.excepthook = sys.__excepthook__
+    # Closing the last window posts a Quit event that exec() has returned before seeing; left queued, the
+    # next event processing would deliver it and make every later event loop of this QApplication return
+    # at once (a second window in the same process, or the next test, would freeze).
+    QtCore.QCoreApplication.removePostedEvents(app, QtCore.QEvent.Type.Quit)
+    window.deleteLater()
+    QtCore.QCoreApplication.sendPostedEvents(None, QtCore.QEvent.Type.DeferredDelete)
     return status
 
 
