@@ -75,6 +75,7 @@ def test_tfp_chunk3_on_local2_matches_in_process_and_file_output(cap, tmp_path, 
     np.testing.assert_array_equal(g["window"][:2], [[0, 10], [10, 20]])
     meta = g.attrs["spikeview"]
     assert meta["method"] == "tfp" and len(meta["alpha"]) == 3 and "[classical]" in meta["recipe"]
+    assert "alpha" not in meta["settings"]["classical"]  # as given: the estimate is state, not a setting
     assert "alpha = [" in meta["recipe"]  # the estimate is recorded: the recipe reproduces it
     err = capsys.readouterr().err
     assert "20 windows in 7 chunks of 3 (tfp, on local:2)" in err and "windows/s" in err
@@ -193,7 +194,7 @@ def test_export_store_to_npy_and_mp4_with_the_stores_settings(cap, tmp_path, cap
     from spikeview.export import read_export_metadata
 
     rec = read_export_metadata(tmp_path / "f.npy")
-    assert rec["method"] == "tfp" and rec["params"]["window"] == 10
+    assert rec["method"] == "tfp" and rec["params"]["classical"]["window"] == 10
 
 
 def test_export_refuses_an_incomplete_store(cap, tmp_path, capsys):

@@ -46,65 +46,19 @@ def _require_extra() -> None:
                              "install it with pip install 'spikeview[cluster]'.") from None
 
 
-def _settings(args: argparse.Namespace, preset: dict[str, Any], src) -> tuple[dict[str, Any], dict[str, Any], int]:
-    """``(settings, export, step)``: the recipe tables that decide the frames (as given, α not filled in)."""
-    from spikeview.cfa import cfa_to_str
-    from spikeview.cli.reconstruct import RunConfig, _centres
-    from spikeview.export import ExportConfig
+def _recipe(args: argparse.Namespace, base):
+    """``base`` ← the geometry flags ← the recipe flags given ← ``--at``/``--range`` (as ``recipe_from_args``)."""
+    from spikeview.cli.reconstruct import STREAM_FLAGS
+    from spikeview.recipe import apply_flags
 
-    given = set(getattr(args, "_given", ()))
-    run_cfg = RunConfig.from_dict(preset.get("run", {}), where="preset [run]") if preset else RunConfig()
-    if not preset or "method" in given:
-        run_cfg.method = args.method
-    if args.at is not None or args.range is not None:
-        run_cfg.at, run_cfg.range = args.at, args.range
-    info = src.info
-    stream = {"format": info.format, "width": info.width, "height": info.height, "cfa": cfa_to_str(info.cfa),
-              "flip_vertical": info.flip_vertical, "flip_horizontal": info.flip_horizontal, "tick_rate": info.tick_rate}
-    if info.format == "npz" and getattr(args, "layout", None):
-        stream["layout"] = args.layout
-    settings: dict[str, Any] = {"run": run_cfg.to_dict(), "stream": stream}
-    # the same flag/preset rules as the file outputs (spikeview/cli/reconstruct.py, spikeview/cli/guided.py)
-    if run_cfg.method == "guided":
-        from spikeview.cli.guided import _guided_config
-
-        params = _guided_config(args, preset)
-        settings["guided"] = params.to_dict()
-        window = params.window
-    else:
-        from spikeview.classical.reconstruct import ClassicalConfig
-
-        cdict = dict(preset.get("classical", {}))
-        cdict["method"] = run_cfg.method
-        if "demosaic" not in cdict and args.demosaic is None:
-            cdict["demosaic"] = "malvar2004"
-        for flag in ("window", "demosaic", "eta"):
-            value = getattr(args, flag)
-            if value is not None and (not preset or flag in given or flag not in cdict):
-                cdict[flag] = value
-        if not preset or "colour_cast" in given:
-            cdict["colour_cast"] = args.colour_cast
-        if run_cfg.method == "tfi" and "window" in cdict and "tfi_half_window" not in cdict:
-            cdict["tfi_half_window"] = max(1, cdict.pop("window") // 2)
-        ccfg = ClassicalConfig.from_dict(cdict, where="reconstruction settings")
-        settings["classical"] = ccfg.to_dict()
-        window = ccfg.window if ccfg.method == "tfp" else 2 * ccfg.tfi_half_window
-    edict = dict(preset.get("export", {}))
-    for key in ("fps", "compression"):
-        if not preset or key in given or key not in edict:
-            edict[key] = getattr(args, key)
-    export = ExportConfig.from_dict(edict, where="export settings").to_dict()
-    _, step = _centres(run_cfg, src.n_frames, window)
-    return settings, export, step
-
-
-def _open_kwargs(src) -> dict[str, Any]:
-    from spikeview.cfa import cfa_to_str
-
-    info = src.info
-    kw = {"format": info.format, "width": info.width, "height": info.height, "cfa": cfa_to_str(info.cfa),
-          "flip_vertical": info.flip_vertical, "flip_horizontal": info.flip_horizontal, "tick_rate": info.tick_rate}
-    return kw
+    recipe = base
+    stream = {k: getattr(args, k) for k in STREAM_FLAGS if getattr(args, k, None) is not None}
+    if stream:
+        recipe = recipe.with_values({f"stream.{k}": v for k, v in stream.items()})
+    recipe = apply_flags(recipe, args)
+    if getattr(args, "at", None) is not None or getattr(args, "range", None) is not None:
+        recipe = recipe.with_values({"run.at": args.at, "run.range": args.range})
+    return recipe
 
 
 class _Progress:
@@ -140,13 +94,21 @@ class _Progress:
 def run_zarr(args: argparse.Namespace, *, cancel=None, client=None) -> int:
     """Reconstruct a range of windows into ``args.out`` (a ``.zarr`` store); see the module docstring."""
     _require_extra()
-    import tomli_w
-
-    from spikeview.cli.main import _open_from_args
-    from spikeview.cli.reconstruct import _centres, _load_preset, preset_path
-    from spikeview.cluster._compute import DEFAULT_CHUNK, DEFAULT_KEYFRAME, SequenceState, prepare_state
+    from spikeview._files import write_atomic
+    from spikeview.classical.windows import window_range
+    from spikeview.cli.reconstruct import open_stream, preset_path
+    from spikeview.cluster._compute import DEFAULT_CHUNK, DEFAULT_KEYFRAME, chained, state_from_attrs, state_to_attrs
     from spikeview.cluster.run import BatchJob, parse_cluster, run_batch
-    from spikeview.cluster.store import check_compatible, create_store, input_fingerprint, open_store, store_attrs
+    from spikeview.cluster.store import (
+        check_compatible,
+        create_store,
+        done_mask,
+        input_fingerprint,
+        open_store,
+        store_attrs,
+    )
+    from spikeview.pipeline import prepare_sequence, recipe_for_state, window_centres
+    from spikeview.recipe import Recipe, StreamTable
 
     out = Path(args.out).absolute()
     if args.chunk is not None and args.chunk < 1:
@@ -159,72 +121,55 @@ def run_zarr(args: argparse.Namespace, *, cancel=None, client=None) -> int:
             raise ParameterError(f"{out.name} already exists; add --resume to finish it, --overwrite to start it "
                                  "again, or choose another --out.")
         attrs = store_attrs(open_store(out))
-    preset = _load_preset(args.preset)
-    if attrs is not None and not preset:
-        # resume with the store's own settings; flags given explicitly must agree with them
-        import tomllib
-
-        preset = {**attrs["settings"], "export": tomllib.loads(attrs["recipe"]).get("export", {})}
-    for key, value in preset.get("stream", {}).items():
-        if getattr(args, key, None) is None and key in ("format", "width", "height", "cfa", "flip_vertical",
-                                                          "flip_horizontal", "tick_rate", "layout"):
-            setattr(args, key, value)
+    if getattr(args, "preset", None):
+        base = Recipe.load(args.preset)
+    elif attrs is not None:
+        base = Recipe.from_dict(attrs["settings"], where=f"{out.name} (its recipe)")  # flags given must agree with it
+    else:
+        base = Recipe()
+    recipe = _recipe(args, base)
     chunk = args.chunk or (int(attrs["chunk"]) if attrs else DEFAULT_CHUNK)
 
-    src = _open_from_args(args)
+    src = open_stream(args, recipe)
     with src:
-        settings, export, step = _settings(args, preset, src)
-        from spikeview.cli.reconstruct import RunConfig
-
-        run_cfg = RunConfig.from_dict(settings["run"], where="settings [run]")
-        from spikeview.cluster._compute import window_length
-
-        window = window_length(settings)
-        centres, step = _centres(run_cfg, src.n_frames, window)
+        stream = StreamTable.from_info(src.info, getattr(args, "layout", None)).to_dict()
+        recipe = recipe.with_values({f"stream.{k}": v for k, v in stream.items()})
+        settings = recipe.to_dict()
+        centres, step = window_centres(recipe, src.n_frames)
+        window = recipe.span()
+        method = recipe.run.method
         fingerprint = input_fingerprint(src.info.path)
-        method = run_cfg.method
-        table = "guided" if method == "guided" else "classical"
         if attrs is not None:
             check_compatible(out, attrs, fingerprint=fingerprint, settings=settings, chunk=chunk)
-            state = SequenceState.from_dict({"alpha": attrs.get("alpha"), "white_point": attrs.get("white_point")})
+            state = state_from_attrs(attrs)
         else:
-            state = prepare_state(src, settings)
-            recipe = {k: dict(v) for k, v in settings.items()}
-            if state.alpha is not None and recipe[table].get("alpha") is None:
-                recipe[table]["alpha"] = list(state.alpha)  # record the estimate: the preset reproduces it
-            recipe["export"] = export
-            recipe_toml = f"# spikeview reconstruct preset for {src.info.path}\n" + tomli_w.dumps(recipe)
-            from spikeview.classical.windows import window_range
-
+            state = prepare_sequence(src, recipe)
+            full = recipe_for_state(recipe, state)  # the α estimate recorded: the preset reproduces the frames
+            recipe_toml = f"# spikeview reconstruct preset for {src.info.path}\n" + full.to_toml()
             windows = [window_range(c, window, src.n_frames) for c in centres]
             frame_shape = (src.height, src.width, 3 if src.cfa is not None else 1)
             create_store(out, centres=centres, windows=windows, frame_shape=frame_shape, chunk=chunk, attrs={
                 "input": str(Path(src.info.path).absolute()), "fingerprint": fingerprint, "settings": settings,
-                "recipe": recipe_toml, "alpha": None if state.alpha is None else list(state.alpha),
-                "white_point": state.white_point, "method": method, "window": window, "step": step,
-                "tick_rate": src.tick_rate, "chunk": chunk, "keyframe": DEFAULT_KEYFRAME, "n_windows": len(centres),
-                "frame_shape": list(frame_shape)})
-            from spikeview._files import write_atomic
-
+                "recipe": recipe_toml, **state_to_attrs(state), "method": method, "window": window, "step": step,
+                "tick_rate": float(src.tick_rate), "chunk": chunk, "keyframe": DEFAULT_KEYFRAME,
+                "n_windows": len(centres), "frame_shape": list(frame_shape)})
             write_atomic(preset_path(out), recipe_toml, "the preset")
-        job = BatchJob(input=str(Path(src.info.path).absolute()), open_kwargs=_open_kwargs(src), recipe=settings,
+        open_kwargs = recipe.stream.open_kwargs()
+        if getattr(args, "tag_check", None):
+            open_kwargs["tag_check"] = args.tag_check
+        job = BatchJob(input=str(Path(src.info.path).absolute()), open_kwargs=open_kwargs, recipe=settings,
                        centres=tuple(int(c) for c in centres), chunk=chunk, store=str(out),
                        keyframe=int(attrs["keyframe"]) if attrs else DEFAULT_KEYFRAME)
 
-    from spikeview.cluster.store import done_mask
-
     done = done_mask(open_store(out))
     done_windows = sum(job.bounds(i)[1] - job.bounds(i)[0] for i in range(job.n_chunks) if done[i])
-    where = f"on {args.cluster}" if args.cluster else "in-process"
+    where = f"on {args.cluster}" if args.cluster else ("on the given Dask client" if client is not None else "in-process")
     print(f"{len(centres)} windows in {job.n_chunks} chunks of {chunk} ({method}, {where})"
           + (f"; {int(done.sum())} chunks already done" if done.any() else ""), file=sys.stderr)
-    if method == "guided" and chunk % job.keyframe and job.keyframe > 1:
-        from spikeview.cluster._compute import chained
-
-        if chained(settings):
-            print(f"note: --chunk {chunk} is not a multiple of the keyframe interval {job.keyframe}: chunks that start "
-                  f"between keyframes recompute up to {job.keyframe - 1} lead-in windows (same frames, more time)",
-                  file=sys.stderr)
+    if chunk % job.keyframe and chained(settings):
+        print(f"note: --chunk {chunk} is not a multiple of the keyframe interval {job.keyframe}: chunks that start "
+              f"between keyframes recompute up to {job.keyframe - 1} lead-in windows (same frames, more time).",
+              file=sys.stderr)
     bar = _Progress(len(centres), done_windows, f"{method} → {out.name}")
     try:
         report = run_batch(job, state, cluster=args.cluster, progress=bar, cancel=cancel, client=client)

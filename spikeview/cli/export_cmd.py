@@ -52,13 +52,12 @@ def run(args: argparse.Namespace) -> int:
             edict[key] = getattr(args, key)
     ecfg = ExportConfig.from_dict(edict, where="export settings")
     method = attrs["method"]
-    table = recipe.get("guided" if method == "guided" else "classical", {})
     windows = group["window"][:]
     centres = group["centre_tick"][:]
     step = int(attrs["step"])
     meta = ExportMetadata(source=attrs["input"], method=method, tick_rate=float(attrs["tick_rate"]),
                           window=tuple(int(v) for v in windows[0]), centre_tick=int(centres[0]), step_ticks=step,
-                          params=table)
+                          params=recipe)
     frames = group["frames"]
     n, h, w, c = frames.shape
     shape = (h, w, 3) if c == 3 else (h, w)

@@ -9,14 +9,13 @@ Everything the batch path knows about *how* frames are made is in this file:
   once and cached (workers read the input from its file path; nothing large goes through the
   scheduler).
 
-Settings travel as the *recipe*: the plain dict of the preset TOML (tables ``run``, ``stream``,
-``classical`` or ``guided``, ``export``), so they pickle cheaply and are exactly what the store
-records. When the library's single pipeline lands, only this file changes.
+Settings travel as the *recipe* dict (:meth:`spikeview.recipe.Recipe.to_dict`, the preset's tables),
+so they pickle cheaply and are exactly what the store records. Frames come from the one pipeline,
+:func:`spikeview.pipeline.reconstruct_windows`, as for every other output.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import threading
 from collections.abc import Sequence
@@ -30,101 +29,71 @@ DEFAULT_CHUNK = 16
 DEFAULT_KEYFRAME = 16
 
 
-@dataclasses.dataclass(frozen=True)
-class SequenceState:
-    """What every chunk of a sequence shares, resolved once before dispatch.
+def recipe_of(data: dict[str, Any]):
+    """The :class:`~spikeview.recipe.Recipe` of a recipe dict (the preset tables)."""
+    from spikeview.recipe import Recipe
 
-    Attributes:
-        alpha: gray-world gains ``[α_R, α_G, α_B]`` (``None``: monochrome stream or no colour cast).
-        white_point: display white point, linear units (``None`` until the library estimates one).
-    """
-
-    alpha: tuple[float, ...] | None = None
-    white_point: float | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"alpha": None if self.alpha is None else list(self.alpha), "white_point": self.white_point}
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> SequenceState:
-        alpha = data.get("alpha")
-        return cls(alpha=None if alpha is None else tuple(float(v) for v in alpha), white_point=data.get("white_point"))
+    return Recipe.from_dict(data, where="the batch recipe")
 
 
-def method_of(recipe: dict[str, Any]) -> str:
+def method_of(data: dict[str, Any]) -> str:
     """``"tfp"``, ``"tfi"`` or ``"guided"``."""
-    return str(recipe.get("run", {}).get("method", "tfp"))
+    return str(data.get("run", {}).get("method", "tfp"))
 
 
-def _classical(recipe: dict[str, Any]):
-    from spikeview.classical.reconstruct import ClassicalConfig
-
-    return ClassicalConfig.from_dict({**recipe.get("classical", {}), "method": method_of(recipe)}, where="recipe [classical]")
-
-
-def _guided(recipe: dict[str, Any]):
-    from spikeview.guided import GuidedConfig
-
-    return GuidedConfig.from_dict(dict(recipe.get("guided", {})), where="recipe [guided]")
-
-
-def window_length(recipe: dict[str, Any]) -> int:
+def window_length(data: dict[str, Any]) -> int:
     """Ticks of one window (TFP window, TFI span, guided window)."""
-    if method_of(recipe) == "guided":
-        return int(_guided(recipe).window)
-    cfg = _classical(recipe)
-    return int(cfg.window if cfg.method == "tfp" else 2 * cfg.tfi_half_window)
+    return int(recipe_of(data).span())
 
 
-def chained(recipe: dict[str, Any]) -> bool:
+def chained(data: dict[str, Any]) -> bool:
     """Whether a window's result depends on its predecessor's (guided reuse or warm start)."""
-    if method_of(recipe) != "guided":
+    if method_of(data) != "guided":
         return False
-    p = _guided(recipe)
-    return p.reuse is not False or bool(p.warm_start)
+    g = recipe_of(data).guided
+    return g.reuse is not False or bool(g.warm_start)
 
 
-def prepare_state(source, recipe: dict[str, Any]) -> SequenceState:
-    """The sequence-wide state of ``recipe`` on ``source`` (one gray-world estimate over the stream)."""
-    if method_of(recipe) == "guided":
-        from spikeview.guided import resolve_alpha
+def prepare_state(source, data: dict[str, Any]):
+    """The sequence-wide state (:class:`spikeview.pipeline.SequenceState`: one gray-world α over the stream)."""
+    from spikeview.pipeline import prepare_sequence
 
-        alpha = resolve_alpha(source, _guided(recipe))
-    else:
-        from spikeview.classical.reconstruct import resolve_alpha
-
-        alpha = resolve_alpha(source, _classical(recipe))
-    return SequenceState(alpha=None if alpha is None else tuple(float(v) for v in np.asarray(alpha).ravel()))
+    return prepare_sequence(source, recipe_of(data))
 
 
-def compute_chunk(source, centres: Sequence[int], recipe: dict[str, Any], state: SequenceState, *,
+def state_to_attrs(state) -> dict[str, Any]:
+    """Plain values of a state (Zarr attributes; what travels to the workers)."""
+    attrs = dict(state.attrs())
+    attrs.setdefault("white_point", getattr(state, "white_point", None))
+    return attrs
+
+
+def state_from_attrs(attrs: dict[str, Any]):
+    """The state of :func:`state_to_attrs` values (α as float64, as :func:`prepare_state` makes it)."""
+    from spikeview.pipeline import SequenceState
+
+    alpha = attrs.get("alpha")
+    return SequenceState(None if alpha is None else np.asarray(alpha, dtype=np.float64))
+
+
+def compute_chunk(source, centres: Sequence[int], data: dict[str, Any], state, *,
                   sampler: Any = None, cancel: Any = None) -> np.ndarray:
     """Frames of consecutive windows, the first of which starts a reuse / warm-start chain.
 
     Args:
         source: the spike stream.
         centres: centre ticks, in output order.
-        recipe: the preset tables (see the module docstring).
+        data: the recipe dict (see the module docstring).
         state: from :func:`prepare_state` on the whole sequence.
         sampler: a guided sampler to reuse (keeps the prior loaded).
-        cancel: checked between guided sampler steps.
+        cancel: checked between frames / guided sampler steps.
 
     Returns:
         float32 ``(n, H, W, C)``: C = 3 for a Bayer stream, 1 for monochrome.
     """
-    alpha = None if state.alpha is None else np.asarray(state.alpha, dtype=np.float64)
-    if method_of(recipe) == "guided":
-        from spikeview.guided import reconstruct_sequence
+    from spikeview.pipeline import reconstruct_windows
 
-        frames = list(reconstruct_sequence(source, list(centres), _guided(recipe), alpha=alpha, sampler=sampler,
-                                           cancel=cancel))
-    else:
-        from spikeview.classical.reconstruct import reconstruct_frames
-
-        cfg = _classical(recipe)
-        if alpha is None:
-            cfg = cfg.replace(colour_cast=False)  # monochrome, or the cast was off when the state was made
-        frames = list(reconstruct_frames(source, list(centres), cfg, alpha=alpha))
+    frames = list(reconstruct_windows(source, list(centres), recipe_of(data), state, sampler=sampler, cancel=cancel))
     out = np.stack([np.asarray(f, dtype=np.float32) for f in frames])
     return out[..., None] if out.ndim == 3 else out
 
@@ -144,7 +113,7 @@ def worker_resources(path: str, open_kwargs: dict[str, Any], recipe: dict[str, A
     The source is opened from ``path`` (a file every worker can read); the guided sampler (``None``
     for classical methods) keeps its prior loaded. Torch runs one thread per task, as the workers do.
     """
-    key = _key(path, open_kwargs, recipe.get("guided") if method_of(recipe) == "guided" else None)
+    key = _key(path, open_kwargs, recipe if method_of(recipe) == "guided" else None)
     with _LOCK:
         hit = _CACHE.get(key)
     if hit is not None:
@@ -156,7 +125,7 @@ def worker_resources(path: str, open_kwargs: dict[str, Any], recipe: dict[str, A
     if method_of(recipe) == "guided":
         from spikeview.guided import GuidedSampler
 
-        sampler = GuidedSampler(_guided(recipe))
+        sampler = GuidedSampler(recipe_of(recipe).guided)
     with _LOCK:
         _CACHE[key] = (source, sampler)
     return source, sampler

@@ -24,9 +24,10 @@ import numpy as np
 
 from spikeview.cluster._compute import (
     DEFAULT_KEYFRAME,
-    SequenceState,
     chained,
     compute_chunk,
+    state_from_attrs,
+    state_to_attrs,
     worker_resources,
 )
 from spikeview.errors import Cancelled, ParameterError, SpikeviewError
@@ -117,7 +118,7 @@ def run_chunk(job: BatchJob, index: int, state: dict[str, Any]) -> dict[str, Any
     lo, hi = job.bounds(index)
     start = job.chain_start(lo)
     t0 = time.perf_counter()
-    frames = compute_chunk(source, job.centres[start:hi], job.recipe, SequenceState.from_dict(state), sampler=sampler)
+    frames = compute_chunk(source, job.centres[start:hi], job.recipe, state_from_attrs(state), sampler=sampler)
     frames = frames[lo - start:]
     seconds = time.perf_counter() - t0
     write_chunk(job.store, index, lo, frames, seconds)
@@ -182,14 +183,14 @@ def connect(cluster: str, timeout: float = 10.0):
     return client, client.close
 
 
-def run_batch(job: BatchJob, state: SequenceState, *, cluster: str | None = None,
+def run_batch(job: BatchJob, state: Any, *, cluster: str | None = None,
               progress: Callable[[int], Any] | None = None, cancel: Callable[[], bool] | None = None,
               client: Any = None) -> BatchReport:
     """Run every chunk of ``job`` that the store does not yet mark done.
 
     Args:
         job: the work (its store must exist, see :func:`spikeview.cluster.store.create_store`).
-        state: the sequence-wide state, computed once before the split.
+        state: the sequence-wide state (:func:`spikeview.pipeline.prepare_sequence`), computed once before the split.
         cluster: ``None`` (in-process, chunk after chunk), ``"local:N"`` or a scheduler address.
         progress: called with the number of windows each finished chunk adds.
         cancel: polled after every finished chunk; true stops the run (:class:`Cancelled`) leaving the
@@ -205,7 +206,7 @@ def run_batch(job: BatchJob, state: SequenceState, *, cluster: str | None = None
     done = done_mask(open_store(job.store))
     pending = [i for i in range(job.n_chunks) if not done[i]]
     report = BatchReport(chunks_skipped=job.n_chunks - len(pending))
-    sd = state.to_dict()
+    sd = state_to_attrs(state)
     t0 = time.perf_counter()
 
     def finished(res: dict[str, Any]) -> None:

@@ -134,7 +134,9 @@ def check_compatible(path: str | os.PathLike[str], attrs: dict[str, Any], *, fin
             f"{p.name} belongs to another input ({theirs.get('name')}, {theirs.get('size')} bytes), not "
             f"{fingerprint['name']} ({fingerprint['size']} bytes); resume with that input or write to a new --out."
         )
-    diff = _first_difference(attrs.get("settings", {}), settings)
+    # the export table does not change the frames: fps etc. may differ on resume
+    diff = _first_difference({k: v for k, v in attrs.get("settings", {}).items() if k != "export"},
+                             {k: v for k, v in settings.items() if k != "export"})
     if diff is not None:
         key, old, new = diff
         raise ParameterError(
