@@ -90,6 +90,51 @@ def _print_error(message: str) -> None:
     print(f"spikeview: error: {message}", file=sys.stderr)
 
 
+#: the system packages Qt's X11 platform plugin needs on Debian/Ubuntu (README, "Set up")
+QT_SYSTEM_PACKAGES = ("libxcb-cursor0 libxcb-icccm4 libxcb-keysyms1 libxcb-image0 libxcb-randr0 libxcb-render-util0 "
+                      "libxcb-shape0 libxcb-xkb1 libxkbcommon-x11-0 libegl1 libgl1 libfontconfig1 libdbus-1-3")
+
+
+def display_problem(environ: dict[str, str] | None = None, platform: str | None = None,
+                    load: Callable[[str], object] | None = None) -> str | None:
+    """Why the app cannot open a window here, in one sentence, or ``None`` when it can.
+
+    Checked before Qt starts, because Qt aborts the process (exit 134) without a display or when its
+    X11 plugin's libraries are missing. Only Linux and the BSDs are checked (macOS and Windows always
+    have a display). ``load`` loads a shared library (default :class:`ctypes.CDLL`; tests inject one).
+    """
+    env = os.environ if environ is None else environ
+    platform = sys.platform if platform is None else platform
+    if not platform.startswith(("linux", "freebsd", "openbsd", "netbsd")):
+        return None
+    qpa = env.get("QT_QPA_PLATFORM", "")
+    if not qpa and not env.get("DISPLAY") and not env.get("WAYLAND_DISPLAY"):
+        return ("no display found; use the command-line sub-commands (spikeview --help), "
+                "or set QT_QPA_PLATFORM=offscreen for screenshots.")
+    if qpa.split(":")[0] not in ("", "xcb") or (not qpa and env.get("WAYLAND_DISPLAY") and not env.get("DISPLAY")):
+        return None  # not the X11 plugin (Wayland, offscreen, …): Qt reports its own problems
+    import importlib.util
+
+    spec = importlib.util.find_spec("PySide6")
+    if spec is None or not spec.submodule_search_locations:
+        return None  # no Qt at all: the app command says so
+    plugin = os.path.join(list(spec.submodule_search_locations)[0], "Qt", "plugins", "platforms", "libqxcb.so")
+    if not os.path.exists(plugin):
+        return None
+    if load is None:
+        import ctypes
+
+        load = ctypes.CDLL
+    try:
+        load(plugin)
+    except OSError as e:
+        missing = str(e).split(":")[0].strip() if "cannot open shared object" in str(e) else str(e)
+        return (f"Qt's X11 plugin cannot load ({missing} is missing); on Debian/Ubuntu install the system packages "
+                f"with: sudo apt-get install -y {QT_SYSTEM_PACKAGES} (elsewhere: the X11/xcb libraries, libxkbcommon-x11, "
+                "EGL/OpenGL, fontconfig and D-Bus from your distribution).")
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the process exit status (0 ok, 1 failed, 2 bad usage, 130 interrupted)."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -101,6 +146,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     args._given = _given_dests(parser, args.command, argv)
+    if args.command == "app":
+        problem = display_problem()
+        if problem is not None:
+            _print_error(problem)
+            return 1
     run: Callable[[argparse.Namespace], int] = args.func
     try:
         return int(run(args) or 0)
