@@ -3,6 +3,9 @@
 The models are built from configs (as diffusers' own tests do), saved with ``save_pretrained`` and
 loaded back through :meth:`LatentDiffusionPrior.from_pretrained`; no weights are downloaded. The VAE
 has four blocks like SD's, so its downsampling factor is SD's 8 and odd frame sizes get padded.
+
+Sampling goes through the one guided driver, :class:`spikeview.guided.sampler.GuidedSampler`, with
+``GuidedConfig(prior="sd", guidance="dps", ...)`` and the latent parts of :mod:`spikeview.guided.latent`.
 """
 
 from __future__ import annotations
@@ -12,15 +15,20 @@ import math
 import shutil
 import sys
 import threading
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import torch
 
 from spikeview.errors import Cancelled, InputFileError, ParameterError
-from spikeview.guided.latent import DDIMLadder, LatentConfig, LatentGuidedSampler
+from spikeview.guided.baseline import start_estimate
+from spikeview.guided.config import GuidedConfig
+from spikeview.guided.latent import DDIMLadder, LatentDPSGuidance, make_ladder, start_timestep
 from spikeview.guided.observation import Observation
+from spikeview.guided.plan import make_plan
 from spikeview.guided.priors.base import PriorUnavailableError
+from spikeview.guided.sampler import GuidedSampler, load_prior
 
 HAS_DIFFUSERS = importlib.util.find_spec("diffusers") is not None
 needs_diffusers = pytest.mark.skipif(not HAS_DIFFUSERS, reason='needs the optional extra: pip install "spikeview[sd]"')
@@ -40,7 +48,13 @@ SD21_SCHEDULER = dict(
     set_alpha_to_one=False, steps_offset=1, prediction_type="v_prediction",
 )
 H, W = 13, 22  # not multiples of 8: padded to 16 x 24, latent 2 x 3
-FAST = dict(steps=3, t_start=0.6, s=1.0, device="cpu")
+# the sd path of the guided sampler: 3 DDIM steps from the pixel noise level 60/255; diffusion always
+# (the plan could otherwise skip a clean window)
+SD = dict(prior="sd", guidance="dps", steps=3, t_start=60 / 255, s=1.0, device="cpu", diffusion="always")
+
+
+def _cfg(**changes) -> GuidedConfig:
+    return GuidedConfig(**(SD | changes))
 
 
 def _tiny_modules(seed: int = 0, **unet_changes):
@@ -220,80 +234,106 @@ def test_ddim_ladder_timesteps_and_update():
         ladder.step(z0, eps, 0, eta=0.5)
 
 
-def test_start_timestep_from_fraction_and_from_pixel_sigma():
+def _abar() -> torch.Tensor:
     betas = torch.linspace(0.00085**0.5, 0.012**0.5, 1000, dtype=torch.float64) ** 2
-    abar = torch.cumprod(1 - betas, 0)
-    assert LatentConfig(t_start=0.5).start_timestep(abar) == 500  # round(0.5 * 999)
-    assert LatentConfig(t_start=1.0).start_timestep(abar) == 999
-    sigma = 50 / 255
-    t = LatentConfig(sigma_start=sigma).start_timestep(abar)
-    target = 1 / (1 + (2 * sigma) ** 2)  # √((1−ᾱ)/ᾱ) = 2σ
-    assert abar[t] <= target < abar[t - 1]
+    return torch.cumprod(1 - betas, 0)
 
 
-def test_latent_config_validates_and_round_trips(tmp_path):
-    cfg = LatentConfig(model_path="/models/sd21", steps=30, t_start=0.4, s=0.5, dtype="bfloat16", seed=7)
+def test_start_timestep_from_pixel_sigma():
+    abar = _abar()
+    for sigma in (5 / 255, 40 / 255, 50 / 255, 75 / 255):
+        t = start_timestep(abar, sigma)
+        target = 1 / (1 + (2 * sigma) ** 2)  # √((1−ᾱ)/ᾱ) = 2σ: the VAE works in [−1, 1]
+        assert abar[t] <= target < abar[t - 1]
+    assert start_timestep(abar, 50 / 255) > start_timestep(abar, 40 / 255)  # more noise, later start
+    assert start_timestep(abar, 100.0) == 999  # beyond the schedule: its last timestep
+    # the ladder starts there, and its σ of step 0 is the noise-to-signal ratio that reaches 2σ
+    ladder = make_ladder(SimpleNamespace(alphas_cumprod=abar), 4, 50 / 255)
+    t_s = start_timestep(abar, 50 / 255)
+    assert ladder.timesteps[0] == t_s and len(ladder.timesteps) == 4
+    nsr = float(ladder.sigma(0, torch.zeros(1)))
+    assert nsr == pytest.approx(math.sqrt((1 - float(abar[t_s])) / float(abar[t_s])), rel=1e-6)
+    assert nsr >= 2 * 50 / 255
+    with pytest.raises(ParameterError, match="above 0"):
+        make_ladder(SimpleNamespace(alphas_cumprod=abar), 4, 0.0)
+
+
+def test_sd_fields_of_the_guided_config_round_trip(tmp_path):
+    cfg = GuidedConfig(prior="sd", guidance="dps", model_path="/models/sd21", steps=30, t_start=40 / 255, s=0.5, zeta=0.25,
+                       seed=7, k=20.0, quantise=True, levels=2, device="cpu", dtype="bfloat16")
     path = cfg.save(tmp_path / "sd.toml")
-    assert LatentConfig.load(path) == cfg
-    with pytest.raises(ParameterError, match="t_start"):
-        LatentConfig(t_start=0.0)
+    back = GuidedConfig.load(path)
+    assert back == cfg
+    assert (back.prior, back.model_path, back.dtype, back.zeta, back.t_start) == ("sd", "/models/sd21", "bfloat16", 0.25, 40 / 255)
     with pytest.raises(ParameterError, match="dtype"):
-        LatentConfig(dtype="float64")
-
-
-def test_guided_config_maps_onto_the_latent_sampler():
-    from spikeview.guided.config import GuidedConfig
-
-    g = GuidedConfig(prior="sd", guidance="dps", model_path="/m", steps=12, t_start=40 / 255, s=0.7, zeta=0.25, seed=3, k=20.0,
-                     levels=2, dense_gradient=False, use_cast=False)
-    cfg = LatentConfig.coerce(g)
-    # GuidedConfig.levels counts band-pass levels (L = 2 → 3 bands); LatentConfig.levels counts bands
-    assert (cfg.model_path, cfg.steps, cfg.s, cfg.ddim_eta, cfg.seed, cfg.k, cfg.levels) == ("/m", 12, 0.7, 0.25, 3, 20.0, 3)
-    assert cfg.sigma_start == pytest.approx(40 / 255)
-    assert cfg.dense_gradient is False and cfg.cast is False
-    with pytest.raises(ParameterError, match='guidance = "dps"'):
-        LatentConfig.coerce(GuidedConfig(prior="sd", guidance="hqs"))
-    with pytest.raises(ParameterError, match="t_start = 0"):
-        LatentConfig.coerce(GuidedConfig(prior="sd", guidance="dps", t_start=0.0))
+        GuidedConfig(prior="sd", guidance="dps", dtype="float64")
+    with pytest.raises(ParameterError, match="device"):
+        GuidedConfig(prior="sd", guidance="dps", device="tpu")
 
 
 # ------------------------------------------------------------------------------------- sampling
 @needs_diffusers
 def test_run_shape_range_and_padding(prior):
-    sampler = LatentGuidedSampler(prior)
     for h, w in ((H, W), (16, 24)):  # padded and not
-        out = sampler.run(_observation(h, w), LatentConfig(**FAST))
+        rule = LatentDPSGuidance(1.0, (h, w))
+        out = GuidedSampler(_cfg(), prior=prior, guidance=rule).run(_observation(h, w))
         assert out.shape == (h, w, 3) and out.dtype == np.float32
         assert np.isfinite(out).all() and out.min() >= 0.0 and out.max() <= 1.0
-    assert len(sampler.losses) == 3 and all(math.isfinite(v) and v > 0 for v in sampler.losses)
+        assert len(rule.losses) == 3 and all(math.isfinite(v) and v > 0 for v in rule.losses)
+
+
+@needs_diffusers
+def test_odd_sizes_are_edge_replicated_to_the_vae_factor(prior):
+    seen = []
+
+    class Spy:
+        def __getattr__(self, name):
+            return getattr(prior, name)
+
+        def encode(self, x):
+            seen.append(x.detach().clone())
+            return prior.encode(x)
+
+    obs = _observation()
+    cfg = _cfg(steps=1)
+    smp = GuidedSampler(cfg, prior=Spy())
+    smp.run(obs)
+    (x,) = seen
+    assert x.shape == (1, 3, 16, 24)  # 13 x 22 padded to multiples of 8
+    y0 = torch.from_numpy(start_estimate(obs, smp.info.plan.mosaic, smp.info.plan.cast, cfg.demosaic)).permute(2, 0, 1)[None]
+    torch.testing.assert_close(x[..., :H, :W], y0.clamp(0, 1))
+    torch.testing.assert_close(x[..., H:, :W], x[..., H - 1:H, :W].expand(-1, -1, 16 - H, -1))  # last row repeated
+    torch.testing.assert_close(x[..., :, W:], x[..., :, W - 1:W].expand(-1, -1, -1, 24 - W))  # last column repeated
 
 
 @needs_diffusers
 def test_run_is_deterministic_for_a_seed(prior):
-    sampler = LatentGuidedSampler(prior)
     obs = _observation()
-    cfg = LatentConfig(**FAST, ddim_eta=0.5)  # fresh noise every step too
-    a = sampler.run(obs, cfg)
-    b = sampler.run(obs, cfg)
-    c = sampler.run(obs, cfg.replace(seed=1))
+    cfg = _cfg(zeta=0.5)  # fresh DDIM noise every step too
+    a = GuidedSampler(cfg, prior=prior).run(obs)
+    b = GuidedSampler(cfg, prior=prior).run(obs)
+    c = GuidedSampler(cfg.replace(seed=1), prior=prior).run(obs)
+    d = GuidedSampler(cfg.replace(zeta=0.0), prior=prior).run(obs)
     np.testing.assert_array_equal(a, b)
     assert np.abs(a - c).max() > 1e-4
+    assert np.abs(a - d).max() > 1e-4  # zeta is DDIM's η: it changes the path
 
 
 @needs_diffusers
 def test_callback_every_step_with_preview(prior):
     calls = []
-    out = LatentGuidedSampler(prior).run(_observation(), LatentConfig(**FAST),
-                                         callback=lambda i, n, pv: calls.append((i, n, pv)))
+    smp = GuidedSampler(_cfg(), prior=prior)
+    out = smp.run(_observation(), callback=lambda i, n, pv: calls.append((i, n, pv)))
     assert [(i, n) for i, n, _ in calls] == [(1, 3), (2, 3), (3, 3)]
     for _, _, pv in calls:
         assert pv.shape == (H, W, 3) and pv.dtype == np.float32 and 0 <= pv.min() and pv.max() <= 1
     assert out.shape == (H, W, 3)
+    assert smp.info.mode == "diffusion" and smp.info.steps == 3
 
 
 @needs_diffusers
 def test_cancel_midway_and_before_start(prior):
-    sampler = LatentGuidedSampler(prior)
+    smp = GuidedSampler(_cfg(), prior=prior)
     stop = threading.Event()
     calls = []
 
@@ -303,42 +343,70 @@ def test_cancel_midway_and_before_start(prior):
             stop.set()
 
     with pytest.raises(Cancelled):
-        sampler.run(_observation(), LatentConfig(**FAST | {"steps": 5}), callback=cb, cancel=stop)
+        smp.run(_observation(), _cfg(steps=5), callback=cb, cancel=stop)
     assert calls == [1, 2]
     calls.clear()
     with pytest.raises(Cancelled):
-        sampler.run(_observation(), LatentConfig(**FAST), callback=cb, cancel=lambda: True)
+        smp.run(_observation(), callback=cb, cancel=lambda: True)
     assert calls == []
 
 
 @needs_diffusers
 def test_dps_gradient_reaches_the_latent_and_descends(prior):
-    sampler = LatentGuidedSampler(prior)
     obs = _observation(16, 24)
-    cfg = LatentConfig(**FAST)
-    fm = sampler.forward_model(obs, cfg, 16, 24)
-    y = torch.from_numpy(obs.y)[None, None]
+    # Q and a 3-band pyramid in the loss; the exact mosaic (the dense-gradient one is a surrogate backward
+    # pass, by design not the gradient of L)
+    cfg = _cfg(levels=2, k=20.0, dense_gradient=False)
+    plan = make_plan(obs, cfg)
+    assert plan.quantise and plan.levels == 2
+    data = GuidedSampler.data_term(obs, plan, cfg)
+    ladder = make_ladder(prior, 3, cfg.t_start)
     z = torch.randn(1, 4, 2, 3, generator=torch.Generator().manual_seed(0))
-    g = sampler.guided_prediction(prior, z, 300, fm, y, (16, 24))
-    assert g.grad is not None and g.grad.shape == z.shape
-    assert torch.isfinite(g.grad).all() and g.grad.norm() > 0
-    # a small step against the gradient lowers the loss: the gradient is that of L w.r.t. Z_t
-    step = 1e-2 * g.grad / g.grad.norm()
-    lower = sampler.guided_prediction(prior, z - step, 300, fm, y, (16, 24)).loss
-    higher = sampler.guided_prediction(prior, z + step, 300, fm, y, (16, 24)).loss
-    assert lower < g.loss < higher
-    # no guidance: no gradient, no loss, no decoder call needed
-    g0 = sampler.guided_prediction(prior, z, 300, fm, y, (16, 24), guide=False, decode=False)
-    assert g0.grad is None and g0.x0 is None
+    t = int(ladder.timesteps[0])
+
+    def loss_of(z_in):  # L = ‖P(√w̃ (A(clamp(D(ẑ₀))) − Y))‖ through decoder and UNet
+        _, z0 = prior.predict(z_in, t)
+        return data.norm(prior.decode(z0)[..., :16, :24].clamp(0.0, 1.0))
+
+    with torch.enable_grad():
+        zg = z.clone().requires_grad_(True)
+        (grad,) = torch.autograd.grad(loss_of(zg), zg)
+    assert grad.shape == z.shape and torch.isfinite(grad).all() and grad.norm() > 0
+
+    def step(rule, z_in):
+        return rule.step(prior, ladder, data, z_in, 0, ladder.sigma(0, z_in))[0]
+
+    # the rule's step is DDIM minus s·∇_{Z_t} L
+    s = 2.0
+    rule = LatentDPSGuidance(s, (16, 24))
+    unguided = LatentDPSGuidance(0.0, (16, 24))
+    torch.testing.assert_close(step(unguided, z) - step(rule, z), s * grad, rtol=1e-3, atol=1e-5)
+    assert unguided.losses == []  # s = 0: no loss, no backward pass
+    # a small step against the gradient lowers the loss the rule records, one along it raises it, at the
+    # rate |∇L| (the gradient is that of L with respect to Z_t)
+    eps = 1e-3
+    d = eps * grad / grad.norm()
+    rule.losses.clear()
+    for z_in in (z - d, z, z + d):
+        step(rule, z_in)
+    lower, mid, higher = rule.losses
+    assert lower < mid < higher
+    assert (higher - lower) / (2 * eps) == pytest.approx(float(grad.norm()), rel=0.1)
+    assert mid == pytest.approx(float(loss_of(z)), rel=1e-5)
+    # the sampler uses a rule it is given, and the data term of the config: one loss per step
+    rule.losses.clear()
+    GuidedSampler(cfg, prior=prior, guidance=rule).run(obs)
+    assert len(rule.losses) == 3 and all(math.isfinite(v) and v > 0 for v in rule.losses)
 
 
 @needs_diffusers
 def test_guidance_strength_changes_the_result(prior):
-    sampler = LatentGuidedSampler(prior)
     obs = _observation()
-    unguided = sampler.run(obs, LatentConfig(**FAST | {"s": 0.0}))
-    assert sampler.losses == []
-    guided = sampler.run(obs, LatentConfig(**FAST | {"s": 5.0}))
+    rule = LatentDPSGuidance(0.0, (H, W))
+    unguided = GuidedSampler(_cfg(s=0.0), prior=prior, guidance=rule).run(obs)
+    assert rule.losses == []
+    np.testing.assert_array_equal(GuidedSampler(_cfg(s=0.0), prior=prior).run(obs), unguided)  # s from the config
+    guided = GuidedSampler(_cfg(s=5.0), prior=prior).run(obs)
     assert np.abs(guided - unguided).max() > 1e-4
 
 
@@ -356,68 +424,78 @@ def test_start_latent_is_the_noised_encoding_of_y0(prior):
             seen.append((z_t.detach().clone(), t))
             return prior.predict(z_t, t)
 
-    y0 = np.full((16, 24, 3), 0.3, np.float32)
-    LatentGuidedSampler(Spy()).run(_observation(16, 24), LatentConfig(steps=2, t_start=0.4, s=0.0, seed=5), y0=y0)
-    assert [t for _, t in seen] == [400, 200]  # t_s = round(0.4 * 999), then evenly down
+    obs = _observation(16, 24)
+    cfg = _cfg(steps=2, t_start=40 / 255, s=0.0, seed=5)
+    smp = GuidedSampler(cfg, prior=Spy())
+    smp.run(obs)
+    t_s = start_timestep(prior.alphas_cumprod, 40 / 255)
+    assert [t for _, t in seen] == [t_s, round(t_s / 2)]  # t_s from the pixel σ, then evenly down
+    y0 = start_estimate(obs, smp.info.plan.mosaic, smp.info.plan.cast, cfg.demosaic)
     with torch.no_grad():
-        z_enc = prior.encode(torch.from_numpy(y0).permute(2, 0, 1)[None])
+        z_enc = prior.encode(torch.from_numpy(y0).clamp(0, 1).permute(2, 0, 1)[None])
     noise = torch.randn(z_enc.shape, generator=torch.Generator().manual_seed(5))
-    a = prior.alpha_bar(400)
+    a = prior.alpha_bar(t_s)
     torch.testing.assert_close(seen[0][0], a**0.5 * z_enc + (1 - a) ** 0.5 * noise)
 
 
 @needs_diffusers
-def test_start_point_uses_the_given_estimate(prior):
-    # t_s = 0 would be no noise at all; a one-step run from t_s ≈ 1 is dominated by noise, so compare
-    # two start images at a low t_s instead: the result must follow Y₀.
-    sampler = LatentGuidedSampler(prior)
+def test_warm_start_uses_the_given_image(prior):
+    # init (the previous result) replaces Y₀; at a low t_s the result must follow it
     obs = _observation(16, 24)
-    cfg = LatentConfig(steps=1, t_start=0.01, s=0.0, device="cpu")
-    dark = sampler.run(obs, cfg, y0=np.zeros((16, 24, 3), np.float32))
-    bright = sampler.run(obs, cfg, y0=torch.ones(16, 24, 3))
+    smp = GuidedSampler(_cfg(steps=1, t_start=2 / 255, s=0.0), prior=prior)
+    dark = smp.run(obs, init=np.zeros((16, 24, 3), np.float32))
+    bright = smp.run(obs, init=np.ones((16, 24, 3), np.float32))
     assert np.abs(dark - bright).mean() > 1e-3
-    with pytest.raises(ParameterError, match=r"y0 must be an \(H, W, 3\) image matching"):
-        sampler.run(obs, cfg, y0=np.zeros((8, 8, 3), np.float32))
-
-
-@needs_diffusers
-def test_any_forward_model_with_a_loss_is_accepted(prior):
-    class PlainL2:
-        """A forward model with only ``loss``: the green channel against the observation."""
-
-        def __init__(self):
-            self.calls = 0
-
-        def loss(self, x, y):
-            self.calls += 1
-            return torch.linalg.vector_norm(x[:, 1:2] - y)
-
-    fm = PlainL2()
-    obs = {"y": _observation().y}
-    out = LatentGuidedSampler(prior).run(obs, LatentConfig(**FAST), forward=fm, y0=np.full((H, W, 3), 0.5, np.float32))
-    assert out.shape == (H, W, 3) and fm.calls == 3
-    with pytest.raises(ParameterError, match="no start estimate"):
-        LatentGuidedSampler(prior).run(obs, LatentConfig(**FAST), forward=fm)
+    with pytest.raises(ParameterError, match="init has shape"):
+        smp.run(obs, init=np.zeros((8, 8, 3), np.float32))
 
 
 @needs_diffusers
 def test_monochrome_observation(prior):
-    out = LatentGuidedSampler(prior).run(_observation(cfa=None), LatentConfig(**FAST))
-    assert out.shape == (H, W, 3) and np.isfinite(out).all()
+    rule = LatentDPSGuidance(1.0, (H, W))
+    previews = []
+    out = GuidedSampler(_cfg(), prior=prior, guidance=rule).run(_observation(cfa=None), callback=lambda i, n, pv: previews.append(pv))
+    assert out.shape == (H, W) and out.dtype == np.float32  # M is off: a gray frame (the RGB decode averaged)
+    assert np.isfinite(out).all() and 0 <= out.min() and out.max() <= 1
+    assert [pv.shape for pv in previews] == [(H, W)] * 3
+    assert len(rule.losses) == 3 and all(math.isfinite(v) for v in rule.losses)
+
+
+@needs_diffusers
+def test_divergence_is_one_sentence(prior):
+    rule = LatentDPSGuidance(math.inf, (H, W))  # a step no latent survives
+    with pytest.raises(ParameterError) as err:
+        GuidedSampler(_cfg(), prior=prior, guidance=rule).run(_observation())
+    msg = str(err.value)
+    assert "diverged" in msg and "step 1 of 3" in msg
+    assert msg.endswith(".") and ". " not in msg and "\n" not in msg
+
+
+@needs_diffusers
+def test_hqs_and_t_start_zero_are_rejected_with_the_sd_prior(prior):
+    obs = _observation()
+    with pytest.raises(ParameterError, match="guidance 'hqs' needs a denoiser prior"):
+        GuidedSampler(_cfg(guidance="hqs"), prior=prior).run(obs)
+    with pytest.raises(ParameterError, match="guidance 'hqs' needs a denoiser prior"):
+        GuidedSampler.guidance_for(_cfg(guidance="hqs"), prior, (H, W))
+    assert isinstance(GuidedSampler.guidance_for(_cfg(), prior, (H, W)), LatentDPSGuidance)
+    calls = []
+    with pytest.raises(ParameterError, match="t_s above 0"):
+        GuidedSampler(_cfg(t_start=0.0), prior=prior).run(obs, callback=lambda *a: calls.append(a))
+    assert calls == []
 
 
 @needs_diffusers
 def test_run_loads_the_model_from_a_guided_config(model_dir):
-    from spikeview.guided.config import GuidedConfig
-
-    sampler = LatentGuidedSampler()
-    g = GuidedConfig(prior="sd", guidance="dps", model_path=str(model_dir), steps=2, t_start=60 / 255)
-    out = sampler.run(_observation(), g)
-    first = sampler.prior
-    sampler.run(_observation(), g)
-    assert out.shape == (H, W, 3) and sampler.prior is first  # loaded once, then reused
-    with pytest.raises(ParameterError, match="model_path is not set"):
-        LatentGuidedSampler().run(_observation(), LatentConfig(steps=2))
+    g = _cfg(model_path=str(model_dir), steps=2, device="cpu")
+    smp = GuidedSampler(g)
+    out = smp.run(_observation())
+    assert out.shape == (H, W, 3) and np.isfinite(out).all()
+    first = load_prior(g, 3)
+    assert first.source == str(model_dir) and load_prior(g, 3) is first  # loaded once, then reused
+    np.testing.assert_array_equal(GuidedSampler(g, prior=first).run(_observation()), out)
+    with pytest.raises(ParameterError, match="needs its weights"):
+        GuidedSampler(_cfg(model_path=None)).run(_observation())
 
 
 @needs_diffusers
@@ -427,9 +505,9 @@ def test_cuda_mixed_precision_matches_float32(model_dir, dtype):
     from spikeview.guided.priors.sd import LatentDiffusionPrior
 
     obs = _observation(32, 48)
-    ref = LatentGuidedSampler(LatentDiffusionPrior.from_pretrained(model_dir, device="cuda")).run(obs, LatentConfig(**FAST))
-    half = LatentGuidedSampler(LatentDiffusionPrior.from_pretrained(model_dir, device="cuda", dtype=dtype)).run(
-        obs, LatentConfig(**FAST))
+    cfg = _cfg(device="cuda")
+    ref = GuidedSampler(cfg, prior=LatentDiffusionPrior.from_pretrained(model_dir, device="cuda")).run(obs)
+    half = GuidedSampler(cfg.replace(dtype=dtype),
+                         prior=LatentDiffusionPrior.from_pretrained(model_dir, device="cuda", dtype=dtype)).run(obs)
     assert np.isfinite(half).all()
     assert np.abs(half - ref).mean() < 0.02  # half precision changes pixels by ~1e-3 on these tiny nets
-
