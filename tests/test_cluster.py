@@ -90,9 +90,28 @@ def test_guided_chunk3_on_scheduler_address_matches_in_process(cap, tmp_path, cl
     a, b = _frames(tmp_path / "a.zarr"), _frames(tmp_path / "b.zarr")
     assert a.shape == (6, 32, 32, 3) and np.isfinite(a).all()
     np.testing.assert_array_equal(a, b)
+    # each worker opened the input once, however many chunks it ran
+    opens = client.run(lambda: __import__("spikeview.cluster._compute", fromlist=["OPENS"]).OPENS.get(str(cap), 0))
+    assert set(opens.values()) <= {0, 1} and sum(opens.values()) >= 1
     # with the default chunk (16 >= 6 windows) the store equals one plain sequence run
     assert _reconstruct(*common, "--out", tmp_path / "ref.npy") == 0
     np.testing.assert_array_equal(a, np.load(tmp_path / "ref.npy"))
+
+
+def test_second_chunk_depends_on_its_lead_in(cap):
+    """Windows 4-5 reuse / re-sample from window 3 (region mode): computed without the lead-in from the
+    keyframe they differ, which is why a chunk starting between keyframes recomputes it."""
+    from spikeview.cluster._compute import compute_chunk, prepare_state
+    from spikeview.io import open_source
+    from spikeview.recipe import Recipe
+
+    recipe = Recipe().with_values({"run.method": "guided", "guided.steps": 2, "guided.seed": 5}).to_dict()
+    centres = list(range(5, 240, 40))
+    with open_source(cap, width=32, height=32, cfa="RGGB") as src:
+        state = prepare_state(src, recipe)
+        chained = compute_chunk(src, centres, recipe, state)[4:]
+        alone = compute_chunk(src, centres[4:], recipe, state)
+    assert not np.array_equal(chained, alone)
 
 
 def test_killed_worker_is_retried_and_the_run_completes(cap, tmp_path, cluster):

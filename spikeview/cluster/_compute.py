@@ -101,6 +101,8 @@ def compute_chunk(source, centres: Sequence[int], data: dict[str, Any], state, *
 # ------------------------------------------------------------------------- worker-side caches
 _CACHE: dict[tuple, Any] = {}
 _LOCK = threading.Lock()
+#: how many times this process opened each input (the batch tests check it is once per worker)
+OPENS: dict[str, int] = {}
 
 
 def _key(*parts: Any) -> tuple:
@@ -121,6 +123,7 @@ def worker_resources(path: str, open_kwargs: dict[str, Any], recipe: dict[str, A
     from spikeview.io import open_source
 
     source = open_source(path, **open_kwargs)
+    OPENS[path] = OPENS.get(path, 0) + 1
     sampler = None
     if method_of(recipe) == "guided":
         from spikeview.guided import GuidedSampler
