@@ -173,3 +173,51 @@ def test_alpha_with_note_returns_the_sentence_without_warning():
 def test_sequence_channel_means():
     src = _periodic_stream("GBRG", 64, (2, 4, 8))
     np.testing.assert_allclose(sequence_channel_means(src, window=8), [0.5, 0.25, 0.125], rtol=1e-12)
+
+
+# --- white point (exposure) ----------------------------------------------------------------------
+def test_estimate_white_exact_on_periodic_stream():
+    from spikeview.classical.colour_cast import estimate_white
+
+    # R every 2 ticks, G every 4, B every 5: a 20-tick window counts 10, 5, 4 spikes at every site
+    src = _periodic_stream("RGGB", 200, (2, 4, 5))
+    alpha = np.array([2.0, 4.0, 5.0])  # gray-world of those rates: every corrected value is 1
+    assert estimate_white(src, alpha, window=20, eta=1.0) == pytest.approx(1.0)
+    assert estimate_white(src, alpha, window=20, eta=2.0) == pytest.approx(0.5)
+    # without gains the brightest channel (R at 0.5 spikes per tick) sets the white point
+    assert estimate_white(src, None, window=20, eta=1.0) == pytest.approx(0.5)
+
+
+def test_estimate_white_clips_at_most_the_percentile():
+    from spikeview.classical.colour_cast import estimate_white, sample_starts
+    from spikeview.classical.tfp import window_counts
+
+    rng = np.random.default_rng(4)
+    rates = rng.uniform(0.02, 0.7, (32, 32))
+    spikes = (rng.uniform(size=(400, 32, 32)) < rates).astype(np.uint8)
+    src = ArraySource(spikes, cfa="GRBG")
+    alpha = estimate_alpha(src, window=10)
+    white = estimate_white(src, alpha, window=10, eta=2.0, percentile=99.0)
+    gains = np.array([[alpha[1], alpha[0]], [alpha[2], alpha[1]]])  # GRBG
+    vals = np.concatenate([(window_counts(src, s, s + 10) / 10 * np.tile(gains, (16, 16)) / 2.0).ravel()
+                           for s in sample_starts(400, 10, 64)])
+    assert (vals > white + 1e-9).mean() <= 0.01  # at most 1 % above the 99th percentile
+    assert (vals >= white - 1e-9).mean() > 0.01  # and it is that percentile, not a loose bound
+
+
+def test_estimate_white_of_a_dark_stream_is_the_gray_world_mean_and_bad_percentile_is_refused():
+    from spikeview.classical.colour_cast import estimate_white
+
+    src = ArraySource(np.zeros((30, 8, 8), dtype=np.uint8), cfa=None)
+    assert estimate_white(src, None, window=10, eta=2.0) == 0.5
+    with pytest.raises(ParameterError, match="percentile"):
+        estimate_white(src, None, percentile=0.0)
+
+
+def test_exposed_eta_maps_the_white_point_to_the_level():
+    from spikeview.guided.observation import exposed_eta
+
+    eta = exposed_eta(2.0, white=1.6, level=0.8)
+    assert 1.6 * 2.0 / eta == pytest.approx(0.8)  # the linear value 1.6 (frame Y·α/2) lands at 0.8
+    with pytest.raises(ParameterError, match="white"):
+        exposed_eta(2.0, 0.0)

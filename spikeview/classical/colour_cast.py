@@ -304,3 +304,67 @@ def apply_colour_cast_mosaic(mosaic: np.ndarray, cfa: str | None, alpha: np.ndar
         for (py, px), ch in zip(((0, 0), (0, 1), (1, 0), (1, 1)), cfa):
             out[py::2, px::2] *= g[CHANNEL_INDEX[ch]]
     return np.clip(out, 0.0, 1.0, out=out) if clip else out
+
+
+# --- exposure: the white point of a sequence ---------------------------------------------------
+#: default percentile of :func:`estimate_white`: at most 0.1 % of photosites lie above the white point
+WHITE_PERCENTILE = 99.9
+
+
+def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, window: int = 10,
+                   max_windows: int = DEFAULT_ALPHA_WINDOWS, eta: float = DEFAULT_ETA,
+                   percentile: float = WHITE_PERCENTILE) -> float:
+    """White point of a whole sequence: a robust high percentile of its colour-corrected rates.
+
+    Gray-world (:func:`estimate_alpha`) sets the channel **ratios**; this sets the **exposure**.
+    The corrected TFP values ``Y_c · α_c / η`` of every photosite of ``max_windows`` windows of
+    ``window`` ticks spread over the stream (:func:`sample_starts`; the same windows as the α
+    estimate) are pooled and their ``percentile`` is returned. Mapping that value to full scale
+    clips at most ``100 − percentile`` % of the TFP values of such windows (0.1 % by default), and it
+    is chosen **once per sequence**, so frames do not flicker. Use the reconstruction's own window:
+    shorter windows are noisier and put the percentile higher.
+
+    Args:
+        source: the sequence (flips applied; ``source.cfa`` names the CFA).
+        alpha: the sequence's gray-world gains ``(3,)`` (``None`` or ``(1,)`` for monochrome: no
+            per-channel gain).
+        window: ticks per sampled window (at most the stream length).
+        max_windows: windows sampled from a long stream.
+        eta: range parameter η of the linear frame (``Y · α / η``).
+        percentile: in ``(0, 100]``.
+
+    Returns:
+        The white point in the units of the linear frame ``Y · α / η`` (> 0; a stream without any
+        spike gives ``1/η``, the gray-world mean, instead of 0).
+    """
+    if not 0.0 < float(percentile) <= 100.0:
+        raise ParameterError(f"percentile = {percentile!r} is out of range: use a value in (0, 100], e.g. {WHITE_PERCENTILE}.")
+    eta = _check_eta(eta)
+    cfa = source.cfa
+    gains = None
+    if cfa is not None and alpha is not None:
+        g = _check_alpha(alpha, 3)
+        gains = np.ones((2, 2))
+        for (py, px), ch in zip(((0, 0), (0, 1), (1, 0), (1, 1)), cfa):
+            gains[py, px] = g[CHANNEL_INDEX[ch]]
+    elif alpha is not None:
+        gains = np.full((2, 2), float(_check_alpha(alpha, 1)[0]))
+    n_ticks = min(int(window), source.n_frames)
+    # a histogram per distinct gain: counts take only n_ticks + 1 values per photosite class
+    hist: dict[float, np.ndarray] = {}
+    for s in sample_starts(source.n_frames, n_ticks, max_windows):
+        counts = window_counts(source, s, s + n_ticks)
+        for py in (0, 1):
+            for px in (0, 1):
+                g = 1.0 if gains is None else float(gains[py, px])
+                h = np.bincount(np.asarray(counts[py::2, px::2]).ravel(), minlength=n_ticks + 1)[: n_ticks + 1]
+                hist[g] = hist.get(g, 0) + h
+    values = np.concatenate([np.arange(n_ticks + 1) / n_ticks * g / eta for g in hist])
+    weights = np.concatenate([hist[g] for g in hist]).astype(np.float64)
+    order = np.argsort(values, kind="stable")
+    values, cum = values[order], np.cumsum(weights[order])
+    if cum[-1] <= 0:
+        return 1.0 / eta
+    idx = int(np.searchsorted(cum, float(percentile) / 100.0 * cum[-1], side="left"))
+    white = float(values[min(idx, values.size - 1)])
+    return white if white > 0 else 1.0 / eta

@@ -31,6 +31,28 @@ from spikeview.classical.windows import window_range
 from spikeview.errors import ParameterError
 from spikeview.io.source import SpikeSource
 
+#: where the sequence's white point sits in what the prior and the data term see (headroom above it
+#: keeps the brightest 0.1 % of values out of the [0, 1] clamp); chosen on the benchmark's tuning scenes
+EXPOSURE_LEVEL = 0.9
+
+
+def exposed_eta(eta: float, white: float, level: float = EXPOSURE_LEVEL) -> float:
+    """The range parameter that maps the sequence's white point to ``level``.
+
+    ``white`` is in the units of the linear frame ``Y·α/η`` (see
+    :func:`spikeview.classical.colour_cast.estimate_white`); the exposed estimate ``Y·α/η'`` with
+    ``η' = η·white/level`` has its white point at ``level``. Gray-world α keeps the channel ratios;
+    this only sets the exposure, once per sequence.
+
+    Raises:
+        ParameterError: a non-positive or non-finite ``eta``, ``white`` or ``level``.
+    """
+    for name, v in (("eta", eta), ("white", white), ("level", level)):
+        if not (np.isfinite(v) and v > 0):
+            raise ParameterError(f"{name} = {v!r} must be a positive finite number (white: the sequence's white point, e.g. from estimate_white).")
+    return float(eta) * float(white) / float(level)
+
+
 #: clip range of the data-derived scale of the binomial variance model
 KAPPA_RANGE = (1e-4, 4.0)
 #: pseudo-count of the binomial model (Jeffreys), see :func:`spikeview.ops.noise.tfp_variance`
