@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import errno
+import io
 import os
 import shutil
 from collections.abc import Iterable
@@ -45,6 +46,8 @@ def is_disk_full(e: BaseException) -> bool:
 
 def os_error_sentence(e: BaseException) -> str:
     """What went wrong and the fix, for the end of a sentence (no errno numbers)."""
+    if isinstance(e, OSError) and e.errno == errno.EFBIG or "file too large" in str(e).lower():
+        return "the file is larger than this disk or account allows; choose another disk or write less"
     if is_disk_full(e):
         return "the disk is full; free some space or choose another disk"
     if isinstance(e, PermissionError) or getattr(e, "errno", None) in (errno.EACCES, errno.EPERM, errno.EROFS):
@@ -125,6 +128,52 @@ def preallocate(fd: int, n_bytes: int, path: str | os.PathLike[str]) -> None:
             return
         raise OutputFileError(f"{path}: cannot reserve {human_bytes(n_bytes)} for the file: {os_error_sentence(e)}.") \
             from None
+
+
+def write_all(fd: int, data: bytes | bytearray | memoryview) -> None:
+    """Write all of ``data`` to file descriptor ``fd`` (``os.write`` may write only part)."""
+    view = memoryview(data).cast("B")
+    while len(view):
+        n = os.write(fd, view)
+        if n <= 0:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        view = view[n:]
+
+
+class RawFile(io.RawIOBase):
+    """A file written with plain ``os.write`` calls (wrap it in :class:`io.BufferedWriter`).
+
+    Every writer's bytes pass through :func:`os.write`, one place where a full disk shows up
+    as ``OSError(ENOSPC)`` (and where tests inject it).
+    """
+
+    def __init__(self, path: str | os.PathLike[str]):
+        self.fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+
+    def writable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return True
+
+    def write(self, b) -> int:  # type: ignore[override]
+        return os.write(self.fd, b)
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return os.lseek(self.fd, offset, whence)
+
+    def tell(self) -> int:
+        return os.lseek(self.fd, 0, os.SEEK_CUR)
+
+    def fileno(self) -> int:
+        return self.fd
+
+    def close(self) -> None:
+        if not self.closed:
+            try:
+                os.close(self.fd)
+            finally:
+                super().close()
 
 
 def write_atomic(path: str | os.PathLike[str], data: str | bytes, what: str = "the file",

@@ -38,15 +38,29 @@ def write_image(
     if out is None:
         raise OutputFileError(f"{final}: OpenImageIO cannot write this format ({oiio.geterror()}).")
     if not out.open(str(tmp), spec):
-        raise OutputFileError(f"{final}: could not create the file ({out.geterror()}); check the folder.")
+        raise _failure(final, tmp, "could not create the file", out.geterror(), pixels.nbytes)
     try:
         if not out.write_image(np.ascontiguousarray(pixels)):
-            raise OutputFileError(f"{final}: writing failed ({out.geterror()}); check free disk space.")
+            raise _failure(final, tmp, "writing failed", out.geterror(), pixels.nbytes)
     except BaseException:
         out.close()
         raise
     if not out.close():
-        raise OutputFileError(f"{final}: finishing the file failed ({out.geterror()}); check free disk space.")
+        raise _failure(final, tmp, "finishing the file failed", out.geterror(), pixels.nbytes)
+
+
+def _failure(final: Path, tmp: Path, what: str, detail: str, n_bytes: int) -> OutputFileError:
+    """One sentence for a failed OpenImageIO write: a full disk said as such, never the temporary's name."""
+    import shutil
+
+    try:
+        free = shutil.disk_usage(final.parent).free
+    except OSError:
+        free = None
+    if free is not None and free < n_bytes + (1 << 16):
+        return OutputFileError(f"{final}: {what}: the disk is full; free some space or choose another disk.")
+    detail = " ".join(str(detail).replace(str(tmp), str(final)).replace(tmp.name, final.name).split()).rstrip(".")
+    return OutputFileError(f"{final}: {what} ({detail}); check the folder and free disk space.")
 
 
 def read_attributes(path: str | Path) -> dict[str, Any]:

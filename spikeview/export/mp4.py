@@ -196,7 +196,7 @@ class Mp4Exporter(Exporter):
             for packet in self._stream.encode(vf):
                 self._container.mux(packet)
         except (av.error.FFmpegError, OSError) as e:
-            raise OutputFileError(f"{self.path}: encoding frame {index} failed ({e}); check free disk space.") from None
+            raise self._error(f"encoding frame {index} failed", e) from None
 
     def _finish(self) -> None:
         import av
@@ -206,9 +206,19 @@ class Mp4Exporter(Exporter):
                 self._container.mux(packet)
             self._container.close()
         except (av.error.FFmpegError, OSError) as e:
-            raise OutputFileError(f"{self.path}: finishing the video failed ({e}); check free disk space.") from None
+            raise self._error("finishing the video failed", e) from None
         self._file.commit()
         self.paths.append(self.path)
+
+    def _error(self, what: str, e: BaseException) -> OutputFileError:
+        """One sentence for a failed write: a full disk said as such, never the temporary's name."""
+        from spikeview._files import is_disk_full, os_error_sentence
+
+        if is_disk_full(e):
+            return OutputFileError(f"{self.path}: {what}: {os_error_sentence(e)}.")
+        detail = getattr(e, "strerror", None) or str(e)
+        detail = str(detail).replace(str(self._file.tmp), str(self.path)).rstrip(".")
+        return OutputFileError(f"{self.path}: {what} ({detail}); check the folder and free disk space.")
 
     def _discard(self) -> None:
         # the file is being thrown away: errors while closing it do not matter

@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from spikeview._files import os_error_sentence
+from spikeview.errors import OutputFileError
 from spikeview.export import _oiio
 from spikeview.export.base import SequenceExporter
 from spikeview.export.display import to_display
@@ -48,4 +50,36 @@ class PngExporter(SequenceExporter):
         attrs = frame_attributes(record, self.describe(record), typed=False)
         attrs.append(("oiio:ColorSpace", "string", colorspace))
         fmt = "uint8" if bits == 8 else "uint16"
-        _oiio.write_image(tmp, self.frame_path(record["frame_index"]), pixels, fmt, names, attrs)
+        final = self.frame_path(record["frame_index"])
+        _oiio.write_image(tmp, final, pixels, fmt, names, attrs)
+        check_png_complete(tmp, final)
+
+
+#: the last 12 bytes of every complete PNG: an empty IEND chunk and its CRC
+_IEND = b"\x00\x00\x00\x00IEND\xaeB`\x82"
+
+
+def check_png_complete(tmp: Path, final: Path) -> None:
+    """Raise :class:`OutputFileError` unless ``tmp`` ends with the IEND chunk.
+
+    OpenImageIO's PNG writer does not report failed writes (a full disk, a file-size limit): it
+    leaves a truncated file and says it succeeded, so the end of the file is checked here.
+    """
+    try:
+        with open(tmp, "rb") as f:
+            f.seek(0, 2)
+            size = f.tell()
+            f.seek(max(0, size - len(_IEND)))
+            tail = f.read()
+    except OSError as e:
+        raise OutputFileError(f"{final}: the PNG could not be read back: {os_error_sentence(e)}.") from None
+    if tail != _IEND:
+        import shutil
+
+        try:
+            full = shutil.disk_usage(final.parent).free < (1 << 20)
+        except OSError:
+            full = False
+        why = "the disk is full" if full else "the disk may be full or a file-size limit reached"
+        raise OutputFileError(f"{final}: the PNG was cut short after {size} bytes: {why}; "
+                              "free some space or choose another disk, then export again.")

@@ -9,14 +9,13 @@ reported in ``info.warnings``.
 
 from __future__ import annotations
 
-import errno
 import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from spikeview._files import os_error_sentence, preallocate
+from spikeview._files import os_error_sentence, preallocate, write_all
 from spikeview.cfa import parse_cfa
 from spikeview.errors import GeometryError, OutputFileError, ParameterError
 from spikeview.io._base import PackedFileSource, check_dims, check_tick_rate, open_bytes
@@ -254,12 +253,7 @@ class PlainDatWriter:
         if self._closed:
             raise ParameterError(f"{self.path.name}: the writer is closed; open a new PlainDatWriter to add frames.")
         try:
-            done = 0
-            while done < len(view):
-                n = self._f.write(view[done:])
-                if not n:
-                    raise OSError(errno.ENOSPC, "No space left on device")
-                done += n
+            write_all(self._f.fileno(), view)
         except OSError as e:
             self._trim()
             raise OutputFileError(f"{self.path}: writing frame {self.n_frames} failed: {os_error_sentence(e)}.") from None

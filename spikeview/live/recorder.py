@@ -17,6 +17,9 @@ closed): every frame submitted before :meth:`Recorder.stop` — the writer drain
 flushes, fsyncs and writes the sidecar with the ``[recording]`` table (frame count, drop
 counters, why it ended). The sidecar is also written when the recording starts, so even a killed
 process leaves a readable file (its last frame may then be partial; readers report it).
+**When the disk fills up** the recording stops there: the file is trimmed back to the whole
+frames written before the failed write (readable, no partial frame), the state becomes
+``"failed"`` with one sentence saying the disk is full, and later frames are counted as dropped.
 Writer threads are not daemons, and :func:`stop_all` (run before Python joins threads at exit)
 stops every recording still running, so leaving the interpreter finalises the files too.
 """

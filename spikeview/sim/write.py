@@ -29,6 +29,7 @@ final names only when complete (written under temporary names, then renamed); on
 
 from __future__ import annotations
 
+import io
 import os
 import zipfile
 from collections.abc import Callable, Iterable
@@ -111,11 +112,13 @@ class _GroundTruthWriter:
         self._zip.close()
 
     def abort(self) -> None:
+        """Drop the archive without finishing it (the caller closes and removes the file)."""
         try:
             self._entry.close()
-            self._zip.close()
-        except (OSError, ValueError, RuntimeError):  # the temporary file is removed anyway
+        except (OSError, ValueError, RuntimeError):  # a full disk fails the entry's last write
             pass
+        # forget the file: closing the archive now would only try to write its directory
+        self._zip.fp = None
 
 
 def _temp(path: Path) -> Path:
@@ -171,7 +174,8 @@ def simulate_to_file(scene: Scene | str | Path, config: SimConfig, out_path: str
             is False, an output is an input, the disk cannot hold the files (checked first), or
             a write failed (the disk filled up): then nothing is left behind.
     """
-    from spikeview._files import LARGE_WRITE_BYTES, check_free_space, check_writable, human_bytes, os_error_sentence
+    from spikeview._files import (LARGE_WRITE_BYTES, RawFile, check_free_space, check_writable, human_bytes,
+                                  os_error_sentence)
 
     out_path = Path(out_path)
     targets = [out_path, sidecar_path(out_path), ground_truth_path(out_path)]
@@ -210,7 +214,7 @@ def simulate_to_file(scene: Scene | str | Path, config: SimConfig, out_path: str
     try:
         writer = PlainDatWriter(tmp_dat, w, h, flip_vertical=config.flip_vertical, cfa=config.cfa_or_none,
                                 tick_rate=config.tick_rate, sidecar=False, reserve_frames=config.n_ticks)
-        fgt = open(tmp_gt, "wb")
+        fgt = io.BufferedWriter(RawFile(tmp_gt), buffer_size=1 << 20)
         gt_writer = _GroundTruthWriter(fgt, len(gt_ticks), h, w)
         buf = np.empty((sim.chunk_ticks, h, w), dtype=np.uint8)
         next_gt = 0
