@@ -39,13 +39,18 @@ class SequenceState:
 
     Attributes:
         alpha: ``(3,)`` float64 gray-world gains, or ``None`` (monochrome stream, colour cast off).
+        white: the sequence's white point in linear-frame units ``Y·α/η``
+            (:func:`spikeview.classical.colour_cast.estimate_white`: 99.9th percentile of the
+            corrected rates); the guided sampler sees the exposure that puts it at
+            :data:`spikeview.guided.observation.EXPOSURE_LEVEL`. ``None``: not estimated.
     """
 
     alpha: np.ndarray | None = None
+    white: float | None = None
 
     def attrs(self) -> dict[str, Any]:
         """Plain values for metadata (Zarr attributes, logs)."""
-        return {"alpha": None if self.alpha is None else [float(v) for v in self.alpha]}
+        return {"alpha": None if self.alpha is None else [float(v) for v in self.alpha], "white": self.white}
 
 
 def window_centres(recipe: Recipe, n_frames: int) -> tuple[list[int], int]:
@@ -85,15 +90,19 @@ def parse_range(text: str, default_step: int) -> tuple[int, int, int]:
 
 def prepare_sequence(source: Any, recipe: Recipe) -> SequenceState:
     """The sequence-wide state: α from ``[classical] alpha`` or one gray-world estimate of the stream."""
+    from spikeview.classical.colour_cast import estimate_alpha, estimate_white
+
     c = recipe.classical
     if source.cfa is None or not c.colour_cast:
-        return SequenceState(None)
-    if c.alpha is not None:
-        return SequenceState(np.asarray(c.alpha, dtype=np.float64))
-    from spikeview.classical.colour_cast import estimate_alpha
-
-    a = estimate_alpha(source, window=min(c.alpha_window, source.n_frames), max_windows=c.alpha_max_windows)
-    return SequenceState(np.asarray(a, dtype=np.float64))
+        a = None
+    elif c.alpha is not None:
+        a = np.asarray(c.alpha, dtype=np.float64)
+    else:
+        a = np.asarray(estimate_alpha(source, window=min(c.alpha_window, source.n_frames), max_windows=c.alpha_max_windows),
+                       dtype=np.float64)
+    # the exposure, once per sequence, on the windows the frames are made of
+    white = estimate_white(source, a, window=min(c.window, source.n_frames), max_windows=c.alpha_max_windows, eta=c.eta)
+    return SequenceState(a, white)
 
 
 def recipe_for_state(recipe: Recipe, state: SequenceState) -> Recipe:
@@ -143,7 +152,12 @@ def reconstruct_windows(source: Any, centers: Iterable[int], recipe: Recipe, sta
     if recipe.run.method == "guided":
         from spikeview.guided.video import reconstruct_sequence
 
-        yield from reconstruct_sequence(source, centers, recipe.guided, alpha=state.alpha, callback=callback,
+        from spikeview.guided.observation import exposed_eta
+
+        params = recipe.guided
+        if state.white is not None:  # the prior and the data term see the white point at EXPOSURE_LEVEL
+            params = params.replace(eta=exposed_eta(params.eta, state.white))
+        yield from reconstruct_sequence(source, centers, params, alpha=state.alpha, callback=callback,
                                         cancel=cancel, sampler=sampler, infos=infos, roi=roi,
                                         resolve=False)
         return
