@@ -221,3 +221,10 @@ def test_exposed_eta_maps_the_white_point_to_the_level():
     assert 1.6 * 2.0 / eta == pytest.approx(0.8)  # the linear value 1.6 (frame Y·α/2) lands at 0.8
     with pytest.raises(ParameterError, match="white"):
         exposed_eta(2.0, 0.0)
+
+
+def test_estimate_white_leaves_out_a_partial_last_window():
+    from spikeview.classical.colour_cast import estimate_white
+
+    src = _periodic_stream("RGGB", 210, (2, 4, 5))  # 10 full 20-tick windows and a 10-tick rest
+    assert estimate_white(src, np.array([2.0, 4.0, 5.0]), window=20, eta=1.0) == pytest.approx(1.0)

@@ -353,6 +353,8 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
     # a histogram per distinct gain: counts take only n_ticks + 1 values per photosite class
     hist: dict[float, np.ndarray] = {}
     for s in sample_starts(source.n_frames, n_ticks, max_windows):
+        if s + n_ticks > source.n_frames:  # a partial last window has other levels: left out
+            continue
         counts = window_counts(source, s, s + n_ticks)
         for py in (0, 1):
             for px in (0, 1):
