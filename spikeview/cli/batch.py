@@ -91,8 +91,12 @@ class _Progress:
             self.bar.close()
 
 
-def run_zarr(args: argparse.Namespace, *, cancel=None, client=None) -> int:
-    """Reconstruct a range of windows into ``args.out`` (a ``.zarr`` store); see the module docstring."""
+def run_zarr(args: argparse.Namespace, *, cancel=None, client=None, reports: list | None = None) -> int:
+    """Reconstruct a range of windows into ``args.out`` (a ``.zarr`` store); see the module docstring.
+
+    ``cancel`` is polled after every finished chunk; ``client`` is a Dask client to use instead of
+    ``--cluster``; the run's :class:`~spikeview.cluster.run.BatchReport` is appended to ``reports``.
+    """
     _require_extra()
     from spikeview._files import write_atomic
     from spikeview.classical.windows import window_range
@@ -175,6 +179,8 @@ def run_zarr(args: argparse.Namespace, *, cancel=None, client=None) -> int:
         report = run_batch(job, state, cluster=args.cluster, progress=bar, cancel=cancel, client=client)
     finally:
         bar.close()
+    if reports is not None:
+        reports.append(report)
     rate = report.windows_per_second
     print(f"wrote {report.windows} window{'s' if report.windows != 1 else ''} in {report.seconds:.1f} s"
           + (f" ({rate:.2f} windows/s)" if report.windows else "")
