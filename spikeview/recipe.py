@@ -29,7 +29,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from spikeview.classical.reconstruct import ClassicalConfig
+from spikeview.classical.config import ClassicalConfig
 from spikeview.config import Config, load_toml
 from spikeview.errors import ParameterError
 from spikeview.export.settings import EXR_COMPRESSIONS, TRANSFERS, X264_PRESETS, ExportConfig
@@ -203,8 +203,8 @@ PARAMS: tuple[Param, ...] = (
     _p("classical.tfi_half_window", "--tfi-half-window", "tfi_half_window", "TFI half-window",
        "TFI searches this many ticks before and after the centre tick.", unit="ticks", lo=1, hi=512, step=1),
     _p("classical.demosaic", "--demosaic", "demosaic", "Demosaicking",
-       "Demosaicking of TFP/TFI outputs and of the guided start estimate: bilinear, malvar2004 or menon2007.",
-       choices=("bilinear", "malvar2004", "menon2007")),
+       "Demosaicking of TFP/TFI outputs and of the guided start estimate: auto (the plan picks from the measured noise: bilinear where noise dominates, malvar2004 where clean or denoised afterwards), bilinear, malvar2004 or menon2007.",
+       choices=("auto", "bilinear", "malvar2004", "menon2007")),
     _p("classical.colour_cast", "--colour-cast", "colour_cast", "Correct colour cast",
        "Undo the sensor's per-channel response with gray-world gains estimated once per sequence (Bayer streams)."),
     _p("classical.eta", "--eta", "eta", "Colour range η",
@@ -235,7 +235,7 @@ PARAMS: tuple[Param, ...] = (
        "Sharpness k of the soft quantiser Q (the paper's best: 50); acts only when Q is on.", lo=0.0, hi=1000.0, step=1.0),
     _p("guided.levels", "--levels", "levels", "Pyramid levels L",
        "Band-pass levels L of the multiscale Laplacian loss (0 = plain residual; capped by the frame size).",
-       lo=0, hi=12, step=1),
+       lo=0, hi=6, step=1),
     _p("guided.sigma_scale", "--sigma-scale", "sigma_scale", "Prior noise scale",
        "Factor on the data-derived noise level handed to the prior (1 = as measured).", lo=0.0, lo_open=True, hi=10.0, step=0.05),
     _p("guided.seed", "--seed", "seed", "Seed", "Random seed (same seed and machine: same result).", lo=0, hi=2**31 - 1, step=1),
@@ -250,7 +250,7 @@ PARAMS: tuple[Param, ...] = (
        lo=0, hi=51),
     _p("export.preset", "--x264-preset", "", "x264 preset", "libx264 speed/size preset.", choices=X264_PRESETS),
     _p("export.black", "--black", "black", "Black level",
-       "Linear value shown as black in PNG/MP4 and the app (fixed, never per frame).", lo=0.0, hi=64.0, step=0.01),
+       "Linear value shown as black in PNG/MP4 and the app (fixed, never per frame).", lo=0.0, hi=1.0, step=0.01),
     _p("export.white", "--white", "white", "White level",
        "Linear value shown as white in PNG/MP4 and the app (fixed, never per frame).", lo=0.0, lo_open=True, hi=64.0, step=0.01),
     _p("export.transfer", "--transfer", "transfer", "Display curve",

@@ -265,7 +265,20 @@ def test_cfa_hint_flags_unequal_greens():
     assert "CFA is probably wrong" in cfa_hint({"R": 0.4, "Gr": 0.1, "Gb": 0.1, "B": 0.3})
 
 
-def test_degradation_chain_of_a_consistent_scene_has_a_small_residual():
+def _stages(x, y, alpha, eta, levels, quantise=True, k=500.0, window=8):
+    from spikeview.guided.baseline import to_tensor
+    from spikeview.guided.config import GuidedConfig
+    from spikeview.guided.observation import Observation
+    from spikeview.guided.plan import make_plan
+    from spikeview.guided.sampler import GuidedSampler
+
+    obs = Observation(y, "RGGB", window, np.asarray(alpha, np.float64), eta)
+    cfg = GuidedConfig(k=k, quantise=quantise, levels=levels, window=window, eta=eta, use_cast=True)
+    plan = make_plan(obs, cfg)
+    return GuidedSampler.data_term(obs, plan, cfg).stages(to_tensor(x))
+
+
+def test_degradation_preview_shows_the_samplers_own_data_term():
     # X grey 0.5, α = (2, 4, 8), η = 2: C M X = 0.5·2/α = (0.5, 0.25, 0.125) per site; Y on the
     # 8-level grid holds exactly those values, and k = 500 makes Q nearly hard rounding.
     h = w = 8
@@ -275,27 +288,44 @@ def test_degradation_chain_of_a_consistent_scene_has_a_small_residual():
 
     y = np.array([0.5, 0.25, 0.125], np.float32)[channel_map("RGGB", h, w)]
     p = default_params()
-    res = core.degradation_chain(x, y, "RGGB", 8, 500.0, 2.0, alpha, 1, True, p)
+    res = core.stage_images(x, _stages(x, y, alpha, 2.0, 1), p, True)
     assert res.rmse < 0.01
     assert set(res.images) == {"x", "mx", "cmx", "qcmx", "y", "residual"}
     assert all(im.dtype == np.uint8 for im in res.images.values())
     assert [b.shape for b in res.bands] == [(8, 8), (4, 4)]  # L = 1: one band-pass level + the coarse residual
-    wrong = core.degradation_chain(x, y, "RGGB", 8, 500.0, 1.0, alpha, 0, False, p)  # η halves C M X
-    assert wrong.rmse > 0.05
+    wrong = core.stage_images(x, _stages(x, y, alpha, 1.0, 0), p, False)  # η halves C M X
+    assert wrong.rmse > 0.05 and wrong.bands == []
+    # Q is what the sampler runs: off, the quantised stage is C M X itself; on with a soft k it differs
+    st_off = _stages(x + 0.03, y, alpha, 2.0, 0, quantise=False)
+    assert torch_equal(st_off["a"], st_off["cmx"])
+    st_on = _stages(x + 0.03, y, alpha, 2.0, 0, quantise=True, k=50.0)
+    assert not torch_equal(st_on["a"], st_on["cmx"])
+
+
+def torch_equal(a, b) -> bool:
+    import torch
+
+    return bool(torch.equal(a, b))
 
 
 # ---------------------------------------------------------------------------------------- jobs
-def test_export_ticks():
-    p = default_params() | {"window": 10}
-    assert jobs.export_ticks(p, "frame", 42, (0, 99)) == (42,)
-    assert jobs.export_ticks(p, "marked", 42, (20, 55)) == (20, 30, 40, 50)
+def test_export_ticks_follow_the_recipes_run_table():
+    from spikeview.recipe import Recipe
+
+    r = Recipe().with_values({"classical.window": 10, "run.at": 42})
+    assert jobs.export_ticks(r, 100) == (42,)
+    r = r.with_values({"run.at": None, "run.range": "20:56:10"})
+    assert jobs.export_ticks(r, 100) == (20, 30, 40, 50)
 
 
 def test_guided_job_reports_every_step_and_cancels(tmp_path):
     st = periodic_stream(16, 16, n=100, period=3)
     gt = np.full((16, 16, 3), 0.5, np.float32)
+    from spikeview.recipe import Recipe
+
     p = default_params() | {"steps": 3}
-    req = jobs.GuidedRequest(st.source, 50, p, np.array([3.0, 3.0, 3.0]), None, lambda t: gt, run=7)
+    recipe = Recipe().with_values({"guided.steps": 3, "guided.diffusion": "always"})
+    req = jobs.GuidedRequest(st.source, 50, p, np.array([3.0, 3.0, 3.0]), None, lambda t: gt, run=7, recipe=recipe)
     ctx = Ctx()
     res = jobs.guided_job(req, ctx)
     steps = [u for u in ctx.reports if u.kind == "step"]
@@ -392,15 +422,20 @@ def test_downsample_is_a_rounded_block_mean():
 def test_psnr_ssim_match_scikit_image():
     from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
+    from spikeview import metrics
+
     rng = np.random.default_rng(3)
     gt = rng.random((24, 30, 3))
     x = np.clip(gt + 0.05 * rng.standard_normal(gt.shape), 0, 1)
-    psnr, ssim = core.psnr_ssim(x, gt)
+    psnr, ssim = metrics.psnr_ssim(x, gt, data_range=1.0)
     assert psnr == pytest.approx(peak_signal_noise_ratio(gt, x, data_range=1.0), rel=1e-9)
-    ref = structural_similarity(gt, x, data_range=1.0, gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
-                                channel_axis=-1)
-    assert ssim == pytest.approx(ref, rel=1e-9)
-    assert core.psnr_ssim(gt, gt)[1] == pytest.approx(1.0)
+    assert ssim == pytest.approx(structural_similarity(gt, x, data_range=1.0, channel_axis=-1), rel=1e-9)
+    assert metrics.psnr_ssim(gt, gt)[1] == pytest.approx(1.0)
+    # the range is explicit: the same images on a 0..255 scale give the same numbers
+    assert metrics.psnr(255 * x, 255 * gt, data_range=255.0) == pytest.approx(psnr, rel=1e-9)
+    assert metrics.ssim(255 * x, 255 * gt, data_range=255.0) == pytest.approx(ssim, rel=1e-9)
+    with pytest.raises(ParameterError, match="data_range"):
+        metrics.ssim(x, gt, data_range=0.0)
 
 
 def test_tfi_frame_and_rates_of_a_periodic_stream():
@@ -417,7 +452,7 @@ def test_ground_truth_alignment_recovers_per_channel_sensor_gain():
     import numpy as np
 
     from spikeview.cfa import channel_map
-    from spikeview.gui.core import align_ground_truth, psnr_ssim
+    from spikeview.metrics import align_ground_truth, psnr_ssim
 
     rng = np.random.default_rng(5)
     gt = rng.uniform(0.05, 0.6, size=(16, 16, 3)).astype(np.float32)

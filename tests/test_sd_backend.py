@@ -474,9 +474,9 @@ def test_divergence_is_one_sentence(prior):
 @needs_diffusers
 def test_hqs_and_t_start_zero_are_rejected_with_the_sd_prior(prior):
     obs = _observation()
-    with pytest.raises(ParameterError, match="guidance 'hqs' needs a denoiser prior"):
+    with pytest.raises(ParameterError, match='set guidance = "dps"'):
         GuidedSampler(_cfg(guidance="hqs"), prior=prior).run(obs)
-    with pytest.raises(ParameterError, match="guidance 'hqs' needs a denoiser prior"):
+    with pytest.raises(ParameterError, match='set guidance = "dps"'):
         GuidedSampler.guidance_for(_cfg(guidance="hqs"), prior, (H, W))
     assert isinstance(GuidedSampler.guidance_for(_cfg(), prior, (H, W)), LatentDPSGuidance)
     calls = []

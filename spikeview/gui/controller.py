@@ -173,8 +173,8 @@ class Controller(QtCore.QObject):
         self.alpha_history.emit((np.zeros(0), np.zeros((0, 3))))
         src = self.session.source
         if src is not None and src.cfa is not None:
-            window = int(self.session.get("window"))
-            self.preview.submit("alpha", lambda ctx, s=src, w=window: jobs.alpha_job(s, w, ctx))
+            recipe = self.session.recipe()
+            self.preview.submit("alpha", lambda ctx, s=src, r=recipe: jobs.alpha_job(s, r, ctx))
         self.request_frames()
         self.request_degradation()
 
@@ -291,7 +291,12 @@ class Controller(QtCore.QObject):
         label = "TFP"
         if g is not None and g.tick == s.tick and self._guided_key == self._guided_context():
             x, label = g.image, f"guided run {g.run}"
-        req = self._request(x_override=x, x_label=label)
+        try:
+            recipe = s.recipe()
+        except Exception as e:  # a value the recipe refuses: say so, keep the old preview
+            self._error(str(e))
+            return
+        req = self._request(x_override=x, x_label=label, recipe=recipe)
         self.preview.submit("degradation", lambda ctx, r=req: jobs.degradation_job(r, ctx))
 
     # ------------------------------------------------------------------------------ guided
@@ -308,7 +313,12 @@ class Controller(QtCore.QObject):
         self.guided_timer.stop()
         self.guided_run += 1
         gt = s.stream.ground_truth if s.stream is not None else None
-        req = jobs.GuidedRequest(s.source, s.tick, dict(s.params), self.alpha, s.roi, gt, self.guided_run)
+        try:
+            recipe = s.recipe()
+        except Exception as e:
+            self._error(str(e))
+            return self.guided_run
+        req = jobs.GuidedRequest(s.source, s.tick, dict(s.params), self.alpha, s.roi, gt, self.guided_run, recipe)
         self._guided_pending_key = self._guided_context()
         self.guided.submit("guided", lambda ctx, r=req: jobs.guided_job(r, ctx), cancel_running=True)
         self.guided_state.emit("running", f"Guided run {self.guided_run} started.")
@@ -324,7 +334,7 @@ class Controller(QtCore.QObject):
         self.run_guided()
 
     # ------------------------------------------------------------------------------ export
-    def start_export(self, out: str | Path) -> bool:
+    def start_export(self, out: str | Path, overwrite: bool = False) -> bool:
         """Export the current frame or the marked range (session's export settings) to ``out``."""
         s = self.session
         if s.source is None:
@@ -333,13 +343,18 @@ class Controller(QtCore.QObject):
         if self.exporter.is_active():
             self._error("An export is already running: wait for it or cancel it first.")
             return False
-        from spikeview.gui.presets import preset_dict
+        from spikeview.gui.presets import session_recipe
 
         p = dict(s.params)
-        ticks = jobs.export_ticks(p, p["export_range"], s.tick, s.marked_range())
+        try:
+            recipe = session_recipe(s)
+            ticks = jobs.export_ticks(recipe, s.n_frames)
+        except Exception as e:
+            self._error(str(e))
+            return False
         name = str(s.stream.path) if s.stream.path is not None else s.stream.label
-        roi = s.roi if p["export_method"] == "guided" else None
-        req = jobs.ExportRequest(s.source, name, ticks, p["export_method"], p, self.alpha, Path(out), roi, preset_dict(s))
+        roi = s.roi if recipe.run.method == "guided" else None
+        req = jobs.ExportRequest(s.source, name, ticks, recipe, self.alpha, Path(out), roi, overwrite)
         self.exporter.submit("export", lambda ctx, r=req: jobs.export_job(r, ctx))
         self.export_state.emit("running", f"Exporting {len(ticks)} frame(s) to {out}…")
         return True

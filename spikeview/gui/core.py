@@ -1,4 +1,4 @@
-"""The app's thin adapter over the core packages (no Qt).
+"""Display code of the app over the core packages (no Qt).
 
 Everything the views show is computed here from the core (:mod:`spikeview.io`,
 :mod:`spikeview.classical`, :mod:`spikeview.sim`, :mod:`spikeview.ops`, :mod:`spikeview.guided`,
@@ -242,43 +242,18 @@ def signed_display(img: np.ndarray, scale: float) -> np.ndarray:
 
 
 def alpha_note(means: np.ndarray) -> tuple[np.ndarray, str | None]:
-    """Gray-world α from channel means, with the core's zero-mean rule but no warning.
+    """Gray-world α from channel means with the core's zero-mean rule, the sentence instead of a warning
+    (:func:`spikeview.classical.colour_cast.alpha_with_note`: warnings are process-global in threads)."""
+    from spikeview.classical.colour_cast import alpha_with_note
 
-    :func:`spikeview.classical.alpha_from_means` warns (a ``ColourCastWarning``) when a channel is
-    dark; warnings are process-global and the app computes this in worker threads, so the same
-    fallback is applied here and the sentence is returned for the status bar instead.
-    """
-    from spikeview.classical.colour_cast import alpha_from_means
-
-    m = np.asarray(means, dtype=np.float64).reshape(-1)
-    valid = np.isfinite(m) & (m > 0)
-    if valid.all():
-        return alpha_from_means(m), None
-    fill = 1.0 / float(m[valid].mean()) if valid.any() else 1.0
-    alpha = np.where(valid, 1.0 / np.where(valid, m, 1.0), fill).astype(np.float32)
-    names = "RGB" if m.size == 3 else "Y" * m.size
-    bad = ", ".join(names[i] for i in np.flatnonzero(~valid))
-    return alpha, f"Colour cast: channel {bad} has no spikes, so its gray-world gain is undefined; using alpha = {fill:.4g}."
+    return alpha_with_note(means)
 
 
 def sequence_alpha(source: SpikeSource, window: int = 10, max_windows: int = 64) -> tuple[np.ndarray, str | None]:
-    """Gray-world α of the whole sequence (the sampling of :func:`spikeview.classical.estimate_alpha`)."""
-    from spikeview.classical.colour_cast import (
-        _channel_means_from_sums,
-        _site_sums,
-        sample_starts,
-    )
-    from spikeview.classical.tfp import window_counts
+    """Gray-world α of the whole sequence (:func:`spikeview.classical.colour_cast.sequence_channel_means`)."""
+    from spikeview.classical.colour_cast import sequence_channel_means
 
-    window = max(1, min(int(window), source.n_frames))
-    total = np.zeros((source.height, source.width), dtype=np.uint64)
-    ticks = 0
-    for s0 in sample_starts(source.n_frames, window, max_windows):
-        e = min(s0 + window, source.n_frames)
-        total += window_counts(source, s0, e)
-        ticks += e - s0
-    sums = {k: (v / ticks, n) for k, (v, n) in _site_sums(total, source.cfa).items()}
-    return alpha_note(_channel_means_from_sums(sums, source.cfa))
+    return alpha_note(sequence_channel_means(source, max(1, min(int(window), source.n_frames)), max_windows))
 
 
 # ----------------------------------------------------------------------------- stream frames
@@ -389,25 +364,6 @@ def _colour_frame(mosaic: np.ndarray, cfa: str | None, params: dict[str, Any], a
     return show(demosaic(mosaic, cfa, params["demosaic"]), params)
 
 
-def classical_config(params: dict[str, Any], method: str = "tfp"):
-    """The :class:`spikeview.classical.ClassicalConfig` of the session's parameters."""
-    from spikeview.classical.reconstruct import ClassicalConfig
-
-    return ClassicalConfig(method=method, window=int(params["window"]), tfi_half_window=int(params["tfi_half_window"]),
-                           demosaic=params["demosaic"], colour_cast=bool(params["colour_cast"]), eta=float(params["eta"]))
-
-
-def reconstruct_classical(source: SpikeSource, tick: int, method: str, params: dict[str, Any],
-                          alpha: np.ndarray | None) -> np.ndarray:
-    """Classical frame (:func:`spikeview.classical.reconstruct_frame`): float32 ``(H, W, 3)`` or ``(H, W)`` in [0, 1]."""
-    from spikeview.classical.reconstruct import reconstruct_frame
-
-    cfg = classical_config(params, method)
-    if cfg.colour_cast and source.cfa is not None and alpha is None:
-        alpha = sequence_alpha(source, cfg.window)[0]
-    return reconstruct_frame(source, int(tick), cfg, alpha=alpha)
-
-
 # ----------------------------------------------------------------------------- firing rates
 
 
@@ -489,155 +445,38 @@ class DegradationResult:
 RESIDUAL_RANGE = 0.5
 
 
-def degradation_chain(x_img: np.ndarray, y_mosaic: np.ndarray, cfa: str | None, window: int, k: float, eta: float,
-                      alpha: np.ndarray | None, levels: int, show_pyramid: bool, display: dict[str, Any]) -> DegradationResult:
-    """Apply ``M``, ``C``, ``Q`` of :mod:`spikeview.ops` to ``x_img`` and compare with ``y_mosaic``.
+def stage_images(x_img: np.ndarray, stages: dict[str, Any], display: dict[str, Any], show_pyramid: bool) -> DegradationResult:
+    """Display images of the sampler's data-term stages (:meth:`spikeview.guided.likelihood.DataTerm.stages`).
 
     Args:
-        x_img: ``(H, W, 3)`` (or ``(H, W)`` mono) float32 in [0, 1], the current reconstruction.
-        y_mosaic: ``(H, W)`` float32 observed TFP SFR (values ``{0, 1/Δτ, …, 1}``).
-        cfa: Bayer CFA of both; monochrome skips M and C (as the scene plan does).
-        window: Δτ in ticks (the quantiser's levels ``{0, 1/Δτ, …, 1}``); k: Q's sharpness.
-        eta, alpha: C scales channel c by ``η / α_c`` (``alpha`` ``None``: C skipped).
-        levels: band-pass levels L of the per-level residual (``L + 1`` bands with the coarse residual,
-            as :class:`spikeview.guided.GuidedConfig`; 0 = none); ``show_pyramid`` computes them.
+        x_img: ``(H, W, 3)`` (or ``(H, W)``) float32 reconstruction X in [0, 1].
+        stages: ``x``, ``mx``, ``cmx``, ``a`` (= A X), ``y``, ``residual`` (noise-weighted
+            ``√w̃ (A X − Y)``) and ``bands`` (its pyramid), as tensors.
         display: the session's display parameters for the scene-side images.
+        show_pyramid: include the residual's bands (when the data term has more than one).
 
-    Sensor-side images (M X onwards, Y, residual) are shown in gray, linear 0..1 through the sRGB
-    curve, so the checkerboard of the mosaic stays visible; the residual maps ±0.5 to black/white.
+    Sensor-side images (C M X onwards, Y, residual) are shown in gray, linear 0..1 through the sRGB
+    curve, so the checkerboard of the mosaic stays visible; the residual is shown as ``√w̃ (Y − A X)``
+    with ±:data:`RESIDUAL_RANGE` at black/white (fixed, never per frame).
     """
-    import torch
+    def arr(t: Any) -> np.ndarray:
+        return t[0, 0].detach().cpu().numpy()
 
-    from spikeview.ops.cast import colour_cast
-    from spikeview.ops.mosaic import mosaic
-    from spikeview.ops.quantise import soft_quantise
-
-    with torch.no_grad():
-        if x_img.ndim == 2 or cfa is None:
-            x1 = x_img if x_img.ndim == 2 else x_img.mean(axis=-1)
-            x = torch.from_numpy(np.ascontiguousarray(x1, dtype=np.float32))[None, None]
-            mx = x
-            cmx = x * (float(eta) / float(alpha[0])) if alpha is not None else x
-        else:
-            x = torch.from_numpy(np.ascontiguousarray(x_img.transpose(2, 0, 1), dtype=np.float32))[None]
-            mx = mosaic(x, cfa)  # (1, 1, H, W)
-            cx = colour_cast(x, tuple(float(a) for a in alpha), eta) if alpha is not None else x
-            cmx = mosaic(cx, cfa)
-        q = soft_quantise(cmx, levels=int(window), k=float(k))
-        y = torch.from_numpy(np.ascontiguousarray(y_mosaic, dtype=np.float32))[None, None]
-        res = y - q
-        rmse = float(torch.sqrt(torch.mean(res * res)))
-        bands_np: list[np.ndarray] = []
-        if show_pyramid and levels > 0:
-            from spikeview.ops.pyramid import laplacian_pyramid, max_pyramid_levels
-
-            # L band-pass levels + the coarse residual (GuidedConfig.levels), capped by the frame size
-            n_bands = min(int(levels) + 1, max_pyramid_levels(*y_mosaic.shape))
-            if n_bands > 1:
-                bands_np = [t[0, 0].numpy() for t in laplacian_pyramid(res, n_bands)]
+    res = -arr(stages["residual"])
+    rmse = float(np.sqrt(np.mean(res.astype(np.float64) ** 2)))
     sensor = {"black": 0.0, "white": 1.0, "gamma": "srgb"}
     images = {
         "x": show(x_img, display),
-        "mx": show(mx[0, 0].numpy(), display),
-        "cmx": to_display(cmx[0, 0].numpy(), **sensor),
-        "qcmx": to_display(q[0, 0].numpy(), **sensor),
-        "y": to_display(y_mosaic, **sensor),
-        "residual": signed_display(res[0, 0].numpy(), RESIDUAL_RANGE),
+        "mx": show(arr(stages["mx"]), display),
+        "cmx": to_display(arr(stages["cmx"]), **sensor),
+        "qcmx": to_display(arr(stages["a"]), **sensor),
+        "y": to_display(arr(stages["y"]), **sensor),
+        "residual": signed_display(res, RESIDUAL_RANGE),
     }
-    bands = [signed_display(bnd, RESIDUAL_RANGE / 2) for bnd in bands_np]
+    bands = []
+    if show_pyramid and len(stages["bands"]) > 1:
+        bands = [signed_display(-arr(b), RESIDUAL_RANGE / 2) for b in stages["bands"]]
     return DegradationResult(images=images, bands=bands, rmse=rmse, residual_scale=RESIDUAL_RANGE)
-
-
-# ------------------------------------------------------------------------------- metrics
-
-
-def align_ground_truth(gt: np.ndarray, y: np.ndarray, cfa: str | None, alpha: np.ndarray | None,
-                       eta: float) -> np.ndarray:
-    """Express the simulator's linear ground truth in the reconstruction's colour normalisation.
-
-    Reconstructions are gray-world corrected (``Y·α/η``), so their per-channel scale differs from
-    the scene's linear RGB by the unknown sensor gain. Each channel of ``gt`` is scaled by the
-    least-squares gain that maps it onto the corrected observation ``y·α_c/η`` at that channel's
-    photosites (one gain per channel, the same for every method and step of a run), then clipped
-    to [0, 1]. Without this, PSNR measures the colour normalisation rather than the reconstruction.
-
-    Args:
-        gt: ``(H, W, 3)`` or ``(H, W)`` float32 linear ground truth.
-        y: ``(H, W)`` mosaicked TFP of the same window.
-        cfa, alpha, eta: the observation's CFA, gains and range parameter.
-    """
-    from spikeview.cfa import channel_map
-
-    gt = np.asarray(gt, dtype=np.float64)
-    y = np.asarray(y, dtype=np.float64)
-    out = np.empty_like(gt)
-    if gt.ndim == 2 or cfa is None:
-        g = gt if gt.ndim == 2 else gt.mean(axis=-1)
-        gain = float((y * g).sum() / max((g * g).sum(), 1e-12))
-        return np.clip(gt * gain, 0, 1).astype(np.float32)
-    cmap = channel_map(cfa, *y.shape)
-    scale = np.ones(3) if alpha is None else np.asarray(alpha, dtype=np.float64) / eta
-    for c in range(3):
-        m = cmap == c
-        obs_c = y[m] * scale[c]
-        g_c = gt[..., c][m]
-        gain = float((obs_c * g_c).sum() / max((g_c * g_c).sum(), 1e-12))
-        out[..., c] = gt[..., c] * gain
-    return np.clip(out, 0, 1).astype(np.float32)
-
-
-def psnr_ssim(x: np.ndarray, gt: np.ndarray) -> tuple[float, float]:
-    """PSNR (dB) and SSIM of ``x`` against ``gt``, float images in [0, 1] (``data_range = 1``).
-
-    SSIM is Wang et al. (2004): an 11×11 Gaussian window with σ = 1.5, K1 = 0.01, K2 = 0.03,
-    population covariances, borders within the window radius excluded, averaged over channels —
-    the same number as ``skimage.metrics.structural_similarity(gt, x, data_range=1,
-    gaussian_weights=True, sigma=1.5, use_sample_covariance=False, channel_axis=-1)``. It is
-    computed with torch, which releases the interpreter lock, so the guided worker can score every
-    step without stalling the window (scikit-image's filters hold the lock). Frames smaller than
-    11×11 use the largest odd window that fits.
-    """
-    import torch
-    import torch.nn.functional as F
-
-    if np.shape(x) != np.shape(gt):
-        raise ParameterError(f"reconstruction shape {np.shape(x)} differs from ground truth {np.shape(gt)}.")
-    a = torch.from_numpy(np.clip(np.asarray(x, dtype=np.float64), 0, 1))
-    b = torch.from_numpy(np.clip(np.asarray(gt, dtype=np.float64), 0, 1))
-    mse = float(torch.mean((a - b) ** 2))
-    psnr = 100.0 if mse <= 1e-10 else 10.0 * math.log10(1.0 / mse)
-    if a.ndim == 2:
-        a, b = a[..., None], b[..., None]
-    a = a.permute(2, 0, 1)[:, None]  # (C, 1, H, W): channels as a batch
-    b = b.permute(2, 0, 1)[:, None]
-    radius = min(5, (min(a.shape[-2:]) - 1) // 2)
-    if radius < 1:
-        return psnr, float("nan")
-    t = torch.arange(-radius, radius + 1, dtype=torch.float64)
-    g = torch.exp(-0.5 * (t / 1.5) ** 2)
-    g = g / g.sum()
-    k = (g[:, None] * g[None, :])[None, None]
-
-    def filt(v: torch.Tensor) -> torch.Tensor:
-        return F.conv2d(v, k)
-
-    mu_a, mu_b = filt(a), filt(b)
-    va = filt(a * a) - mu_a ** 2
-    vb = filt(b * b) - mu_b ** 2
-    cov = filt(a * b) - mu_a * mu_b
-    c1, c2 = 0.01 ** 2, 0.03 ** 2
-    s_map = ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a ** 2 + mu_b ** 2 + c1) * (va + vb + c2))
-    return psnr, float(s_map.mean(dim=(1, 2, 3)).mean())
-
-
-def crop_roi(img: np.ndarray, roi: tuple[int, int, int, int] | None, even: bool = True) -> tuple[np.ndarray, tuple[int, int]]:
-    """Crop ``img`` to ``roi`` (origin rounded down to even pixels to keep the CFA phase)."""
-    if roi is None:
-        return img, (0, 0)
-    x, y, w, h = roi
-    if even:
-        x, y = x - x % 2, y - y % 2
-    return img[y:y + h, x:x + w], (x, y)
 
 
 def fmt_rate(v: float) -> str:

@@ -16,8 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from spikeview.errors import Cancelled, ParameterError
+from spikeview.errors import Cancelled
 from spikeview.gui import core
+from spikeview.recipe import Recipe
 
 # ------------------------------------------------------------------------------------ previews
 
@@ -35,6 +36,7 @@ class PreviewRequest:
     factor: int = 1  # display downsampling of the stream images
     x_override: np.ndarray | None = None  # the guided result for this window, if any (ROI-cropped)
     x_label: str = "TFP"
+    recipe: Recipe | None = None  # the session's recipe (the degradation preview runs its forward model)
 
 
 def frames_job(req: PreviewRequest, ctx: Any) -> core.StreamFrames:
@@ -51,37 +53,85 @@ def rates_job(req: PreviewRequest, mosaic: np.ndarray, ctx: Any) -> core.RatesRe
     return core.site_rates(mosaic, req.source.cfa, int(req.params["window"]), req.roi, tick=req.tick)
 
 
-def alpha_job(source: Any, window: int, ctx: Any) -> tuple[np.ndarray, str | None]:
-    return core.sequence_alpha(source, window)
+def alpha_job(source: Any, recipe: Recipe, ctx: Any) -> tuple[np.ndarray | None, str | None]:
+    """The sequence's gains α, exactly as :func:`spikeview.pipeline.prepare_sequence` finds them, with
+    the sentence for a channel without spikes (no warning: warnings are process-global in threads)."""
+    from spikeview.classical.colour_cast import alpha_with_note, sequence_channel_means
+
+    c = recipe.classical
+    if source.cfa is None:
+        return None, None
+    if c.alpha is not None:
+        return np.asarray(c.alpha, dtype=np.float64), None
+    means = sequence_channel_means(source, window=min(c.alpha_window, source.n_frames), max_windows=c.alpha_max_windows)
+    alpha, note = alpha_with_note(means)
+    return np.asarray(alpha, dtype=np.float32).astype(np.float64), note
 
 
 @dataclass
 class DegradationView:
-    """A :class:`~spikeview.gui.core.DegradationResult` with what it was computed from."""
+    """A :class:`~spikeview.gui.core.DegradationResult` with what it was computed from.
+
+    ``plan`` is the window's scene plan and ``knobs`` :func:`spikeview.guided.knobs.knob_status` of it:
+    the guided panel disables a control whose knob cannot act, with the reason as its tooltip.
+    """
 
     result: core.DegradationResult
     x_label: str
     tick: int
     shape: tuple[int, int]
+    plan: str = ""
+    knobs: dict[str, str | None] = field(default_factory=dict)
+
+
+def window_observation(source: Any, tick: int, recipe: Recipe, alpha: np.ndarray | None,
+                       roi: tuple[int, int, int, int] | None):
+    """The guided sampler's :class:`~spikeview.guided.observation.Observation` of the window (ROI-cropped)."""
+    from spikeview.guided.observation import Observation
+    from spikeview.guided.video import _crop_to_roi
+
+    g = recipe.guided
+    obs = Observation.from_source(source, int(tick), g.window, alpha=alpha if recipe.classical.colour_cast else None,
+                                  eta=g.eta)
+    return obs if roi is None else _crop_to_roi(obs, roi)
 
 
 def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
-    """Current reconstruction X (guided result or classical TFP) pushed through M, C, Q vs. Y."""
-    p = req.params
+    """The forward model the guided sampler will run, stage by stage, on the current reconstruction X.
+
+    X is the guided result of this window when there is one, else the classical TFP of the recipe
+    (:func:`spikeview.pipeline.reconstruct_windows`). The stages come from the sampler's own data term
+    (:meth:`spikeview.guided.sampler.GuidedSampler.data_term`: the plan's M, C, Q, noise weights and
+    pyramid), so the preview shows exactly the model the sampler uses.
+    """
+    import torch
+
+    from spikeview.guided.baseline import to_tensor
+    from spikeview.guided.knobs import knob_status
+    from spikeview.guided.plan import make_plan
+    from spikeview.guided.sampler import GuidedSampler
+    from spikeview.pipeline import SequenceState, reconstruct_windows
+
+    recipe = req.recipe if req.recipe is not None else Recipe()
+    cfg = recipe.guided
     src = req.source
-    a, b = core.window_range(req.tick, int(p["window"]), src.n_frames)
-    y = src.count(a, b).astype(np.float32) / np.float32(b - a)
-    y, _ = core.crop_roi(y, req.roi)
-    if req.x_override is not None and req.x_override.shape[:2] == y.shape:
+    obs = window_observation(src, req.tick, recipe, req.alpha, req.roi)
+    plan = make_plan(obs, cfg)
+    channels = 3 if plan.mosaic else 1
+    if req.x_override is not None and req.x_override.shape[:2] == obs.shape and (req.x_override.ndim == 3) == (channels == 3):
         x, label = req.x_override, req.x_label
     else:
-        x = core.reconstruct_classical(src, req.tick, "tfp", p, req.alpha if p["colour_cast"] else None)
-        x, _ = core.crop_roi(x, req.roi)
+        tfp = recipe.with_values({"run.method": "tfp"})
+        x = next(reconstruct_windows(src, [req.tick], tfp, SequenceState(req.alpha if recipe.classical.colour_cast else None),
+                                     roi=req.roi))
+        if channels == 1 and x.ndim == 3:
+            x = x.mean(axis=-1)
         label = "TFP (classical)"
-    alpha = req.alpha if (src.cfa is not None and p["colour_cast"]) else None
-    res = core.degradation_chain(x, y, src.cfa, b - a, p["k"], p["eta"], alpha, int(p["levels"]),
-                                 bool(p["show_pyramid"]), p)
-    return DegradationView(res, label, req.tick, y.shape)
+    data = GuidedSampler.data_term(obs, plan, cfg)
+    with torch.no_grad():
+        st = data.stages(to_tensor(np.clip(x, 0.0, 1.0)))
+    res = core.stage_images(x, st, req.params, bool(req.params.get("show_pyramid")))
+    return DegradationView(res, label, req.tick, obs.shape, str(plan), knob_status(cfg, plan))
 
 
 # ---------------------------------------------------------------------------------- guided
@@ -98,6 +148,7 @@ class GuidedRequest:
     roi: tuple[int, int, int, int] | None
     ground_truth: Callable[[int], np.ndarray] | None = None
     run: int = 0
+    recipe: Recipe = field(default_factory=Recipe)
 
 
 @dataclass
@@ -113,6 +164,7 @@ class GuidedUpdate:
     psnr: float | None = None
     ssim: float | None = None
     text: str = ""
+    knobs: dict[str, str | None] = field(default_factory=dict)
 
 
 @dataclass
@@ -129,102 +181,52 @@ class GuidedResult:
     config: dict[str, Any] = field(default_factory=dict)
 
 
-def guided_config(params: dict[str, Any]):
-    """The :class:`spikeview.guided.GuidedConfig` of the session's parameters."""
-    from spikeview.guided.config import GuidedConfig
-
-    return GuidedConfig(guidance=params["guidance"], prior=params["prior"], model_path=params["model_path"] or None,
-                        steps=int(params["steps"]), t_start=float(params["t_start"]), s=float(params["s"]),
-                        k=float(params["k"]), levels=int(params["levels"]), eta=float(params["eta"]),
-                        window=int(params["window"]), demosaic=_guided_demosaic(params["demosaic"]),
-                        seed=int(params["seed"]), use_cast=None if params["colour_cast"] else False,
-                        diffusion="always")
-
-
-def _guided_demosaic(name: str) -> str:
-    from spikeview.guided.config import DEMOSAICS
-
-    return name if name in DEMOSAICS else "malvar2004"
-
-
-def observation(source: Any, tick: int, params: dict[str, Any], alpha: np.ndarray | None,
-                roi: tuple[int, int, int, int] | None):
-    """The :class:`spikeview.guided.observation.Observation` of the window, cropped to ``roi``.
-
-    The crop starts on even pixels so the CFA phase (``source.cfa``) stays the same.
-    """
-    from spikeview.guided.observation import Observation
-
-    obs = Observation.from_source(source, int(tick), int(params["window"]), alpha=alpha if params["colour_cast"] else None,
-                                  eta=float(params["eta"]))
-    if roi is None:
-        return obs, (0, 0)
-    y, origin = core.crop_roi(obs.y, roi)
-    if min(y.shape) < 8:
-        raise ParameterError("The region of interest is too small for a guided reconstruction: draw one of at least 8x8 pixels.")
-    return Observation(y, obs.cfa, obs.window, obs.alpha, obs.eta, obs.ticks, obs.center), origin
-
-
 def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
-    """Plan, then run the guided sampler, reporting the clean estimate (and metrics) every step."""
+    """Plan, then run the guided reconstruction of one window through the pipeline, reporting the clean
+    estimate (and metrics against the aligned ground truth) every step."""
+    from spikeview import metrics
+    from spikeview.guided.knobs import knob_status
     from spikeview.guided.plan import make_plan
+    from spikeview.pipeline import SequenceState, crop_roi, reconstruct_windows
 
     p = req.params
-    cfg = guided_config(p)
-    obs, origin = observation(req.source, req.tick, p, req.alpha, req.roi)
+    recipe = req.recipe.with_values({"run.method": "guided"})
+    cfg = recipe.guided
+    obs = window_observation(req.source, req.tick, recipe, req.alpha, req.roi)
     plan = make_plan(obs, cfg)
-    ctx.report(GuidedUpdate("plan", req.run, total=cfg.steps, text=str(plan)))
+    origin = crop_roi(np.zeros((req.source.height, req.source.width), np.uint8), req.roi)[1][::-1] if req.roi else (0, 0)
+    ctx.report(GuidedUpdate("plan", req.run, total=cfg.steps * cfg.chains, text=str(plan), knobs=knob_status(cfg, plan)))
     gt = None
     if req.ground_truth is not None:
         g = np.asarray(req.ground_truth(req.tick), dtype=np.float32)
-        gt, _ = core.crop_roi(g, req.roi)
-        if gt.shape[:2] == obs.y.shape:
-            gt = core.align_ground_truth(gt, obs.y, obs.cfa, obs.alpha, obs.eta)
+        gt = crop_roi(g, req.roi)[0] if req.roi is not None else g
+        gt = metrics.align_ground_truth(gt, obs.y, obs.cfa, obs.alpha, obs.eta) if gt.shape[:2] == obs.y.shape else None
     t0 = time.perf_counter()
-    last: dict[str, Any] = {}
 
-    def callback(step: int, total: int, preview: np.ndarray) -> None:
+    def score(img: np.ndarray) -> tuple[float | None, float | None]:
+        if gt is None or gt.shape != img.shape:
+            return None, None
+        return metrics.psnr_ssim(img, gt, data_range=1.0)
+
+    def callback(fi: int, n: int, step: int, total: int, preview: np.ndarray) -> None:
         ctx.check()
         img = np.asarray(preview, dtype=np.float32)
-        psnr = ssim = None
-        if gt is not None and gt.shape == img.shape:
-            psnr, ssim = core.psnr_ssim(img, gt)
-        elapsed = time.perf_counter() - t0
-        last.update(psnr=psnr, ssim=ssim)
-        ctx.report(GuidedUpdate("step", req.run, step, total, core.show(img, p), elapsed, psnr, ssim))
+        psnr, ssim = score(img)
+        ctx.report(GuidedUpdate("step", req.run, step, total, core.show(img, p), time.perf_counter() - t0, psnr, ssim))
 
-    image = run_sampler(obs, cfg, callback, ctx)
-    ctx.check()
-    image = np.asarray(image, dtype=np.float32)
-    psnr = ssim = None
-    if gt is not None and gt.shape == image.shape:
-        psnr, ssim = core.psnr_ssim(image, gt)
-    return GuidedResult(req.run, req.tick, image, core.show(image, p), origin, str(plan),
-                        time.perf_counter() - t0, psnr, ssim, cfg.to_dict())
-
-
-def run_sampler(obs: Any, cfg: Any, callback: Callable[[int, int, np.ndarray], None], ctx: Any) -> np.ndarray:
-    """Run the guided sampler for ``cfg.prior``, kept in ``ctx.state`` (the worker owns it).
-
-    ``"ffdnet"``: :class:`spikeview.guided.sampler.GuidedSampler` (pixel-space prior, loaded once);
-    ``"sd"``: :class:`spikeview.guided.latent.LatentGuidedSampler` (weights from ``cfg.model_path``,
-    loaded on the first run and kept while the path stays the same). ``callback(step, total,
-    preview)`` gets the float clean estimate after every step; both samplers check ``ctx.cancelled``
-    before every step and raise :class:`~spikeview.errors.Cancelled`.
-    """
-    if cfg.prior == "sd":
-        from spikeview.guided.latent import LatentGuidedSampler
-
-        sampler = ctx.state.get("latent_sampler")
-        if sampler is None:
-            sampler = ctx.state["latent_sampler"] = LatentGuidedSampler()
-    else:
+    sampler = ctx.state.get("sampler")
+    if sampler is None:
         from spikeview.guided.sampler import GuidedSampler
 
-        sampler = ctx.state.get("sampler")
-        if sampler is None:
-            sampler = ctx.state["sampler"] = GuidedSampler(cfg)
-    return sampler.run(obs, cfg, callback=callback, cancel=ctx.cancelled)
+        sampler = ctx.state["sampler"] = GuidedSampler(cfg)
+    alpha = req.alpha if recipe.classical.colour_cast else None
+    image = next(reconstruct_windows(req.source, [req.tick], recipe, SequenceState(alpha), roi=req.roi,
+                                     callback=callback, cancel=ctx.cancelled, sampler=sampler))
+    ctx.check()
+    image = np.asarray(image, dtype=np.float32)
+    psnr, ssim = score(image)
+    return GuidedResult(req.run, req.tick, image, core.show(image, p), origin, str(plan),
+                        time.perf_counter() - t0, psnr, ssim, recipe.to_dict())
 
 
 # ---------------------------------------------------------------------------------- export
@@ -232,59 +234,43 @@ def run_sampler(obs: Any, cfg: Any, callback: Callable[[int, int, np.ndarray], N
 
 @dataclass(frozen=True)
 class ExportRequest:
-    """Write the reconstruction of ``ticks`` to ``out`` (format from its suffix)."""
+    """Write the recipe's reconstruction of ``ticks`` to ``out`` (format from its suffix)."""
 
     source: Any
     source_name: str
     ticks: tuple[int, ...]
-    method: str  # "tfp", "tfi" or "guided"
-    params: dict[str, Any]
+    recipe: Recipe
     alpha: np.ndarray | None
     out: Path
     roi: tuple[int, int, int, int] | None = None
-    preset: dict[str, Any] = field(default_factory=dict)
+    overwrite: bool = False
 
 
-def export_ticks(params: dict[str, Any], mode: str, tick: int, marked: tuple[int, int]) -> tuple[int, ...]:
-    """Centre ticks to export: the current one, or one per window Δτ across the marked range."""
-    if mode == "frame":
-        return (int(tick),)
-    lo, hi = marked
-    step = max(1, int(params["window"]))
-    return tuple(range(int(lo), int(hi) + 1, step)) or (int(lo),)
+def export_ticks(recipe: Recipe, n_frames: int) -> tuple[int, ...]:
+    """Centre ticks of the recipe's ``[run]`` (the CLI's rule, :func:`spikeview.pipeline.window_centres`)."""
+    from spikeview.pipeline import window_centres
+
+    return tuple(window_centres(recipe, n_frames)[0])
 
 
 def export_job(req: ExportRequest, ctx: Any) -> list[Path]:
-    """Reconstruct and write every frame; progress ``(done, total)``; Cancel keeps finished frames."""
-    from spikeview.export import ExportConfig, ExportMetadata, open_exporter
+    """Reconstruct and write every frame with :func:`spikeview.pipeline.write_sequence` (the CLI's
+    function: α once, the sequence path with reuse and warm start as configured); progress
+    ``(done, total)``; Cancel keeps finished frames."""
+    from spikeview.pipeline import SequenceState, window_centres, write_sequence
 
-    p = req.params
     n = len(req.ticks)
-    cfg = ExportConfig(fps=float(p["export_fps"]), black=float(p["black"]), white=max(float(p["white"]), float(p["black"]) + 1e-3),
-                       transfer=p["transfer"], gamma=float(p["gamma"]))
-    step = int(p["window"]) if n > 1 else None
-    a, b = core.window_range(req.ticks[0], int(p["window"]), req.source.n_frames)
-    meta = ExportMetadata(source=req.source_name, method=req.method, tick_rate=float(req.source.tick_rate),
-                          window=(a, b), centre_tick=int(req.ticks[0]), step_ticks=step, params=req.preset)
-
-    def frame(t: int) -> np.ndarray:
-        if req.method == "guided":
-            sub = _Ctx(ctx)
-            res = guided_job(GuidedRequest(req.source, t, p, req.alpha, req.roi), sub)
-            return res.image
-        img = core.reconstruct_classical(req.source, t, req.method, p, req.alpha if p["colour_cast"] else None)
-        return core.crop_roi(img, req.roi)[0] if req.roi is not None else img
-
     ctx.report((0, n))
-    first = frame(req.ticks[0])
-    ex = open_exporter(req.out, n, first.shape, cfg, meta, cancel=ctx.cancelled.is_set,
-                       progress=lambda done, total: ctx.report((done, total)))
-    with ex:
-        ex.write(first)
-        for t in req.ticks[1:]:
-            ctx.check()
-            ex.write(frame(t))
-        return ex.close()
+    sampler = ctx.state.get("sampler")
+    if sampler is None and req.recipe.run.method == "guided":
+        from spikeview.guided.sampler import GuidedSampler
+
+        sampler = ctx.state["sampler"] = GuidedSampler(req.recipe.guided)
+    step = window_centres(req.recipe, req.source.n_frames)[1]
+    alpha = req.alpha if req.recipe.classical.colour_cast else None
+    return write_sequence(req.source, req.recipe, list(req.ticks), req.out, state=SequenceState(alpha), roi=req.roi,
+                          step=step, cancel=ctx.cancelled, sampler=sampler, overwrite=req.overwrite,
+                          progress=lambda done, total: ctx.report((done, total)), source_name=req.source_name)
 
 
 class _Ctx:

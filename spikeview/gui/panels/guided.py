@@ -9,7 +9,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from spikeview.gui.model import Session
+from spikeview.gui.model import SPECS, Session
 from spikeview.gui.widgets import (
     ImagePane,
     ParamCombo,
@@ -46,6 +46,7 @@ class GuidedPanel(QtWidgets.QWidget):
         self.seed = ParamSpin(session, "seed")
         self.prior = ParamCombo(session, "prior", {"ffdnet": "FFDNet (embedded)", "sd": "Stable Diffusion (folder)"})
         self.guidance = ParamCombo(session, "guidance", {"hqs": "HQS (DiffPIR, fast)", "dps": "DPS (backprop)"})
+        self.quantise = ParamCombo(session, "quantise", {"auto": "auto (the plan decides)", "on": "on", "off": "off"})
         self.model_path = QtWidgets.QLineEdit()
         self.model_path.setObjectName("model_path")
         self.model_path.setPlaceholderText("packaged FFDNet weights")
@@ -73,7 +74,10 @@ class GuidedPanel(QtWidgets.QWidget):
         tw = QtWidgets.QWidget()
         tw.setLayout(tline)
         settings = form([self.s, self.k, self.levels, tw, ("", smallw), ("Prior", self.prior), ("Weights", mpw),
-                         ("Guidance", self.guidance)])
+                         ("Guidance", self.guidance), ("Q", self.quantise)])
+        #: recipe path → the control of that knob (disabled with the plan's reason when it cannot act)
+        self.knob_controls = {"guided.s": self.s, "guided.k": self.k, "guided.levels": self.levels,
+                              "guided.t_start": self.t_start}
 
         self.run_btn = QtWidgets.QPushButton("Run")
         self.run_btn.setObjectName("guided_run")
@@ -89,6 +93,10 @@ class GuidedPanel(QtWidgets.QWidget):
         self.progress = QtWidgets.QProgressBar()
         self.progress.setObjectName("guided_progress")
         self.progress.setFormat("%v / %m steps")
+        # not the widths of their texts: the panel must fit beside the others on a 1366-pixel screen
+        self.progress.setMinimumWidth(90)
+        for b in (self.run_btn, self.cancel_btn):
+            b.setMinimumWidth(56)
         self.progress.setValue(0)
         self.status = QtWidgets.QLabel("Idle.")
         self.status.setObjectName("guided_status")
@@ -105,6 +113,7 @@ class GuidedPanel(QtWidgets.QWidget):
         self.plan.setPlaceholderText("The scene plan (which stages this window needs, and why) appears when a run starts.")
         self.plan.setFont(QtGui.QFontDatabase.systemFont(QtGui.QFontDatabase.SystemFont.FixedFont))
         self.plan.setMaximumHeight(110)
+        self.plan.setMinimumHeight(44)  # two lines and a scroll bar on a 768-pixel-high screen
         self.preview = ImagePane("x̂₀ (clean estimate)", min_size=120)
         self.psnr_plot = pg.PlotWidget()
         self.psnr_plot.setObjectName("psnr_plot")
@@ -164,6 +173,13 @@ class GuidedPanel(QtWidgets.QWidget):
         elif name == "prior":
             self.model_path.setPlaceholderText("packaged FFDNet weights" if value == "ffdnet" else "folder with diffusers weights (required)")
 
+    def show_knobs(self, knobs: dict[str, str | None]) -> None:
+        """Enable each knob's control, or disable it with the plan's reason as its tooltip."""
+        for path, control in self.knob_controls.items():
+            why = knobs.get(path)
+            control.setEnabled(why is None)
+            control.setToolTip(SPECS[path.split(".")[1]].help if why is None else f"No effect on this window: {why}.")
+
     def _on_source(self) -> None:
         stream = self.session.stream
         sim = stream is not None and stream.is_simulated
@@ -201,6 +217,7 @@ class GuidedPanel(QtWidgets.QWidget):
         if u.kind == "plan":
             self._flush()
             self.plan.setPlainText(u.text)
+            self.show_knobs(u.knobs)
             self.progress.setRange(0, max(u.total, 1))
             self.progress.setValue(0)
             return

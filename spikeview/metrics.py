@@ -1,0 +1,115 @@
+"""Image-quality metrics: one PSNR, one SSIM and one ground-truth alignment for the app and the benchmark.
+
+Conventions (scikit-image's): every metric takes ``data_range`` explicitly (the distance between the
+smallest and largest value the images can take; frames in [0, 1] have ``data_range = 1``); images are
+``(H, W)`` or ``(H, W, C)`` float arrays, the reference second.
+
+* :func:`psnr`: ``10·log10(data_range² / MSE)``.
+* :func:`ssim`: Wang et al. (2004) exactly as ``skimage.metrics.structural_similarity`` with its
+  defaults (7×7 uniform window, K1 = 0.01, K2 = 0.03, sample covariances, a border of 3 pixels
+  excluded from the mean, channels averaged) — computed with torch, which releases the interpreter
+  lock, so the app's guided worker can score every step without stalling the window.
+* :func:`align_ground_truth`: the simulator's linear ground truth expressed in the reconstruction's
+  colour normalisation (one least-squares gain per channel).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from spikeview.errors import ParameterError
+
+#: SSIM window (scikit-image's default)
+WIN = 7
+
+
+def _check(x: np.ndarray, ref: np.ndarray, data_range: float) -> None:
+    if np.shape(x) != np.shape(ref):
+        raise ParameterError(f"image shape {np.shape(x)} differs from the reference {np.shape(ref)}.")
+    if not (math.isfinite(data_range) and data_range > 0):
+        raise ParameterError(f"data_range = {data_range!r}: pass the positive value range of the images, e.g. 1.0.")
+
+
+def psnr(x: np.ndarray, ref: np.ndarray, data_range: float) -> float:
+    """PSNR in dB of ``x`` against ``ref`` (``inf`` for identical images)."""
+    _check(x, ref, data_range)
+    d = np.asarray(x, dtype=np.float64) - np.asarray(ref, dtype=np.float64)
+    mse = float(np.mean(d * d))
+    return math.inf if mse == 0 else 10.0 * math.log10(data_range ** 2 / mse)
+
+
+def ssim(x: np.ndarray, ref: np.ndarray, data_range: float) -> float:
+    """Mean SSIM of ``x`` against ``ref`` (scikit-image's defaults; see the module docstring).
+
+    Frames smaller than 7×7 use the largest odd window that fits (NaN below 3×3).
+    """
+    import torch
+    import torch.nn.functional as F
+
+    _check(x, ref, data_range)
+    a = torch.from_numpy(np.asarray(x, dtype=np.float64))
+    b = torch.from_numpy(np.asarray(ref, dtype=np.float64))
+    if a.ndim == 2:
+        a, b = a[..., None], b[..., None]
+    a = a.permute(2, 0, 1)[:, None]  # (C, 1, H, W): channels as a batch
+    b = b.permute(2, 0, 1)[:, None]
+    win = min(WIN, min(a.shape[-2:]) - (1 - min(a.shape[-2:]) % 2))
+    if win < 3:
+        return float("nan")
+    k = torch.full((1, 1, win, win), 1.0 / (win * win), dtype=torch.float64)
+    n = win * win
+    cov_norm = n / (n - 1.0)
+
+    def filt(v: torch.Tensor) -> torch.Tensor:
+        return F.conv2d(v, k)  # 'valid': exactly the pixels skimage keeps after cropping the border
+
+    ux, uy = filt(a), filt(b)
+    vx = cov_norm * (filt(a * a) - ux * ux)
+    vy = cov_norm * (filt(b * b) - uy * uy)
+    vxy = cov_norm * (filt(a * b) - ux * uy)
+    c1, c2 = (0.01 * data_range) ** 2, (0.03 * data_range) ** 2
+    s = ((2 * ux * uy + c1) * (2 * vxy + c2)) / ((ux * ux + uy * uy + c1) * (vx + vy + c2))
+    return float(s.mean(dim=(1, 2, 3)).mean())
+
+
+def psnr_ssim(x: np.ndarray, ref: np.ndarray, data_range: float = 1.0) -> tuple[float, float]:
+    """``(psnr, ssim)`` of ``x`` against ``ref``; PSNR capped at 100 dB for identical images (plots)."""
+    p = psnr(x, ref, data_range)
+    return (100.0 if math.isinf(p) else p), ssim(x, ref, data_range)
+
+
+def align_ground_truth(gt: np.ndarray, y: np.ndarray, cfa: str | None, alpha: np.ndarray | None,
+                       eta: float) -> np.ndarray:
+    """Express the simulator's linear ground truth in the reconstruction's colour normalisation.
+
+    Reconstructions are gray-world corrected (``Y·α/η``), so their per-channel scale differs from
+    the scene's linear RGB by the unknown sensor gain. Each channel of ``gt`` is scaled by the
+    least-squares gain that maps it onto the corrected observation ``y·α_c/η`` at that channel's
+    photosites (one gain per channel, the same for every method and step of a run), then clipped
+    to [0, 1]. Without this, PSNR measures the colour normalisation rather than the reconstruction.
+
+    Args:
+        gt: ``(H, W, 3)`` or ``(H, W)`` float linear ground truth.
+        y: ``(H, W)`` mosaicked TFP of the same window.
+        cfa, alpha, eta: the observation's CFA, gains and range parameter.
+    """
+    from spikeview.cfa import channel_map
+
+    gt = np.asarray(gt, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    if gt.ndim == 2 or cfa is None:
+        g = gt if gt.ndim == 2 else gt.mean(axis=-1)
+        gain = float((y * g).sum() / max((g * g).sum(), 1e-12))
+        return np.clip(gt * gain, 0, 1).astype(np.float32)
+    out = np.empty_like(gt)
+    cmap = channel_map(cfa, *y.shape)
+    scale = np.ones(3) if alpha is None else np.asarray(alpha, dtype=np.float64) / eta
+    for c in range(3):
+        m = cmap == c
+        obs_c = y[m] * scale[c]
+        g_c = gt[..., c][m]
+        gain = float((obs_c * g_c).sum() / max((g_c * g_c).sum(), 1e-12))
+        out[..., c] = gt[..., c] * gain
+    return np.clip(out, 0, 1).astype(np.float32)
