@@ -149,7 +149,7 @@ def test_trailing_partial_frame_is_reported(tmp_path):
     src = PlainDatSource(path, 16, 8)
     assert src.n_frames == 3
     assert len(src.info.warnings) == 1
-    assert "5 bytes" in src.info.warnings[0] and "p.dat" in src.info.warnings[0]
+    assert "last 5 bytes" in src.info.warnings[0] and "p.dat" not in src.info.warnings[0]  # shown beside the name
 
 
 def test_errors_name_the_file(tmp_path):

@@ -45,6 +45,7 @@ def run_info(args: argparse.Namespace) -> int:
 
     from spikeview.cli.main import _open_from_args
 
+    args._shows_warnings = True
     with _open_from_args(args) as src:
         print(describe(src, sample_windows=args.sample_windows))
     return 0

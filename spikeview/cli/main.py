@@ -49,7 +49,11 @@ def _open_from_args(args: argparse.Namespace):
                   tick_rate=args.tick_rate, layout=args.layout, tag_check=args.tag_check)
     if args.cfa is not None:
         kwargs["cfa"] = args.cfa
-    return open_source(args.input, **kwargs)
+    src = open_source(args.input, **kwargs)
+    if not getattr(args, "_shows_warnings", False):  # `info` lists them itself
+        for note in src.info.warnings:  # a truncated file, a doubtful width or CFA: said before the work
+            print(f"spikeview: warning: {src.info.path.name if src.info.path else args.input}: {note}", file=sys.stderr)
+    return src
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -174,7 +174,7 @@ class NpySource(SpikeSource):
             raise InputFileError(f"{path}: the spike array of shape {arr.shape} is empty; nothing to read.")
         self.info = StreamInfo(width=int(w), height=int(h), n_frames=int(t), tick_rate=tick_rate, cfa=cfa,
                                format="npz", flip_vertical=bool(flip_vertical), flip_horizontal=bool(flip_horizontal),
-                               path=path, warnings=[f"{path.name}: {note}"] if note else [],
+                               path=path, warnings=[note] if note else [],
                                extra={"npz_key": key} if key else {})
         # check a first stretch now, so that a clearly wrong file fails on open
         n_check = max(1, min(t, _OPEN_CHECK_ELEMENTS // max(1, h * w)))

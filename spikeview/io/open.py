@@ -144,6 +144,12 @@ def open_source(path: str | os.PathLike[str], *, format: str | None = None, widt
                         flip_horizontal=fh, key=key)
 
     src.info.warnings.extend(n for n in notes if n)
+    from_user = width is not None or height is not None or cfa is not UNSET or flip_vertical is not None
+    if fmt in ("plain", "raw400") and (st is None or from_user) and src.n_frames > 0:
+        # settings that did not come from a sidecar written with the file: say when the rates disagree
+        from spikeview.io.geometry import rate_warnings
+
+        src.info.warnings.extend(rate_warnings(src, check_width=fmt == "plain"))
     if side is not None:
         src.info.extra.update(side.tables)
         src.info.extra.setdefault("sidecar", str(side.path))
@@ -188,26 +194,40 @@ def _detect(path: Path, *, width: int | None, height: int | None,
     if only is None and width in (None, raw.RAW1M_WIDTH) and height in (None, raw.RAW1M_HEIGHT) \
             and raw.looks_like_raw1m(buf):
         return "raw1m", raw.RAW1M_WIDTH, raw.RAW1M_HEIGHT, (
-            f"{path.name}: detected a raw 1000x1000 stream from its block tags; pass --format to be explicit.")
+            "detected a raw 1000x1000 stream from its block tags; pass --format to be explicit.")
     del buf
     if only is None and width is not None and height is not None:
         if (width, height) == (raw.RAW400_WIDTH, raw.RAW400_HEIGHT) and size % raw.RAW400_FRAME_BYTES == 0 \
                 and size % (width * height // 8) != 0:
-            return "raw400", width, height, (f"{path.name}: read as a raw 400x250 stream (its size is whole "
-                                             f"416-bit-row frames); pass --format to be explicit.")
+            return "raw400", width, height, ("read as a raw 400x250 stream (its size is whole "
+                                             "416-bit-row frames); pass --format to be explicit.")
         return "plain", width, height, ""
     cands = [c for c in _size_candidates(size) if only is None or c[0] == only]
     if width is not None or height is not None:
         cands = [c for c in cands if (width is None or c[1] == width) and (height is None or c[2] == height)]
     if len(cands) == 1:
         fmt, w, h = cands[0]
+        if fmt == "plain" and width is None and height is None:
+            _check_known_size_against_rates(path, w, h, size)
         what = "a raw 400x250 stream" if fmt == "raw400" else f"a plain {w}x{h} file"
-        return fmt, w, h, (f"{path.name}: no sidecar, read as {what} because its size ({size} bytes) is a whole number "
+        return fmt, w, h, (f"no sidecar, read as {what} because its size ({size} bytes) is a whole number "
                            f"of such frames; pass --format, --width and --height to be explicit.")
     if len(cands) > 1:
         listed = "; ".join(f"--format {f} --width {w} --height {h}" for f, w, h in cands)
         geoms = list(dict.fromkeys((w, h) for _, w, h in cands))
-        raise GeometryError(f"{path}: its size ({size} bytes) fits several known formats or sizes, so pass one of: {listed}.", geoms)
+        hint = ""
+        if width is None and height is None and any(f == "plain" for f, _, _ in cands):
+            from spikeview.io.geometry import rank_plain_geometries
+
+            guesses = rank_plain_geometries(path)
+            if guesses and guesses[0].size not in geoms and guesses[0].temporal > 0:
+                # the spikes point elsewhere: offer that first
+                best = guesses[0]
+                hint = (f", or the size its spikes suggest, --width {best.width} --height {best.height} "
+                        f"({best.n_frames} ticks), which is the most likely")
+                geoms = [guesses[0].size, *geoms]
+        raise GeometryError(f"{path}: its size ({size} bytes) fits several known formats or sizes, so pass one of: "
+                            f"{listed}{hint}.", geoms)
     raise _unknown_plain_geometry(path, width, height, size)
 
 
@@ -249,12 +269,40 @@ def plain_geometry_candidates(size: int, limit: int = 8) -> list[tuple[int, int]
     return (out + rest)[:limit]
 
 
+def _ranked_hint(guesses: list) -> str:
+    if not guesses:
+        return ""
+    best, rest = guesses[0], guesses[1:]
+    hint = f"; most likely --width {best.width} --height {best.height} ({best.n_frames} ticks)"
+    if rest:
+        hint += f", then {', '.join(f'{g.width}x{g.height}' for g in rest)}"
+    return hint
+
+
 def _unknown_plain_geometry(path: Path, width: int | None, height: int | None, size: int | None = None) -> GeometryError:
+    from spikeview.io.geometry import rank_plain_geometries
+
     if size is None:
         size = path.stat().st_size
-    cands = plain_geometry_candidates(size)
-    if width is not None or height is not None:
-        cands = [(w, h) for (w, h) in cands if (width is None or w == width) and (height is None or h == height)]
-    hint = f"; sizes that fit exactly: {', '.join(f'{w}x{h}' for w, h in cands)}" if cands else ""
+    guesses = [g for g in rank_plain_geometries(path, limit=None)
+               if (width is None or g.width == width) and (height is None or g.height == height)][:8]
+    cands = [g.size for g in guesses]
     return GeometryError(f"{path}: a plain .dat file has no header and its size ({size} bytes) is not whole frames of "
-                         f"a known sensor, so pass --width and --height (and --format if it is not plain){hint}.", cands)
+                         f"a known sensor, so pass --width and --height (and --format if it is not plain)"
+                         f"{_ranked_hint(guesses)}.", cands)
+
+
+def _check_known_size_against_rates(path: Path, w: int, h: int, size: int) -> None:
+    """Raise :class:`GeometryError` when a file's size fits a known sensor but its spikes clearly do not."""
+    from spikeview.io.geometry import rank_plain_geometries
+
+    guesses = rank_plain_geometries(path, limit=None)
+    if not guesses or guesses[0].size == (w, h):
+        return
+    known = next((g for g in guesses if g.size == (w, h)), None)
+    top = guesses[0]
+    if known is None or (top.spatial > 0.3 and known.spatial < 0.5 * top.spatial) \
+            or known.temporal < 0.5 <= top.temporal:
+        raise GeometryError(f"{path}: its size fits {w}x{h} frames of a known sensor but its spikes do not look like "
+                            f"them, so pass --width and --height{_ranked_hint(guesses[:8])}.",
+                            [g.size for g in guesses[:8]])

@@ -73,7 +73,7 @@ class PlainDatSource(PackedFileSource):
         warnings = []
         if rem:
             warnings.append(
-                f"{path.name}: the last {rem} bytes do not fill a whole {width}x{height} frame ({fb} bytes) and are "
+                f"the last {rem} bytes do not fill a whole {width}x{height} frame ({fb} bytes) and are "
                 f"not read; if the file should have no partial frame, check --width and --height.")
         self.info = StreamInfo(width=width, height=height, n_frames=n, tick_rate=tick_rate, cfa=cfa, format="plain",
                                flip_vertical=bool(flip_vertical), flip_horizontal=bool(flip_horizontal), path=path,

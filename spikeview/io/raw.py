@@ -115,7 +115,7 @@ class Raw400Source(PackedFileSource):
         self._segments = np.array([[0, 0, RAW400_WIDTH]], dtype=np.int64)
         warnings = []
         if rem:
-            warnings.append(f"{path.name}: the last {rem} bytes do not fill a whole raw 400x250 frame "
+            warnings.append(f"the last {rem} bytes do not fill a whole raw 400x250 frame "
                             f"({RAW400_FRAME_BYTES} bytes) and are not read.")
         self.info = StreamInfo(width=RAW400_WIDTH, height=RAW400_HEIGHT, n_frames=n, tick_rate=tick_rate, cfa=cfa,
                                format="raw400", flip_vertical=bool(flip_vertical),
@@ -333,14 +333,18 @@ class SyncStats:
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
 
-    def warnings(self, name: str) -> list[str]:
-        """One sentence per kind of skipped data (empty when nothing was skipped)."""
+    def warnings(self, name: str = "") -> list[str]:
+        """One sentence per kind of skipped data (empty when nothing was skipped).
+
+        ``name`` (a file name) starts each sentence when given; a stream's ``info.warnings`` leave
+        it out, since whatever shows them names the file already.
+        """
         out = []
         if self.leading_bytes:
-            out.append(f"{name}: skipped {self.leading_bytes} bytes before the first complete frame "
+            out.append(f"{name + ': ' if name else ''}skipped {self.leading_bytes} bytes before the first complete frame "
                        f"(the capture starts mid-frame).")
         if self.skipped_bytes:
-            out.append(f"{name}: lost synchronisation {self.resyncs} time(s) and skipped {self.skipped_bytes} corrupt "
+            out.append(f"{name + ': ' if name else ''}lost synchronisation {self.resyncs} time(s) and skipped {self.skipped_bytes} corrupt "
                        f"bytes (about {self.skipped_frames} frame(s)), so ticks after a gap are not evenly spaced in time.")
         if self.trailing_bytes:
             out.append(f"{name}: the last {self.trailing_bytes} bytes do not form a complete frame and are not read.")
@@ -429,7 +433,7 @@ class Raw1MSource(PackedFileSource):
                                                               RAW1M_HALF_PIXELS]], dtype=np.int64)
         self.info = StreamInfo(width=RAW1M_WIDTH, height=RAW1M_HEIGHT, n_frames=int(offsets.size), tick_rate=tick_rate,
                                cfa=cfa, format="raw1m", flip_vertical=bool(flip_vertical),
-                               flip_horizontal=bool(flip_horizontal), path=path, warnings=stats.warnings(path.name),
+                               flip_horizontal=bool(flip_horizontal), path=path, warnings=stats.warnings(),
                                extra={"sync": stats.as_dict()})
 
     @property

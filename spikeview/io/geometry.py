@@ -1,0 +1,400 @@
+"""Guessing the geometry of a plain ``.dat`` file that has no sidecar, and checking a given one.
+
+A plain file has no header: only its size is known, and many ``width × height`` pairs divide it.
+The file's own bits say which one is right, from two facts about real captures:
+
+1. **The scene changes slowly from tick to tick.** A pixel fires at about the same rate in
+   consecutive frames, so the spike counts of byte ``j`` and byte ``j + frame_bytes`` are
+   correlated; at a lag that is not a whole number of frames they are not (or much less). The
+   frame size is the *smallest* lag whose correlation is close to the best one (2, 3 … frames
+   correlate as well as 1, which is the "many ticks rather than one" rule).
+2. **Images are smooth in space.** With the right width, the firing-rate image (spikes summed
+   over a few hundred ticks) is correlated between a row and the rows below it; a wrong width
+   shears the rows and breaks that. The mean correlation over 1–4 rows down is the score: it also
+   separates ``w`` from ``2w`` (rows 2–8 apart correlate less than rows 1–4) and from ``w/2``
+   (half a row apart correlates little), and lags of 2 and 4 rows compare sites of the same
+   Bayer colour, so a colour filter does not confuse it.
+
+Ties (no signal: a black or uniform capture) fall back on known sensor sizes (1000×1000,
+400×250), then square and common aspect ratios, then more ticks. Only a sample of the file is
+read (about 16 MB whatever its size), so ranking a multi-GB file takes a fraction of a second.
+
+:func:`rate_warnings` uses the same measures on an opened stream to say when the rates suggest a
+wrong width, colour filter phase or flip.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+#: plain-file geometries of known sensors, as (width, height)
+KNOWN_SIZES: tuple[tuple[int, int], ...] = ((1000, 1000), (400, 250))
+#: common aspect ratios (w, h) preferred on ties
+COMMON_ASPECTS: tuple[tuple[int, int], ...] = ((1, 1), (4, 3), (3, 2), (16, 9), (8, 5), (5, 4), (2, 1))
+#: widest aspect ratio considered (either way); known sizes are always considered
+MAX_ASPECT = 4.0
+#: smallest side considered (pixels)
+MIN_SIDE = 8
+#: bytes of the file read to measure the spatial score
+SAMPLE_BYTES = 8 << 20
+#: bytes folded at every candidate frame size to find the frame size
+BLOCK_BYTES = 2 << 20
+#: a frame size whose signal reaches this fraction of the best is consistent with the file
+TEMPORAL_TOLERANCE = 0.9
+
+_POPCOUNT = np.array([bin(i).count("1") for i in range(256)], dtype=np.float32)
+
+
+@dataclass
+class GeometryGuess:
+    """One candidate geometry of a plain file, with its plausibility.
+
+    Attributes:
+        width, height: frame size in pixels.
+        n_frames: whole frames the file holds at this size.
+        temporal: tick-to-tick correlation at this frame size, relative to the best frame size
+            (1 = as good as the best; 0 when there is a single frame).
+        spatial: mean correlation of the rate image with itself 1–4 rows down (−1 … 1).
+        known: a known sensor size.
+        reasons: short phrases for people ("known sensor size", "rows line up" …).
+    """
+
+    width: int
+    height: int
+    n_frames: int
+    temporal: float = 0.0
+    spatial: float = 0.0
+    known: bool = False
+    reasons: list[str] = field(default_factory=list)
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return (self.width, self.height)
+
+    def describe(self) -> str:
+        return f"{self.width}x{self.height} ({self.n_frames} ticks)"
+
+
+def _factorise(n: int) -> dict[int, int]:
+    out: dict[int, int] = {}
+    d = 2
+    while d * d <= n:
+        while n % d == 0:
+            out[d] = out.get(d, 0) + 1
+            n //= d
+        d += 1 if d == 2 else 2
+    if n > 1:
+        out[n] = out.get(n, 0) + 1
+    return out
+
+
+def _divisors(n: int) -> list[int]:
+    divs = [1]
+    for p, e in _factorise(n).items():
+        divs = [d * p**k for d in divs for k in range(e + 1)]
+    return sorted(divs)
+
+
+def candidate_sizes(size: int) -> list[tuple[int, int]]:
+    """Every ``(width, height)`` whose plain frames divide ``size`` bytes exactly.
+
+    Both sides at least :data:`MIN_SIDE` and an aspect ratio within :data:`MAX_ASPECT` (known
+    sensor sizes always included when they fit). Not ranked.
+    """
+    out: set[tuple[int, int]] = {(w, h) for (w, h) in KNOWN_SIZES if size > 0 and size % (w * h // 8) == 0}
+    if size <= 0:
+        return sorted(out)
+    widths = _divisors(8 * size)  # every width is a divisor of 8·frame_bytes, hence of 8·size
+    for fb in _divisors(size):
+        pixels = 8 * fb
+        if pixels < MIN_SIDE * MIN_SIDE:
+            continue
+        lo = max(MIN_SIDE, math.ceil(math.sqrt(pixels / MAX_ASPECT)))
+        hi = math.isqrt(int(pixels * MAX_ASPECT))
+        for w in widths[bisect.bisect_left(widths, lo):bisect.bisect_right(widths, hi)]:
+            if pixels % w == 0 and pixels // w >= MIN_SIDE:
+                out.add((w, pixels // w))
+    return sorted(out)
+
+
+def _prior(w: int, h: int) -> float:
+    """Small tie-breaking bonus: known sensor sizes, then square and common aspect ratios."""
+    if (w, h) in KNOWN_SIZES:
+        return 0.1
+    if w == h:
+        return 0.04
+    g = math.gcd(w, h)
+    if (w // g, h // g) in COMMON_ASPECTS or (h // g, w // g) in COMMON_ASPECTS:
+        return 0.03 if w >= h else 0.02
+    return 0.0
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    a = a - a.mean()
+    b = b - b.mean()
+    den = math.sqrt(float(np.dot(a, a)) * float(np.dot(b, b)))
+    return float(np.dot(a, b)) / den if den > 0 else 0.0
+
+
+def read_block(buf: np.ndarray, n_bytes: int = BLOCK_BYTES) -> np.ndarray:
+    """Spike counts per byte (0 … 8, float32) of a contiguous block from the middle of ``buf``."""
+    n = min(int(n_bytes), buf.size)
+    start = (buf.size - n) // 2
+    return _POPCOUNT[buf[start:start + n]]
+
+
+def frame_signal(block: np.ndarray, frame_bytes: int, buf: np.ndarray | None = None) -> float:
+    """How much of the scene survives folding the stream at ``frame_bytes`` (spikes² per byte).
+
+    The block of per-byte spike counts is cut into frames of ``frame_bytes`` and averaged over
+    them. At the true frame size (or a multiple) every byte position is one set of pixels, so the
+    average keeps the scene's full spatial variance; at any other size a position mixes different
+    parts of the scene and most of that variance averages away. The estimate is unbiased: the
+    variance the tick-to-tick noise adds to the average is subtracted.
+
+    Frames larger than a quarter of the block are taken from ``buf`` instead (a few spread over
+    the file), when given.
+    """
+    m = block.size // frame_bytes
+    if m >= 4:
+        frames = block[:m * frame_bytes].reshape(m, frame_bytes)
+    elif buf is not None and buf.size // frame_bytes >= 4:
+        # large frames: the first bytes of a few frames spread over the file (positions are a sample)
+        n = buf.size // frame_bytes
+        m = min(n, 8)
+        part = min(frame_bytes, BLOCK_BYTES // 16)
+        idx = np.linspace(0, n - 1, m).astype(np.int64)
+        frames = np.stack([_POPCOUNT[buf[i * frame_bytes:i * frame_bytes + part]] for i in idx])
+    else:
+        return 0.0
+    mean = frames.mean(axis=0)
+    within = float(frames.var(axis=0, ddof=1).mean()) / m
+    return max(0.0, float(mean.var()) - within)
+
+
+def rate_vector(buf: np.ndarray, frame_bytes: int, budget: int = SAMPLE_BYTES, runs: int = 4) -> np.ndarray:
+    """Mean spikes per tick of every stored pixel (``8·frame_bytes``, storage order) from a sample.
+
+    Reads at most ``budget`` bytes: ``runs`` runs of consecutive frames spread over the file.
+    """
+    n = buf.size // frame_bytes
+    per_run = max(1, min(n // runs if n >= runs else n, budget // (runs * frame_bytes)))
+    starts = np.unique(np.linspace(0, n - per_run, min(runs, n)).astype(np.int64))
+    total = np.zeros(8 * frame_bytes, dtype=np.float64)
+    chunk = max(1, (1 << 20) // frame_bytes)  # unpack about 1 MB at a time
+    count = 0
+    for s in starts:
+        for a in range(int(s), int(s) + per_run, chunk):
+            b = min(int(s) + per_run, a + chunk)
+            packed = buf[a * frame_bytes:b * frame_bytes].reshape(b - a, frame_bytes)
+            total += np.unpackbits(packed, axis=1, bitorder="little").sum(axis=0, dtype=np.uint32)
+            count += b - a
+    return total / max(1, count)
+
+
+def pair_sums(rates: np.ndarray) -> np.ndarray:
+    """``rates[p] + rates[p + 1]`` (the last value repeated): hides a Bayer filter's column pattern.
+
+    A colour filter alternates gains from pixel to pixel; summing horizontal neighbours gives
+    R+G on one row and G+B on the next, nearly the same gain, so the vertical correlations that
+    rank widths measure the scene, not the filter. It needs no width, so every candidate is
+    scored on the same values.
+    """
+    out = np.empty_like(rates)
+    out[:-1] = rates[:-1] + rates[1:]
+    out[-1] = 2 * rates[-1]
+    return out
+
+
+#: pixel pairs compared per lag (a fixed random subset: enough for three decimals, cheap at 1000×1000)
+_PAIRS = 1 << 17
+
+
+class _Lags:
+    """Correlation of a flat rate vector with itself at any lag, on a fixed random subset of pixels."""
+
+    def __init__(self, flat: np.ndarray):
+        c = np.asarray(flat, dtype=np.float64).ravel()
+        self.c = (c - c.mean()).astype(np.float32)
+        self.n = c.size
+        self.var = float(np.mean(self.c.astype(np.float64) ** 2))
+        rng = np.random.default_rng(self.n)
+        self.pos = np.sort(rng.integers(0, self.n, _PAIRS)) if self.n > 2 * _PAIRS else np.arange(self.n)
+        self.cache: dict[int, float] = {}
+
+    def __call__(self, lag: int) -> float:
+        if lag < 1 or lag >= self.n - 1 or self.var <= 0:
+            return 0.0
+        if lag not in self.cache:
+            pos = self.pos[: np.searchsorted(self.pos, self.n - lag)]
+            a, b = self.c[pos], self.c[pos + lag]
+            self.cache[lag] = float(np.dot(a, b)) / (len(pos) * self.var) if len(pos) else 0.0
+        return self.cache[lag]
+
+
+def spatial_score(image: np.ndarray, max_lag: int = 4, lags: _Lags | None = None) -> float:
+    """How well the rows of a rate image line up: a score in about −1 … 1, higher is better.
+
+    The mean correlation of the image with itself 1 … ``max_lag`` rows down, less the larger
+    correlation at a shift of a half or a third of a row. At the right width rows are a peak:
+    the row below matches better than a part of a row further along. At twice the right width
+    each row holds two real rows side by side, so half a row along matches as well as the row
+    below and the score drops to about 0. ``lags`` reuses the correlations of one flat vector
+    across the widths tried.
+    """
+    h, w = image.shape
+    corr = lags if lags is not None else _Lags(image)
+    steps = [k * w for k in range(1, max_lag + 1) if k < h]
+    if not steps:
+        return 0.0
+    rows = float(np.mean([corr(lag) for lag in steps]))
+    part = max(corr(round(w / k)) for k in (2, 3)) if w >= 6 else 0.0
+    return rows - max(0.0, part)
+
+
+def rank_plain_geometries(path: str | os.PathLike[str], *, limit: int | None = 8) -> list[GeometryGuess]:
+    """Candidate geometries of a plain ``.dat`` file, most plausible first (see the module docstring).
+
+    Args:
+        path: the file (only a sample of it is read).
+        limit: at most this many guesses (``None``: all).
+
+    Returns:
+        :class:`GeometryGuess` list; empty when no frame size divides the file.
+
+    Raises:
+        InputFileError: missing, empty or unreadable file.
+    """
+    from spikeview.io._base import open_bytes
+
+    _, buf = open_bytes(Path(path), "plain .dat")
+    return rank_geometries(buf, limit=limit)
+
+
+def rank_geometries(buf: np.ndarray, *, limit: int | None = 8) -> list[GeometryGuess]:
+    """:func:`rank_plain_geometries` on the bytes of a file (a 1-D uint8 array or memory map)."""
+    size = int(buf.size)
+    sizes = candidate_sizes(size)
+    if not sizes:
+        return []
+    by_fb: dict[int, list[tuple[int, int]]] = {}
+    for w, h in sizes:
+        by_fb.setdefault(w * h // 8, []).append((w, h))
+    # 1. frame size: the smallest that keeps the scene when the stream is folded at it
+    block = read_block(buf)
+    t_raw = {fb: (frame_signal(block, fb, buf) if size // fb >= 4 else 0.0) for fb in by_fb}
+    best_t = max(t_raw.values())
+    # a scene holds a good part of the per-byte variance; noise alone leaves a few hundredths by chance
+    signal = best_t > 0.05 * max(float(block.var()), 1e-12)
+    t_rel = {fb: (v / best_t if signal else 0.0) for fb, v in t_raw.items()}
+    consistent = sorted(fb for fb, v in t_rel.items() if v >= TEMPORAL_TOLERANCE) if signal else []
+    frame_order = consistent + sorted((fb for fb in by_fb if fb not in consistent), key=lambda fb: (-t_rel[fb], fb))
+
+    # 2. width from the spatial smoothness, for the most plausible frame sizes
+    guesses: list[GeometryGuess] = []
+    for rank, fb in enumerate(frame_order):
+        group = []
+        measure = rank < 3 and (signal or rank == 0)
+        rates = pair_sums(rate_vector(buf, fb, SAMPLE_BYTES if rank == 0 else SAMPLE_BYTES // 8)) if measure else None
+        lags = _Lags(rates) if rates is not None else None
+        for w, h in by_fb[fb]:
+            g = GeometryGuess(w, h, size // fb, temporal=round(t_rel[fb], 4), known=(w, h) in KNOWN_SIZES)
+            if rates is not None:
+                g.spatial = round(spatial_score(rates.reshape(h, w), lags=lags), 4)
+            group.append(g)
+        group.sort(key=lambda g: (-(g.spatial + _prior(g.width, g.height)), -g.width))
+        guesses += group
+    if not signal:  # nothing to measure (a black, uniform or random file): known sizes, common shapes, more ticks
+        guesses.sort(key=lambda g: (-_prior(g.width, g.height), -g.n_frames, -g.width))
+    for i, g in enumerate(guesses):
+        if g.known:
+            g.reasons.append("known sensor size")
+        if signal and g.temporal >= TEMPORAL_TOLERANCE:
+            g.reasons.append("pixels match from tick to tick")
+        if g.spatial > 0.3:
+            g.reasons.append("rows line up")
+        if g.n_frames == 1:
+            g.reasons.append("a single tick")
+    return guesses[:limit] if limit else guesses
+
+
+# ------------------------------------------------------------------------- checking a stream
+def _mean_rates(src, max_ticks: int = 512, windows: int = 8) -> np.ndarray:
+    n = src.n_frames
+    win = max(1, min(n, max_ticks // windows))
+    k = max(1, min(windows, n // win))
+    starts = np.linspace(0, n - win, k).round().astype(int)
+    total = np.zeros((src.height, src.width), dtype=np.float64)
+    for a in starts:
+        total += src.count(int(a), int(a) + win)
+    return total / (k * win)
+
+
+def _imbalance(a: float, b: float) -> float:
+    m = (a + b) / 2
+    return abs(a - b) / m if m > 0 else 0.0
+
+
+def rate_warnings(src, *, check_width: bool = True) -> list[str]:
+    """Sentences for people when the firing rates suggest a wrong width, colour filter or flip.
+
+    Looks at the mean rate image of a few hundred ticks: rows that do not line up (another width
+    with the same frame size lines them up much better), an odd width with a colour filter, and
+    green sites of the filter that fire at clearly different rates while the other diagonal fires
+    alike (the filter phase, or the vertical flip that changes it, is wrong).
+
+    Args:
+        src: an open :class:`~spikeview.io.source.SpikeSource`.
+        check_width: also try the other widths of the same frame size (plain files).
+    """
+    from spikeview.cfa import cfa_to_str, parse_cfa
+
+    w, h = src.width, src.height
+    if src.n_frames < 1 or w < 2 or h < 2:
+        return []
+    rates = _mean_rates(src)
+    out: list[str] = []
+    if rates.max() <= 0:
+        return out
+    # back to storage order (undo the reader's flips), where another width is just another reshape
+    stored = rates[::-1] if src.info.flip_vertical else rates
+    stored = stored[:, ::-1] if src.info.flip_horizontal else stored
+    flat = pair_sums(np.ascontiguousarray(stored).ravel())
+    lags = _Lags(flat)
+    here = spatial_score(flat.reshape(h, w), lags=lags)
+    if check_width:
+        pixels = w * h
+        best = (here, w, h)
+        for w2 in range(max(MIN_SIDE, math.ceil(math.sqrt(pixels / MAX_ASPECT))), math.isqrt(int(pixels * MAX_ASPECT)) + 1):
+            if pixels % w2 or w2 == w:
+                continue
+            s = spatial_score(flat.reshape(pixels // w2, w2), lags=lags)
+            if s > best[0]:
+                best = (s, w2, pixels // w2)
+        if best[1] != w and best[0] > 0.3 and here < 0.5 * best[0]:
+            out.append(f"the rows do not line up at width {w} (the rates look sheared); the frames are probably "
+                       f"{best[1]}x{best[2]}: check --width and --height.")
+    cfa = parse_cfa(src.cfa) if src.cfa is not None else None
+    if cfa is not None and w % 2:
+        out.append(f"a colour filter ({cfa_to_str(cfa)}) with an odd width ({w}) shifts the Bayer pattern on every "
+                   "row, which no sensor does; check --width, or pass --cfa none for a monochrome capture.")
+    elif cfa is not None and not out:
+        he, we = h - h % 2, w - w % 2
+        site = {(py, px): float(rates[py:he:2, px:we:2].mean()) for py in (0, 1) for px in (0, 1)}
+        g_pos = [p for p, c in zip(((0, 0), (0, 1), (1, 0), (1, 1)), cfa) if c == "G"]
+        other = [p for p in site if p not in g_pos]
+        g_imb = _imbalance(site[g_pos[0]], site[g_pos[1]])
+        o_imb = _imbalance(site[other[0]], site[other[1]])
+        if g_imb > 0.1 and g_imb > 3 * o_imb:
+            names = ("GRBG or GBRG") if (0, 1) in g_pos else ("RGGB or BGGR")
+            out.append(f"the two green sites of the {cfa_to_str(cfa)} filter fire at different rates "
+                       f"({site[g_pos[0]]:.3f} and {site[g_pos[1]]:.3f} spikes per tick) while the other two fire "
+                       f"alike, so the filter phase is probably wrong: try --cfa {names.split(' or ')[0]} (or "
+                       f"{names.split(' or ')[1]}), or check --flip-vertical.")
+    return out

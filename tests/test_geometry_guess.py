@@ -1,0 +1,125 @@
+"""Guessing the geometry of plain files without a sidecar, and warnings when the given one looks wrong."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from spikeview.cli.main import main
+from spikeview.errors import GeometryError
+from spikeview.io import open_source, write_plain
+from spikeview.io.geometry import candidate_sizes, rank_plain_geometries
+
+BAYER_GAINS = {(0, 0): 0.6, (0, 1): 1.0, (1, 0): 1.0, (1, 1): 0.5}  # RGGB, the simulator's spectral gains
+
+
+def smooth_rates(w: int, h: int, seed: int, cfa: bool) -> np.ndarray:
+    """A smooth random scene (Gaussian blobs and a slanted wave) as spikes per tick in [0.05, 0.55]."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:h, 0:w] / max(w, h)
+    img = np.zeros((h, w))
+    for _ in range(6):
+        cx, cy, s = rng.uniform(0, 1), rng.uniform(0, 1), rng.uniform(0.05, 0.3)
+        img += rng.uniform(0.2, 1) * np.exp(-((xx - cx) ** 2 + (yy - cy) ** 2) / (2 * s * s))
+    img += 0.3 * np.sin(2 * np.pi * (xx * rng.uniform(1, 4) + yy * rng.uniform(1, 4)))
+    rate = 0.05 + 0.5 * (img - img.min()) / (img.max() - img.min())
+    if cfa:
+        for (py, px), g in BAYER_GAINS.items():
+            rate[py::2, px::2] *= g
+    return rate
+
+
+def write_capture(path, w: int, h: int, ticks: int, seed: int = 0, cfa: bool = True, sidecar: bool = False):
+    rate = smooth_rates(w, h, seed, cfa).astype(np.float32)
+    rng = np.random.default_rng(seed + 1)
+    spikes = np.concatenate([rng.random((min(8, ticks - a), h, w), dtype=np.float32) < rate
+                             for a in range(0, ticks, 8)])
+    return write_plain(path, spikes, cfa="RGGB" if cfa else None, sidecar=sidecar)
+
+
+SIZES = [(64, 64, 400), (128, 96, 200), (256, 256, 60), (250, 400, 40), (320, 240, 40), (400, 250, 40),
+         (160, 120, 100), (1000, 1000, 16)]
+
+
+@pytest.mark.parametrize("cfa", [True, False], ids=["RGGB", "mono"])
+@pytest.mark.parametrize("w, h, ticks", SIZES, ids=[f"{w}x{h}" for w, h, _ in SIZES])
+def test_the_true_geometry_ranks_first(tmp_path, w, h, ticks, cfa):
+    path = write_capture(tmp_path / "c.dat", w, h, ticks, seed=w + h, cfa=cfa)
+    size = path.stat().st_size
+    assert (w, h) in candidate_sizes(size)
+    guesses = rank_plain_geometries(path)
+    assert guesses[0].size == (w, h), [g.describe() for g in guesses]
+    assert guesses[0].n_frames == ticks
+    assert all(size % (g.width * g.height // 8) == 0 for g in guesses)
+
+
+def test_a_simulated_capture_ranks_first(tmp_path):
+    from spikeview.sim import SimConfig, demo_scene, simulate_to_file
+
+    files = simulate_to_file(demo_scene(size=96, seed=1), SimConfig(n_ticks=120, width=96, height=96, seed=1),
+                             tmp_path / "sim.dat")
+    files.sidecar.unlink()
+    assert rank_plain_geometries(files.dat)[0].size == (96, 96)
+
+
+def test_info_without_a_sidecar_names_the_likely_size_and_lists_it_first(tmp_path, capsys):
+    path = write_capture(tmp_path / "c.dat", 256, 256, 60)
+    assert main(["info", str(path)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "most likely --width 256 --height 256 (60 ticks)" in err and "\n" not in err, err
+    with pytest.raises(GeometryError) as e:
+        open_source(path)
+    assert e.value.candidates[0] == (256, 256)  # what the app's open dialog pre-fills
+
+
+def test_a_size_that_fits_a_known_sensor_is_not_taken_blindly(tmp_path):
+    path = write_capture(tmp_path / "c.dat", 500, 500, 8)  # 250,000 bytes: two 1000x1000 or 20 400x250 frames
+    with pytest.raises(GeometryError, match="several known.*its spikes suggest, --width 500 --height 500.*most likely"
+                       ) as e:
+        open_source(path)
+    assert e.value.candidates[0] == (500, 500)
+    path = write_capture(tmp_path / "d.dat", 250, 100, 12)  # 37,500 bytes: three 400x250 frames, no other sensor
+    with pytest.raises(GeometryError, match="do not look like them.*most likely --width 250 --height 100") as e:
+        open_source(path)
+    assert e.value.candidates[0] == (250, 100)
+
+
+def test_random_files_without_a_scene_prefer_square_shapes(tmp_path):
+    path = tmp_path / "r.dat"
+    path.write_bytes(np.random.default_rng(0).integers(0, 256, 64 * 64 // 8 * 3, dtype=np.uint8).tobytes())
+    sizes = [g.size for g in rank_plain_geometries(path)]
+    assert (64, 64) in sizes and sizes[0][0] == sizes[0][1]
+
+
+# ------------------------------------------------------------------------------ warnings
+def test_right_settings_give_no_warning(tmp_path):
+    path = write_capture(tmp_path / "c.dat", 128, 96, 200)
+    with open_source(path, width=128, height=96, cfa="RGGB") as src:
+        assert src.info.warnings == []
+
+
+def test_a_wrong_width_is_reported(tmp_path, capsys):
+    path = write_capture(tmp_path / "c.dat", 128, 96, 200)
+    with open_source(path, width=96, height=128, cfa="RGGB") as src:
+        assert any("rows do not line up at width 96" in w and "128x96" in w for w in src.info.warnings), src.info.warnings
+    assert main(["reconstruct", str(path), "--width", "192", "--height", "64", "--cfa", "RGGB", "--at", "100",
+                 "--out", str(tmp_path / "f.png")]) == 0
+    err = capsys.readouterr().err
+    assert "spikeview: warning: c.dat: the rows do not line up at width 192" in err and "128x96" in err
+
+
+def test_an_odd_width_with_a_colour_filter_is_reported(tmp_path):
+    path = write_capture(tmp_path / "c.dat", 120, 64, 16)  # 960 bytes per frame
+    with open_source(path, width=15 * 8, height=64, cfa="RGGB") as src:
+        assert not any("odd width" in w for w in src.info.warnings)
+    with open_source(path, width=15, height=512, cfa="RGGB") as src:  # 7680 pixels: whole bytes, odd width
+        assert any("odd width (15)" in w and "--cfa none" in w for w in src.info.warnings), src.info.warnings
+
+
+def test_a_wrong_colour_filter_phase_is_reported(tmp_path, capsys):
+    path = write_capture(tmp_path / "c.dat", 128, 96, 200)  # written as RGGB
+    with open_source(path, width=128, height=96, cfa="GRBG") as src:
+        assert any("green sites of the GRBG filter fire at different rates" in w and "--cfa RGGB" in w
+                   for w in src.info.warnings), src.info.warnings
+    assert main(["info", str(path), "--width", "128", "--height", "96", "--cfa", "GBRG"]) == 0
+    assert "warning:     the two green sites of the GBRG filter" in capsys.readouterr().out
