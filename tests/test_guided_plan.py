@@ -121,3 +121,34 @@ def test_haar_estimator_on_gaussian_noise():
     v = haar_noise_variance(rng.normal(0, 0.1, (128, 128)))
     assert v == pytest.approx(0.01, rel=0.1)
     assert haar_noise_variance(np.zeros((1, 5))) is None
+
+
+# ------------------------------------------------------------------------------------ demosaic
+def test_demosaic_auto_bilinear_where_noise_dominates_malvar_where_clean_or_denoised():
+    from spikeview.guided.plan import DEMOSAIC_CLEAN_SIGMA, choose_demosaic
+
+    assert choose_demosaic(2 * DEMOSAIC_CLEAN_SIGMA)[0] == "bilinear"
+    assert choose_demosaic(DEMOSAIC_CLEAN_SIGMA / 2)[0] == "malvar2004"
+    assert choose_demosaic(2 * DEMOSAIC_CLEAN_SIGMA, denoised=True)[0] == "malvar2004"
+    name, why = choose_demosaic(0.5, "menon2007")
+    assert name == "menon2007" and "set by demosaic" in why
+    # in the plan: a noisy 10-tick window that runs the sampler starts from Malvar, with the reason
+    plan = make_plan(_obs(), GuidedConfig(diffusion="always"))
+    assert plan.demosaic == "malvar2004" and "prior denoises" in plan.reasons["demosaic"]
+    assert "demosaic" in str(plan)
+    # without diffusion and with the TFP fallback, the same noisy window is demosaicked bilinearly
+    plan = make_plan(_obs(), GuidedConfig(diffusion="never", fallback="tfp"))
+    assert plan.demosaic == "bilinear" and "noise dominates" in plan.reasons["demosaic"]
+
+
+def test_classical_auto_demosaic_measures_the_noise_of_the_mosaic():
+    from spikeview.classical.reconstruct import auto_demosaic
+
+    rng = np.random.default_rng(2)
+    yy, xx = np.mgrid[0:32, 0:32]
+    smooth = 0.3 + 0.2 * np.sin(xx / 5.0) * np.cos(yy / 7.0)
+    assert auto_demosaic(smooth, "RGGB")[0] == "malvar2004"  # no noise at all: clean
+    noisy = rng.binomial(10, smooth) / 10.0  # a 10-tick TFP window: σ ≈ 0.15
+    name, why = auto_demosaic(noisy, "RGGB")
+    assert name == "bilinear" and "noise dominates" in why
+    assert auto_demosaic(noisy, "RGGB", "malvar2004")[0] == "malvar2004"

@@ -21,7 +21,7 @@ DEFAULT_ALPHA_WINDOWS = 64
 #: TFI search half-window in ticks
 DEFAULT_HALF_WINDOW = 32
 #: demosaicking methods (one file each in :mod:`spikeview.classical.demosaic`)
-DEMOSAICS = ("bilinear", "malvar2004", "menon2007")
+DEMOSAICS = ("auto", "bilinear", "malvar2004", "menon2007")
 
 #: valid values of :attr:`ClassicalConfig.method`
 CLASSICAL_METHODS = ("tfp", "tfi")
@@ -35,7 +35,10 @@ class ClassicalConfig(Config):
         method: ``"tfp"`` (spike count over a window) or ``"tfi"`` (inter-spike interval).
         window: TFP window Δτ in ticks (10 ticks = 0.5 ms at 20 kHz, the SpikeDiff observation).
         tfi_half_window: TFI search half-window in ticks (missing spikes cap the interval at twice it).
-        demosaic: one of ``"bilinear"``, ``"malvar2004"``, ``"menon2007"`` (Bayer streams only).
+        demosaic: ``"auto"`` (the plan's rule from the measured noise: bilinear where noise dominates,
+            Malvar-2004 where the window is clean or the prior denoises afterwards;
+            :func:`spikeview.guided.plan.choose_demosaic`), or one of ``"bilinear"``,
+            ``"malvar2004"``, ``"menon2007"`` (Bayer streams only).
         colour_cast: undo the sensor's colour cast with gray-world gains (Bayer streams only;
             monochrome frames are returned uncorrected).
         eta: range parameter η: after correction each channel's sequence mean is ``1/η``.
@@ -49,7 +52,7 @@ class ClassicalConfig(Config):
     method: str = "tfp"
     window: int = 10
     tfi_half_window: int = DEFAULT_HALF_WINDOW
-    demosaic: str = "malvar2004"
+    demosaic: str = "auto"
     colour_cast: bool = True
     eta: float = DEFAULT_ETA
     alpha: list[float] | None = None

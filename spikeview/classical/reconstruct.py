@@ -79,10 +79,29 @@ def _reconstruct(source: SpikeSource, center: int, config: ClassicalConfig, alph
     if source.cfa is not None:
         if alpha is not None:
             y = apply_colour_cast_mosaic(y, source.cfa, alpha, config.eta)
-        y = demosaic(y, source.cfa, config.demosaic)
+        y = demosaic(y, source.cfa, auto_demosaic(y, source.cfa, config.demosaic)[0])
     if config.clip:
         np.clip(y, 0.0, 1.0, out=y)
     return y
+
+
+def auto_demosaic(mosaic: np.ndarray, cfa: str, requested: str = "auto") -> tuple[str, str]:
+    """The demosaic of a TFP/TFI output (not denoised afterwards) and the reason.
+
+    ``requested`` other than ``"auto"`` is used as set. ``"auto"`` measures the noise of the
+    (colour-corrected) mosaic — the largest per-Bayer-plane σ of the trimmed finest diagonal Haar
+    detail (:func:`spikeview.guided.observation.haar_noise_variance`) — and picks bilinear where
+    noise dominates, Malvar-2004 where the window is clean
+    (:func:`spikeview.guided.plan.choose_demosaic`, the same rule as the guided plan's).
+    """
+    if requested != "auto":
+        return requested, f"set by demosaic={requested}"
+    from spikeview.guided.observation import haar_noise_variance
+    from spikeview.guided.plan import choose_demosaic
+
+    var = [haar_noise_variance(mosaic[i::2, j::2]) for i in (0, 1) for j in (0, 1)]
+    sigma = max((float(np.sqrt(v)) for v in var if v is not None), default=0.0)
+    return choose_demosaic(sigma, "auto", denoised=False)
 
 
 def reconstruct_frames(source: SpikeSource, centers: Iterable[int], config: ClassicalConfig | None = None,

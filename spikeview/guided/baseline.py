@@ -14,8 +14,13 @@ from spikeview.guided.observation import Observation
 from spikeview.guided.priors.base import DenoiserPrior
 
 
-def start_estimate(obs: Observation, use_mosaic: bool = True, use_cast: bool = True, demosaic: str = "bilinear") -> np.ndarray:
+def start_estimate(obs: Observation, use_mosaic: bool = True, use_cast: bool = True, demosaic: str = "bilinear",
+                   *, denoised: bool = True) -> np.ndarray:
     """Y₀: the demosaicked, colour-corrected TFP estimate, clipped to [0, 1].
+
+    ``demosaic="auto"`` asks the plan's rule (:func:`spikeview.guided.plan.choose_demosaic`) with
+    the window's data-derived noise; ``denoised`` says whether the prior cleans the estimate
+    afterwards (the sampler's start, the one-pass input) or it is an output itself.
 
     Returns:
         ``(H, W, 3)`` float32 for a Bayer stream with ``use_mosaic``, else ``(H, W)``.
@@ -24,6 +29,11 @@ def start_estimate(obs: Observation, use_mosaic: bool = True, use_cast: bool = T
     if obs.cfa is None or not use_mosaic:
         return np.clip(y, 0.0, 1.0).astype(np.float32)
     from spikeview.classical.demosaic import demosaic as _demosaic
+
+    if demosaic == "auto":
+        from spikeview.guided.plan import choose_demosaic, estimate_sigma
+
+        demosaic = choose_demosaic(float(estimate_sigma(obs, True, use_cast).max()), "auto", denoised=denoised)[0]
 
     rgb = _demosaic(y, obs.cfa, demosaic)
     if use_cast and obs.alpha is not None:

@@ -34,7 +34,7 @@ PRIORS = ("ffdnet", "sd")
 GUIDANCES = ("dps", "hqs")
 DIFFUSION_MODES = ("auto", "always", "never")
 FALLBACKS = ("baseline", "tfp")
-DEMOSAICS = ("bilinear", "malvar2004", "menon2007")
+DEMOSAICS = ("auto", "bilinear", "malvar2004", "menon2007")
 
 #: the FFDNet prior was trained for noise levels up to about 75/255 (METHOD.md)
 SIGMA_MAX = 75.0 / 255.0
@@ -96,7 +96,9 @@ class GuidedConfig(Config):
             per sequence (:func:`spikeview.classical.colour_cast.estimate_alpha`).
         alpha_max_windows: windows sampled from a long stream for that estimate.
         window: TFP window Δτ in ticks (>= 1; SpikeDiff uses 10).
-        demosaic: demosaicking of the TFP start estimate Y₀ (``"bilinear"`` or ``"malvar2004"``).
+        demosaic: demosaicking of the TFP start estimate Y₀: ``"auto"`` (the plan's choice with its
+            reason, :func:`spikeview.guided.plan.choose_demosaic`), ``"bilinear"``, ``"malvar2004"``
+            or ``"menon2007"``.
         sigma_scale: factor on the data-derived noise level handed to the prior (1 = as derived;
             FFDNet wants more than the RMS noise because demosaicking makes it correlated).
         self_ensemble: rotate/flip the input of each prior call (a different one of the 8 dihedral
@@ -145,7 +147,7 @@ class GuidedConfig(Config):
     alpha: list[float] | None = None
     alpha_max_windows: int = 64
     window: int = 10
-    demosaic: str = "malvar2004"
+    demosaic: str = "auto"
     sigma_scale: float = 1.5
     self_ensemble: bool = True
     chains: int = 1
