@@ -220,7 +220,11 @@ def _detect(path: Path, *, width: int | None, height: int | None,
             from spikeview.io.geometry import rank_plain_geometries
 
             guesses = rank_plain_geometries(path)
-            if guesses and guesses[0].size not in geoms and guesses[0].temporal > 0:
+            if not guesses or guesses[0].temporal <= 0:  # no scene in the spikes: nothing to add
+                pass
+            elif guesses[0].size in geoms:  # list the one the spikes agree with first
+                geoms = [guesses[0].size, *(g for g in geoms if g != guesses[0].size)]
+            else:
                 # the spikes point elsewhere: offer that first
                 best = guesses[0]
                 hint = (f", or the size its spikes suggest, --width {best.width} --height {best.height} "
