@@ -52,14 +52,39 @@ def test_info_without_geometry_lists_candidates(capture, capsys):
     (["reconstruct", "{cap}", *GEOM, "--range", "10:5", "--out", "{tmp}/x.npy"], "--range"),
     (["reconstruct", "{cap}", *GEOM, "--range", "0:100", "--out", "{tmp}/x.gif"], ".gif"),
     (["reconstruct", "{cap}", *GEOM, "--range", "0:100", "--out", "{tmp}/x.exr"], "%04d"),
+    (["reconstruct", "{cap}", *GEOM, "--range", "0:100", "--out", "/proc/x.mp4"], "cannot create files in /proc"),
+    (["reconstruct", "{cap}", *GEOM, "--range", "0:100", "--out", "{tmp}/old.npy"], "already exists"),
+    (["reconstruct", "{cap}", *GEOM, "--range", "0:100", "--preset", "{tmp}/empty.toml", "--out", "{tmp}/x.npy"],
+     "empty.toml"),
+    (["info", "{tmp}/nokeys.dat"], "nokeys.dat.toml"),
+    (["simulate", "nothere.png", "--out", "{tmp}/x.dat"], "nothere.png: not found"),
+    (["simulate", "nothere.png", "--pan", "10", "0", "--out", "{tmp}/x.dat"], "nothere.png: not found"),
+    (["simulate", "--demo", "--ticks", "0", "--out", "{tmp}/x.dat"], "--ticks 0"),
+    (["simulate", "--demo", "--gt-every", "0", "--out", "{tmp}/x.dat"], "--gt-every 0"),
+    (["simulate", "--demo", "--config", "{tmp}/empty.toml", "--out", "{tmp}/x.dat"], "empty.toml"),
+    (["simulate", "--demo", "--size", "16", "--ticks", "10", "--out", "{tmp}/old.dat"], "--overwrite"),
+    (["simulate", "--demo", "--size", "16", "--ticks", "10", "--config", "{tmp}/old.dat.toml", "--overwrite",
+      "--out", "{tmp}/old.dat"], "input of the run"),
 ])
 def test_bad_input_gets_one_clear_sentence(capture, tmp_path, capsys, bad, needle):
     path, _ = capture
+    (tmp_path / "old.npy").write_bytes(b"keep me")  # existing outputs: never replaced without --overwrite
+    (tmp_path / "old.dat").write_bytes(b"keep me too")
+    (tmp_path / "old.dat.toml").write_text("n_ticks = 10\n")
+    (tmp_path / "empty.toml").write_text("# nothing here\n")
+    (tmp_path / "nokeys.dat").write_bytes(bytes(64))
+    (tmp_path / "nokeys.dat.toml").write_text('[stream]\nformat = "plain"\n')
     argv = [a.format(cap=path, tmp=tmp_path) for a in bad]
     assert main(argv) == 1
-    err = capsys.readouterr().err.strip()
-    assert err.startswith("spikeview: error:") and needle in err, err
-    assert "\n" not in err and "Traceback" not in err
+    out = capsys.readouterr().err.strip()
+    *before, err = out.splitlines()  # information printed before the failure (e.g. the slow-motion factor)
+    assert not any("error" in line or "Traceback" in line for line in before), out
+    assert err.startswith("spikeview: error:") and needle in err, out
+    assert "Traceback" not in err
+    assert "this is a bug" not in err and "unexpected" not in err, err  # the last-resort fallback is a bug
+    assert "__init__" not in err and "'n_ticks'" not in err, err  # the user's words, not the code's
+    assert (tmp_path / "old.npy").read_bytes() == b"keep me" and (tmp_path / "old.dat").read_bytes() == b"keep me too"
+    assert (tmp_path / "old.dat.toml").read_text() == "n_ticks = 10\n"
     assert not list(tmp_path.glob("x*")), "no output may be left behind by a failed run"
 
 

@@ -104,6 +104,14 @@ def read_sidecar(path: str | os.PathLike[str]) -> Sidecar | None:
     if stream_data is not None:
         if not isinstance(stream_data, dict):
             raise InputFileError(f"{side}: [stream] must be a table; fix or delete the sidecar.")
+        required = [f.name for f in dataclasses.fields(StreamSettings)
+                    if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+        missing = [k for k in required if k not in stream_data]
+        if missing:
+            example = {"format": 'format = "plain"', "width": "width = 1000", "height": "height = 1000"}
+            raise InputFileError(f"{side}: the [stream] table has no {' and no '.join(missing)}; add "
+                                 f"{', '.join(example.get(k, k) for k in missing)} (the real values) to it, or delete "
+                                 "the sidecar and pass --width and --height.")
         try:
             stream = StreamSettings.from_dict(stream_data, where=f"{side} [stream]")
         except SpikeviewError as e:
