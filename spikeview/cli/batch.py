@@ -98,87 +98,34 @@ def run_zarr(args: argparse.Namespace, *, cancel=None, client=None, reports: lis
     ``--cluster``; the run's :class:`~spikeview.cluster.run.BatchReport` is appended to ``reports``.
     """
     _require_extra()
-    from spikeview._files import write_atomic
-    from spikeview.classical.windows import window_range
-    from spikeview.cli.reconstruct import open_stream, preset_path
-    from spikeview.cluster._compute import DEFAULT_CHUNK, DEFAULT_KEYFRAME, chained, state_from_attrs, state_to_attrs
-    from spikeview.cluster.run import BatchJob, parse_cluster, run_batch
-    from spikeview.cluster.store import (
-        check_compatible,
-        create_store,
-        done_mask,
-        input_fingerprint,
-        open_store,
-        store_attrs,
-    )
-    from spikeview.pipeline import prepare_sequence, recipe_for_state, window_centres
-    from spikeview.recipe import Recipe, StreamTable
+    from spikeview.cluster.reconstruct import reconstruct_to_store, store_recipe
+    from spikeview.recipe import Recipe
 
     out = Path(args.out).absolute()
-    if args.chunk is not None and args.chunk < 1:
-        raise ParameterError(f"--chunk {args.chunk}: use a whole number of windows >= 1, e.g. --chunk {DEFAULT_CHUNK}.")
-    if args.cluster is not None:
-        parse_cluster(args.cluster)  # a bad --cluster fails before any work
-    attrs = None
-    if out.exists() and not (getattr(args, "overwrite", False) and not args.resume):
-        if not args.resume:
-            raise ParameterError(f"{out.name} already exists; add --resume to finish it, --overwrite to start it "
-                                 "again, or choose another --out.")
-        attrs = store_attrs(open_store(out))
+    base = None
     if getattr(args, "preset", None):
         base = Recipe.load(args.preset)
-    elif attrs is not None:
-        base = Recipe.from_dict(attrs["settings"], where=f"{out.name} (its recipe)")  # flags given must agree with it
-    else:
-        base = Recipe()
-    recipe = _recipe(args, base)
-    chunk = args.chunk or (int(attrs["chunk"]) if attrs else DEFAULT_CHUNK)
+    elif args.resume:
+        base = store_recipe(out)  # resume with the store's settings; flags given must agree with them
+    recipe = _recipe(args, base if base is not None else Recipe())
+    extra = {"tag_check": args.tag_check} if getattr(args, "tag_check", None) else {}
+    bar: list[_Progress] = []
 
-    src = open_stream(args, recipe)
-    with src:
-        stream = StreamTable.from_info(src.info, getattr(args, "layout", None)).to_dict()
-        recipe = recipe.with_values({f"stream.{k}": v for k, v in stream.items()})
-        settings = recipe.to_dict()
-        centres, step = window_centres(recipe, src.n_frames)
-        window = recipe.span()
-        method = recipe.run.method
-        fingerprint = input_fingerprint(src.info.path)
-        if attrs is not None:
-            check_compatible(out, attrs, fingerprint=fingerprint, settings=settings, chunk=chunk)
-            state = state_from_attrs(attrs)
+    def progress(done: int, total: int) -> None:
+        if not bar:
+            bar.append(_Progress(total, done, f"{recipe.run.method} → {out.name}"))
         else:
-            state = prepare_sequence(src, recipe)
-            full = recipe_for_state(recipe, state)  # the α estimate recorded: the preset reproduces the frames
-            recipe_toml = f"# spikeview reconstruct preset for {src.info.path}\n" + full.to_toml()
-            windows = [window_range(c, window, src.n_frames) for c in centres]
-            frame_shape = (src.height, src.width, 3 if src.cfa is not None else 1)
-            create_store(out, centres=centres, windows=windows, frame_shape=frame_shape, chunk=chunk, attrs={
-                "input": str(Path(src.info.path).absolute()), "fingerprint": fingerprint, "settings": settings,
-                "recipe": recipe_toml, **state_to_attrs(state), "method": method, "window": window, "step": step,
-                "tick_rate": float(src.tick_rate), "chunk": chunk, "keyframe": DEFAULT_KEYFRAME,
-                "n_windows": len(centres), "frame_shape": list(frame_shape)})
-            write_atomic(preset_path(out), recipe_toml, "the preset")
-        open_kwargs = recipe.stream.open_kwargs()
-        if getattr(args, "tag_check", None):
-            open_kwargs["tag_check"] = args.tag_check
-        job = BatchJob(input=str(Path(src.info.path).absolute()), open_kwargs=open_kwargs, recipe=settings,
-                       centres=tuple(int(c) for c in centres), chunk=chunk, store=str(out),
-                       keyframe=int(attrs["keyframe"]) if attrs else DEFAULT_KEYFRAME)
+            bar[0](done - bar[0].done)
 
-    done = done_mask(open_store(out))
-    done_windows = sum(job.bounds(i)[1] - job.bounds(i)[0] for i in range(job.n_chunks) if done[i])
-    where = f"on {args.cluster}" if args.cluster else ("on the given Dask client" if client is not None else "in-process")
-    print(f"{len(centres)} windows in {job.n_chunks} chunks of {chunk} ({method}, {where})"
-          + (f"; {int(done.sum())} chunks already done" if done.any() else ""), file=sys.stderr)
-    if chunk % job.keyframe and chained(settings):
-        print(f"note: --chunk {chunk} is not a multiple of the keyframe interval {job.keyframe}: chunks that start "
-              f"between keyframes recompute up to {job.keyframe - 1} lead-in windows (same frames, more time).",
-              file=sys.stderr)
-    bar = _Progress(len(centres), done_windows, f"{method} → {out.name}")
     try:
-        report = run_batch(job, state, cluster=args.cluster, progress=bar, cancel=cancel, client=client)
+        report = reconstruct_to_store(args.input, recipe, out, chunk=args.chunk, resume=args.resume,
+                                      overwrite=bool(getattr(args, "overwrite", False)), cluster=args.cluster,
+                                      client=client, progress=progress, cancel=cancel,
+                                      notes=lambda text: print(text, file=sys.stderr), open_kwargs=extra,
+                                      layout=getattr(args, "layout", None))
     finally:
-        bar.close()
+        if bar:
+            bar[0].close()
     if reports is not None:
         reports.append(report)
     rate = report.windows_per_second

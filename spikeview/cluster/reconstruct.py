@@ -1,0 +1,143 @@
+"""One call for front ends: a recipe and an input path in, a finished Zarr store out.
+
+::
+
+    from spikeview.cluster.reconstruct import reconstruct_to_store
+    report = reconstruct_to_store("capture.dat", recipe, "clip.zarr", cluster="tcp://10.1.0.5:8786",
+                                  progress=lambda done, total: ..., cancel=event.is_set)
+
+The CLI (``spikeview reconstruct … --out OUT.zarr``) and the app's export panel both call it; it
+creates the store (or checks the one to resume), computes the sequence-wide state once, and runs the
+chunks (:func:`spikeview.cluster.run.run_batch`).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from spikeview.errors import ParameterError
+
+
+def store_recipe(out: str | os.PathLike[str]):
+    """The :class:`~spikeview.recipe.Recipe` a store was written with, as given (``None`` if ``out`` does not exist)."""
+    from spikeview.cluster.store import open_store, store_attrs
+    from spikeview.recipe import Recipe
+
+    p = Path(out)
+    if not p.exists():
+        return None
+    return Recipe.from_dict(store_attrs(open_store(p))["settings"], where=f"{p.name} (its recipe)")
+
+
+def reconstruct_to_store(input_path: str | os.PathLike[str], recipe: Any, out: str | os.PathLike[str], *,
+                         chunk: int | None = None, resume: bool = False, overwrite: bool = False,
+                         cluster: str | None = None, client: Any = None,
+                         progress: Callable[[int, int], Any] | None = None, cancel: Callable[[], bool] | None = None,
+                         notes: Callable[[str], Any] | None = None, open_kwargs: dict[str, Any] | None = None,
+                         layout: str | None = None):
+    """Reconstruct ``recipe``'s windows of ``input_path`` into the Zarr store ``out``.
+
+    Args:
+        input_path: the spike file (every worker must read it at this path).
+        recipe: a :class:`~spikeview.recipe.Recipe` (its ``[run]`` range picks the windows; its
+            ``[stream]`` how the file is read).
+        out: the ``.zarr`` store.
+        chunk: windows per chunk (default 16; on resume, the store's).
+        resume: finish the store at ``out`` (it must come from the same input and settings).
+        overwrite: replace an existing store (without ``resume``).
+        cluster: ``None`` (in-process), ``"local:N"`` or a scheduler address; ``client``: a Dask client instead.
+        progress: ``progress(windows_done, windows_total)`` after every finished chunk (and once at the start).
+        cancel: polled after every finished chunk; true stops with :class:`~spikeview.errors.Cancelled`.
+        notes: receives one-line messages for a person (plan of the run, notes).
+        open_kwargs: extra :func:`spikeview.io.open_source` arguments (``tag_check``).
+        layout: ``.npy``/``.npz`` axis order, recorded in the recipe's ``[stream]``.
+
+    Returns:
+        The :class:`~spikeview.cluster.run.BatchReport` of this call.
+
+    Raises:
+        ParameterError: bad ``chunk``/``cluster``; ``out`` exists (without ``resume``/``overwrite``);
+            a store of another input or other settings; a worker that died repeatedly.
+    """
+    from spikeview._files import write_atomic
+    from spikeview.classical.windows import window_range
+    from spikeview.cluster._compute import DEFAULT_CHUNK, DEFAULT_KEYFRAME, chained, state_from_attrs, state_to_attrs
+    from spikeview.cluster.run import BatchJob, parse_cluster, run_batch
+    from spikeview.cluster.store import (
+        check_compatible,
+        create_store,
+        done_mask,
+        input_fingerprint,
+        open_store,
+        store_attrs,
+    )
+    from spikeview.io import open_source
+    from spikeview.pipeline import prepare_sequence, recipe_for_state, window_centres
+    from spikeview.recipe import StreamTable
+
+    say = notes if notes is not None else (lambda text: None)
+    out = Path(out).absolute()
+    if out.suffix.lower() != ".zarr":
+        raise ParameterError(f"{out.name}: a batch reconstruction writes a Zarr store; end the name with .zarr.")
+    if chunk is not None and chunk < 1:
+        raise ParameterError(f"--chunk {chunk}: use a whole number of windows >= 1, e.g. --chunk {DEFAULT_CHUNK}.")
+    if cluster is not None:
+        parse_cluster(cluster)  # a bad address fails before any work
+    attrs = None
+    if out.exists() and not (overwrite and not resume):
+        if not resume:
+            raise ParameterError(f"{out.name} already exists; add --resume to finish it, --overwrite to start it "
+                                 "again, or choose another --out.")
+        attrs = store_attrs(open_store(out))
+    chunk = chunk or (int(attrs["chunk"]) if attrs else DEFAULT_CHUNK)
+
+    kwargs = {**recipe.stream.open_kwargs(), **(open_kwargs or {})}
+    with open_source(input_path, **kwargs) as src:
+        stream = StreamTable.from_info(src.info, layout).to_dict()
+        recipe = recipe.with_values({f"stream.{k}": v for k, v in stream.items()})
+        settings = recipe.to_dict()
+        centres, step = window_centres(recipe, src.n_frames)
+        window = recipe.span()
+        method = recipe.run.method
+        fingerprint = input_fingerprint(src.info.path)
+        if attrs is not None:
+            check_compatible(out, attrs, fingerprint=fingerprint, settings=settings, chunk=chunk)
+            state = state_from_attrs(attrs)
+        else:
+            state = prepare_sequence(src, recipe)
+            full = recipe_for_state(recipe, state)  # the α estimate recorded: the preset reproduces the frames
+            recipe_toml = f"# spikeview reconstruct preset for {src.info.path}\n" + full.to_toml()
+            windows = [window_range(c, window, src.n_frames) for c in centres]
+            frame_shape = (src.height, src.width, 3 if src.cfa is not None else 1)
+            create_store(out, centres=centres, windows=windows, frame_shape=frame_shape, chunk=chunk, attrs={
+                "input": str(Path(src.info.path).absolute()), "fingerprint": fingerprint, "settings": settings,
+                "recipe": recipe_toml, **state_to_attrs(state), "method": method, "window": window, "step": step,
+                "tick_rate": float(src.tick_rate), "chunk": chunk, "keyframe": DEFAULT_KEYFRAME,
+                "n_windows": len(centres), "frame_shape": list(frame_shape)})
+            write_atomic(out.with_name(out.name + ".preset.toml"), recipe_toml, "the preset")
+        job = BatchJob(input=str(Path(src.info.path).absolute()), open_kwargs=kwargs, recipe=settings,
+                       centres=tuple(int(c) for c in centres), chunk=chunk, store=str(out),
+                       keyframe=int(attrs["keyframe"]) if attrs else DEFAULT_KEYFRAME)
+
+    done = done_mask(open_store(out))
+    total = len(centres)
+    n_done = sum(job.bounds(i)[1] - job.bounds(i)[0] for i in range(job.n_chunks) if done[i])
+    where = f"on {cluster}" if cluster else ("on the given Dask client" if client is not None else "in-process")
+    say(f"{total} windows in {job.n_chunks} chunks of {chunk} ({method}, {where})"
+        + (f"; {int(done.sum())} chunks already done" if done.any() else ""))
+    if chunk % job.keyframe and chained(settings):
+        say(f"note: --chunk {chunk} is not a multiple of the keyframe interval {job.keyframe}: chunks that start "
+            f"between keyframes recompute up to {job.keyframe - 1} lead-in windows (same frames, more time).")
+    counter = [n_done]
+
+    def on_chunk(n: int) -> None:
+        counter[0] += n
+        if progress is not None:
+            progress(counter[0], total)
+
+    if progress is not None:
+        progress(n_done, total)
+    return run_batch(job, state, cluster=cluster, progress=on_chunk, cancel=cancel, client=client)
