@@ -77,6 +77,7 @@ def test_tfp_chunk3_on_local2_matches_in_process_and_file_output(cap, tmp_path, 
     assert meta["method"] == "tfp" and len(meta["alpha"]) == 3 and "[classical]" in meta["recipe"]
     assert "alpha" not in meta["settings"]["classical"]  # as given: the estimate is state, not a setting
     assert "alpha = [" in meta["recipe"]  # the estimate is recorded: the recipe reproduces it
+    assert isinstance(meta["white_point"], float) and meta["white_point"] > 0  # computed once, before the split
     err = capsys.readouterr().err
     assert "20 windows in 7 chunks of 3 (tfp, on local:2)" in err and "windows/s" in err
 

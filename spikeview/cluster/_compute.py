@@ -2,8 +2,8 @@
 
 Everything the batch path knows about *how* frames are made is in this file:
 
-* :func:`prepare_state` — the sequence-wide quantities (colour cast α; a white point once the
-  library has one), computed **once** before the work is split and handed to every chunk.
+* :func:`prepare_state` — the sequence-wide quantities (colour cast α, white point), computed
+  **once** before the work is split and handed to every chunk.
 * :func:`compute_chunk` — the frames of a run of consecutive windows, given that state.
 * :func:`worker_resources` — the source and the guided sampler of a worker process, opened / loaded
   once and cached (workers read the input from its file path; nothing large goes through the
@@ -62,18 +62,20 @@ def prepare_state(source, data: dict[str, Any]):
 
 
 def state_to_attrs(state) -> dict[str, Any]:
-    """Plain values of a state (Zarr attributes; what travels to the workers)."""
-    attrs = dict(state.attrs())
-    attrs.setdefault("white_point", getattr(state, "white_point", None))
-    return attrs
+    """Plain values of a state (Zarr attributes; what travels to the workers): ``alpha`` and ``white_point``."""
+    alpha = getattr(state, "alpha", None)
+    white = getattr(state, "white", None)
+    return {"alpha": None if alpha is None else [float(v) for v in np.asarray(alpha).ravel()],
+            "white_point": None if white is None else float(white)}
 
 
 def state_from_attrs(attrs: dict[str, Any]):
-    """The state of :func:`state_to_attrs` values (α as float64, as :func:`prepare_state` makes it)."""
+    """The state of :func:`state_to_attrs` values, exactly as :func:`prepare_state` made it (float64 α, float white)."""
     from spikeview.pipeline import SequenceState
 
-    alpha = attrs.get("alpha")
-    return SequenceState(None if alpha is None else np.asarray(alpha, dtype=np.float64))
+    alpha, white = attrs.get("alpha"), attrs.get("white_point")
+    return SequenceState(None if alpha is None else np.asarray(alpha, dtype=np.float64),
+                         None if white is None else float(white))
 
 
 def compute_chunk(source, centres: Sequence[int], data: dict[str, Any], state, *,
