@@ -167,6 +167,39 @@ def test_resume_after_an_interrupted_run_gives_identical_frames(cap, tmp_path):
     np.testing.assert_array_equal(_frames(out), _frames(tmp_path / "full.zarr"))
 
 
+def test_resume_after_the_process_was_killed(cap, tmp_path):
+    """A real ``kill -9`` of ``spikeview reconstruct`` part-way, then ``--resume``: the same frames as one run."""
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "killed.zarr"
+    argv = [sys.executable, "-m", "spikeview", "reconstruct", str(cap), *GEOM, "--range", "5:125:1", "--chunk", "1",
+            "--out", str(out)]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env={**os.environ, "OMP_NUM_THREADS": "1"})
+    try:
+        deadline = time.monotonic() + 120
+        done = 0
+        while time.monotonic() < deadline and proc.poll() is None:
+            try:
+                done = int(np.asarray(zarr.open_group(str(out), mode="r")["done"][:]).sum())
+            except Exception:  # the store is still being created
+                done = 0
+            if done >= 3:
+                break
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGKILL)
+    finally:
+        proc.wait(timeout=60)
+    assert proc.returncode == -signal.SIGKILL, "the run finished before it could be killed"
+    marked = np.asarray(zarr.open_group(str(out), mode="r")["done"][:])
+    assert 3 <= marked.sum() < marked.size
+    assert _reconstruct(cap, *GEOM, "--out", out, "--resume") == 0
+    assert _reconstruct(cap, *GEOM, "--range", "5:125:1", "--chunk", "8", "--out", tmp_path / "one.zarr") == 0
+    np.testing.assert_array_equal(_frames(out), _frames(tmp_path / "one.zarr"))
+
+
 @pytest.mark.parametrize("change, needle", [
     (["--window", "12"], "was written with other settings (classical.window = 10 there, 12 now)"),
     (["--chunk", "5"], "was written in chunks of 4 windows, not 5"),
