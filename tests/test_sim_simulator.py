@@ -299,7 +299,7 @@ def test_the_sensor_integrates_the_frame_of_each_tick():
 def test_runs_longer_than_the_scene_are_refused():
     # 3 ms: ticks 0 … 60 (the last one at exactly 3 ms, where the last frame is still held)
     scene = ArrayScene(np.zeros((3, 8, 8, 3), np.float32), fps=1000.0)
-    with pytest.raises(ParameterError, match="n_ticks ≤ 61"):
+    with pytest.raises(ParameterError, match="at most 61 ticks \\(--ticks 61"):
         simulate(scene, SimConfig(n_ticks=62))
     assert simulate(scene, SimConfig(n_ticks=61)).n_frames == 61
 

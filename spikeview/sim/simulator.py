@@ -219,9 +219,11 @@ class SpikeSimulator:
         last = self.time_of(n_ticks - 1)
         if last > d * (1 + 1e-12):
             most = int(math.floor((d - self.config.start_s) * self.config.tick_rate)) + 1
+            start = f" from {self.config.start_s:g} s" if self.config.start_s else ""
             raise ParameterError(
-                f"The scene lasts {d:g} s but n_ticks={n_ticks} at {self.config.tick_rate:g} Hz from start_s="
-                f"{self.config.start_s:g} s needs {last:g} s: use n_ticks ≤ {max(most, 0)} or an earlier start_s."
+                f"The scene lasts {d:g} s but {n_ticks} ticks at {self.config.tick_rate:g} Hz{start} need {last:g} s: "
+                f"simulate at most {max(most, 0)} ticks (--ticks {max(most, 0)}, n_ticks in a config), or give a "
+                "longer input (for an image folder, more frames or a lower --fps)."
             )
 
     def gt_at(self, tick: int) -> np.ndarray:
