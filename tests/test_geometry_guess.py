@@ -105,7 +105,7 @@ def test_a_wrong_width_is_reported(tmp_path, capsys):
     assert main(["reconstruct", str(path), "--width", "192", "--height", "64", "--cfa", "RGGB", "--at", "100",
                  "--out", str(tmp_path / "f.png")]) == 0
     err = capsys.readouterr().err
-    assert "spikeview: warning: c.dat: the rows do not line up at width 192" in err and "128x96" in err
+    assert "spikeview: warning: c.dat: the rows do not line up at width 192" in err and "frames are 128x96" in err
 
 
 def test_an_odd_width_with_a_colour_filter_is_reported(tmp_path):

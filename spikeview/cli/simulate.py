@@ -73,11 +73,14 @@ def _config(args: argparse.Namespace):
     if args.config:
         from spikeview.config import load_toml
 
-        if not load_toml(args.config):
+        data = load_toml(args.config)
+        if not data:
             raise ParameterError(f"{args.config}: the simulation config is empty; add settings such as "
                                  "n_ticks = 2000, or drop --config.")
         try:
-            cfg = SimConfig.load(args.config)
+            # a capture's sidecar holds the settings in its [simulation] table
+            cfg = SimConfig.load(args.config, table="simulation") if isinstance(data.get("simulation"), dict) \
+                else SimConfig.load(args.config)
         except ParameterError as e:
             raise _in_user_words(e, args, {}) from None
     else:
@@ -121,6 +124,9 @@ def _scene(args: argparse.Namespace, cfg):
     path = Path(args.input)
     if not path.exists() and not glob.has_magic(str(args.input)):
         raise InputFileError(f"{path}: not found; check the path of the video, image or image folder.")
+    if path.is_file() and path.suffix.lower() in (".dat", ".raw", ".npy", ".npz", ".bin"):
+        raise ParameterError(f"{path}: is a spike capture, not a scene; simulate reads a video, an image or a folder "
+                             f"of images (spikeview info {path.name} describes a capture).")
     if motion:
         if not path.is_file():
             raise ParameterError(f"{path}: synthetic motion (--pan/--zoom/--rotation/--fan) needs one still image "

@@ -5,6 +5,7 @@ streaming, :class:`PlainDatWriter`. numba (the fast packed counting) is imported
 """
 
 from spikeview.io.arrays import NpySource, write_array
+from spikeview.io.geometry import GeometryGuess, rank_plain_geometries, rate_warnings
 from spikeview.io.open import UNSET, open_source, plain_geometry_candidates
 from spikeview.io.plain import PlainDatSource, PlainDatWriter, pack_frames, write_plain
 from spikeview.io.raw import (
@@ -25,6 +26,7 @@ from spikeview.io.source import DEFAULT_TICK_RATE, FORMATS, ArraySource, SpikeSo
 __all__ = [
     "DEFAULT_TICK_RATE",
     "FORMATS",
+    "GeometryGuess",
     "UNSET",
     "ArraySource",
     "NpySource",
@@ -44,6 +46,8 @@ __all__ = [
     "open_source",
     "pack_frames",
     "plain_geometry_candidates",
+    "rank_plain_geometries",
+    "rate_warnings",
     "raw1m_tag_sequence",
     "read_sidecar",
     "sidecar_path",

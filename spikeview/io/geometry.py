@@ -336,6 +336,25 @@ def _mean_rates(src, max_ticks: int = 512, windows: int = 8) -> np.ndarray:
     return total / (k * win)
 
 
+def _file_guess(src) -> GeometryGuess | None:
+    """The most plausible geometry of the plain file behind ``src`` (``None`` without a file or a scene)."""
+    path = getattr(src.info, "path", None)
+    if path is None or getattr(src.info, "format", None) != "plain":
+        return None
+    guesses = rank_plain_geometries(path, limit=1)
+    return guesses[0] if guesses and guesses[0].temporal > 0 else None
+
+
+def _whole_frames(src) -> bool:
+    path = getattr(src.info, "path", None)
+    if path is None or getattr(src.info, "format", None) != "plain":
+        return True
+    try:
+        return Path(path).stat().st_size % (src.width * src.height // 8) == 0
+    except OSError:
+        return True
+
+
 def _imbalance(a: float, b: float) -> float:
     m = (a + b) / 2
     return abs(a - b) / m if m > 0 else 0.0
@@ -377,9 +396,18 @@ def rate_warnings(src, *, check_width: bool = True) -> list[str]:
             s = spatial_score(flat.reshape(pixels // w2, w2), lags=lags)
             if s > best[0]:
                 best = (s, w2, pixels // w2)
-        if best[1] != w and best[0] > 0.3 and here < 0.5 * best[0]:
-            out.append(f"the rows do not line up at width {w} (the rates look sheared); the frames are probably "
-                       f"{best[1]}x{best[2]}: check --width and --height.")
+        if here < 0.3 or (best[1] != w and here < 0.5 * best[0]):
+            # the rows look wrong: let the whole file say what it holds (the frame size may be wrong too)
+            guess = _file_guess(src)
+            if guess is not None and guess.size != (w, h) and guess.spatial > 0.3 and here < 0.5 * guess.spatial:
+                out.append(f"the rows do not line up at width {w} (the rates look sheared); judging by the spikes the "
+                           f"frames are {guess.width}x{guess.height}: check --width and --height.")
+            elif not _whole_frames(src):
+                out.append(f"the rows do not line up at width {w} and the file is not whole {w}x{h} frames, so the "
+                           "frame size is probably wrong: check --width and --height.")
+            elif best[1] != w and best[0] > 0.3 and here < 0.5 * best[0]:
+                out.append(f"the rows do not line up at width {w} (the rates look sheared); the frames are probably "
+                           f"{best[1]}x{best[2]}: check --width and --height.")
     cfa = parse_cfa(src.cfa) if src.cfa is not None else None
     if cfa is not None and w % 2:
         out.append(f"a colour filter ({cfa_to_str(cfa)}) with an odd width ({w}) shifts the Bayer pattern on every "

@@ -67,7 +67,7 @@ def demo_scene(size: int = 256, seed: int = 0, render_rate: float | None = DEMO_
         render_rate: key frames per second (``None``: render every tick exactly).
     """
     if size < 16:
-        raise ParameterError(f"Demo scene size {size} is too small: use at least 16 pixels.")
+        raise ParameterError(f"A demo scene of {size}x{size} pixels is too small: use at least 16 (--size 16).")
     rng = np.random.default_rng([seed, 7])
     # the strip is built at the output scale (the view shows 384 of its 512 nominal rows)
     k = size / 384.0

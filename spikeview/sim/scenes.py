@@ -423,7 +423,9 @@ class VideoScene(_KeyframeScene):
         try:
             container = av.open(str(self.path))
         except (av.error.FFmpegError, OSError) as e:
-            raise InputFileError(f"{self.path}: not a readable video ({e}); convert it to MP4 (H.264) or a folder of PNGs.") from None
+            why = getattr(e, "strerror", None) or str(e)
+            raise InputFileError(f"{self.path}: not a readable video ({why}); convert it to MP4 (H.264) or a folder of "
+                                 "PNGs.") from None
         if not container.streams.video:
             container.close()
             raise InputFileError(f"{self.path}: the file holds no video stream; give a video file.")
