@@ -141,6 +141,29 @@ def test_killed_worker_is_retried_and_the_run_completes(cap, tmp_path, cluster):
     client.wait_for_workers(2, timeout=60)  # the nanny restarts it for the next test
 
 
+def test_progress_counts_windows_inside_chunks(cap, tmp_path, cluster):
+    """Progress moves window by window, in-process and from Dask workers (their events), and never goes back."""
+    from spikeview.cluster import run as run_mod
+    from spikeview.cluster.reconstruct import reconstruct_to_store
+    from spikeview.recipe import Recipe
+
+    _, client = cluster
+    recipe = Recipe().with_values({"run.range": "5:125:10", "stream.width": 32, "stream.height": 32,
+                                   "stream.cfa": "RGGB"})
+    seen: list[tuple[int, int]] = []
+    reconstruct_to_store(cap, recipe, tmp_path / "p.zarr", chunk=4, progress=lambda d, t: seen.append((d, t)))
+    assert [d for d, _ in seen] == list(range(13)) and {t for _, t in seen} == {12}
+    client.run(lambda: setattr(__import__("spikeview.cluster.run", fromlist=["x"]), "EVENT_INTERVAL", 0.0))
+    seen.clear()
+    rep = reconstruct_to_store(cap, recipe, tmp_path / "q.zarr", chunk=4, client=client,
+                               progress=lambda d, t: seen.append((d, t)))
+    done = [d for d, _ in seen]
+    assert done[0] == 0 and done[-1] == 12 and done == sorted(set(done))
+    events = [msg for _, msg in client.get_events(rep.topic)]
+    assert sorted({e["done"] for e in events}) == [1, 2, 3]  # each chunk of 4 reported windows 1-3, then its result
+    client.run(lambda: setattr(__import__("spikeview.cluster.run", fromlist=["x"]), "EVENT_INTERVAL", run_mod.EVENT_INTERVAL))
+
+
 # ----------------------------------------------------------------------------------- resume
 def test_resume_after_an_interrupted_run_gives_identical_frames(cap, tmp_path):
     from spikeview.cli import batch

@@ -79,7 +79,7 @@ def state_from_attrs(attrs: dict[str, Any]):
 
 
 def compute_chunk(source, centres: Sequence[int], data: dict[str, Any], state, *,
-                  sampler: Any = None, cancel: Any = None) -> np.ndarray:
+                  sampler: Any = None, cancel: Any = None, on_window: Any = None) -> np.ndarray:
     """Frames of consecutive windows, the first of which starts a reuse / warm-start chain.
 
     Args:
@@ -89,14 +89,19 @@ def compute_chunk(source, centres: Sequence[int], data: dict[str, Any], state, *
         state: from :func:`prepare_state` on the whole sequence.
         sampler: a guided sampler to reuse (keeps the prior loaded).
         cancel: checked between frames / guided sampler steps.
+        on_window: called with the number of windows finished so far, after each one.
 
     Returns:
         float32 ``(n, H, W, C)``: C = 3 for a Bayer stream, 1 for monochrome.
     """
     from spikeview.pipeline import reconstruct_windows
 
-    frames = list(reconstruct_windows(source, list(centres), recipe_of(data), state, sampler=sampler, cancel=cancel))
-    out = np.stack([np.asarray(f, dtype=np.float32) for f in frames])
+    frames = []
+    for f in reconstruct_windows(source, list(centres), recipe_of(data), state, sampler=sampler, cancel=cancel):
+        frames.append(np.asarray(f, dtype=np.float32))
+        if on_window is not None:
+            on_window(len(frames))
+    out = np.stack(frames)
     return out[..., None] if out.ndim == 3 else out
 
 

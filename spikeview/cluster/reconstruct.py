@@ -49,7 +49,8 @@ def reconstruct_to_store(input_path: str | os.PathLike[str], recipe: Any, out: s
         resume: finish the store at ``out`` (it must come from the same input and settings).
         overwrite: replace an existing store (without ``resume``).
         cluster: ``None`` (in-process), ``"local:N"`` or a scheduler address; ``client``: a Dask client instead.
-        progress: ``progress(windows_done, windows_total)`` after every finished chunk (and once at the start).
+        progress: ``progress(windows_done, windows_total)`` once at the start, then as windows finish
+            (inside running chunks too; on Dask at most once a second per chunk).
         cancel: polled after every finished chunk; true stops with :class:`~spikeview.errors.Cancelled`.
         notes: receives one-line messages for a person (plan of the run, notes).
         open_kwargs: extra :func:`spikeview.io.open_source` arguments (``tag_check``).
@@ -131,12 +132,9 @@ def reconstruct_to_store(input_path: str | os.PathLike[str], recipe: Any, out: s
     if chunk % job.keyframe and chained(settings):
         say(f"note: --chunk {chunk} is not a multiple of the keyframe interval {job.keyframe}: chunks that start "
             f"between keyframes recompute up to {job.keyframe - 1} lead-in windows (same frames, more time).")
-    counter = [n_done]
-
     def on_chunk(n: int) -> None:
-        counter[0] += n
         if progress is not None:
-            progress(counter[0], total)
+            progress(n_done + n, total)
 
     if progress is not None:
         progress(n_done, total)

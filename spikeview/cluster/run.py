@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import sys
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -81,6 +82,8 @@ class BatchReport:
     windows: int = 0
     seconds: float = 0.0
     results: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    #: the Dask event topic of the workers' progress inside chunks (``None`` in-process)
+    topic: str | None = None
 
     @property
     def windows_per_second(self) -> float:
@@ -102,12 +105,22 @@ def _in_dask_worker() -> bool:
 _TORCH_THREADS_SET = False
 
 
-def run_chunk(job: BatchJob, index: int, state: dict[str, Any]) -> dict[str, Any]:
-    """Compute and store work chunk ``index`` (runs on a worker, or in-process); returns a small report."""
+#: seconds between a worker's progress events for one chunk (the chunk's end is always reported)
+EVENT_INTERVAL = 1.0
+
+
+def run_chunk(job: BatchJob, index: int, state: dict[str, Any], topic: str | None = None,
+              on_window: Callable[[int, int], Any] | None = None) -> dict[str, Any]:
+    """Compute and store work chunk ``index`` (runs on a worker, or in-process); returns a small report.
+
+    Progress inside the chunk: ``on_window(index, windows_done)`` in-process, or on a Dask worker an
+    event ``{"chunk": index, "done": windows_done}`` on ``topic`` at most every :data:`EVENT_INTERVAL` s.
+    """
     global _TORCH_THREADS_SET
     from spikeview.cluster.store import write_chunk
 
-    if not _TORCH_THREADS_SET and _in_dask_worker():
+    in_worker = _in_dask_worker()
+    if not _TORCH_THREADS_SET and in_worker:
         # one task per worker thread: torch must not spawn its own pool on top (the issue's "one thread each")
         if job.recipe.get("run", {}).get("method") == "guided":
             import torch
@@ -118,7 +131,22 @@ def run_chunk(job: BatchJob, index: int, state: dict[str, Any]) -> dict[str, Any
     lo, hi = job.bounds(index)
     start = job.chain_start(lo)
     t0 = time.perf_counter()
-    frames = compute_chunk(source, job.centres[start:hi], job.recipe, state_from_attrs(state), sampler=sampler)
+    last = [t0]
+
+    def window_done(k: int) -> None:
+        k -= lo - start  # lead-in windows are not output
+        if k <= 0 or k >= hi - lo:
+            return  # the chunk's end is reported by its result
+        if on_window is not None:
+            on_window(index, k)
+        elif topic is not None and in_worker and time.perf_counter() - last[0] >= EVENT_INTERVAL:
+            from distributed import get_worker
+
+            last[0] = time.perf_counter()
+            get_worker().log_event(topic, {"chunk": index, "done": k})
+
+    frames = compute_chunk(source, job.centres[start:hi], job.recipe, state_from_attrs(state), sampler=sampler,
+                           on_window=window_done)
     frames = frames[lo - start:]
     seconds = time.perf_counter() - t0
     write_chunk(job.store, index, lo, frames, seconds)
@@ -192,7 +220,8 @@ def run_batch(job: BatchJob, state: Any, *, cluster: str | None = None,
         job: the work (its store must exist, see :func:`spikeview.cluster.store.create_store`).
         state: the sequence-wide state (:func:`spikeview.pipeline.prepare_sequence`), computed once before the split.
         cluster: ``None`` (in-process, chunk after chunk), ``"local:N"`` or a scheduler address.
-        progress: called with the number of windows each finished chunk adds.
+        progress: called with the number of windows this call has finished so far (stored chunks
+            plus the windows finished inside running chunks; never decreasing).
         cancel: polled after every finished chunk; true stops the run (:class:`Cancelled`) leaving the
             finished chunks marked, so ``--resume`` continues from them.
         client: an existing Dask client to use instead of ``cluster`` (left open).
@@ -208,20 +237,41 @@ def run_batch(job: BatchJob, state: Any, *, cluster: str | None = None,
     report = BatchReport(chunks_skipped=job.n_chunks - len(pending))
     sd = state_to_attrs(state)
     t0 = time.perf_counter()
+    lock = threading.Lock()
+    inflight: dict[int, int] = {}
+    shown = [0]
+
+    def show() -> None:  # under the lock
+        n = report.windows + sum(inflight.values())
+        if n > shown[0]:
+            shown[0] = n
+            if progress is not None:
+                progress(n)
+
+    stored: set[int] = set()
+
+    def partial(index: int, k: int) -> None:
+        with lock:
+            if index in stored:
+                return  # a late event of a chunk already stored
+            inflight[index] = k
+            show()
 
     def finished(res: dict[str, Any]) -> None:
-        report.results.append(res)
-        report.chunks_done += 1
-        report.windows += res["windows"]
-        if progress is not None:
-            progress(res["windows"])
+        with lock:
+            stored.add(res["index"])
+            inflight.pop(res["index"], None)
+            report.results.append(res)
+            report.chunks_done += 1
+            report.windows += res["windows"]
+            show()
 
     if cluster is None and client is None:
         from spikeview.cluster._compute import clear_cache
 
         try:
             for i in pending:
-                finished(run_chunk(job, i, sd))
+                finished(run_chunk(job, i, sd, on_window=partial))
                 if cancel is not None and cancel():
                     raise Cancelled()
         finally:
@@ -234,7 +284,16 @@ def run_batch(job: BatchJob, state: Any, *, cluster: str | None = None,
         client, close = connect(cluster)
     from distributed import as_completed
 
-    futures = [client.submit(run_chunk, job, i, sd, pure=False, retries=RETRIES, key=f"spikeview-chunk-{i}-{os.urandom(4).hex()}")
+    token = os.urandom(4).hex()
+    topic = report.topic = f"spikeview-progress-{token}"
+
+    def on_event(event: Any) -> None:
+        msg = event[1]
+        if isinstance(msg, dict) and "chunk" in msg:
+            partial(int(msg["chunk"]), int(msg["done"]))
+
+    client.subscribe_topic(topic, on_event)
+    futures = [client.submit(run_chunk, job, i, sd, topic, pure=False, retries=RETRIES, key=f"spikeview-chunk-{i}-{token}")
                for i in pending]
     try:
         for fut in as_completed(futures):
@@ -255,6 +314,10 @@ def run_batch(job: BatchJob, state: Any, *, cluster: str | None = None,
         for f in futures:
             if not f.done():
                 f.cancel()
+        try:
+            client.unsubscribe_topic(topic)
+        except Exception:  # noqa: BLE001 - a client that is already gone has nothing to unsubscribe
+            pass
         if close is not None:
             close()
     report.seconds = time.perf_counter() - t0
