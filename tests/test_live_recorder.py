@@ -105,6 +105,10 @@ def test_bad_input_and_existing_files(tmp_path):
         Recorder(tmp_path / "x.dat", 16, 8)
     with pytest.raises(OutputFileError, match="does not exist"):
         Recorder(tmp_path / "missing" / "x.dat", 16, 8)
+    (tmp_path / "replayed.dat").write_bytes(b"the capture being replayed")
+    with pytest.raises(OutputFileError, match="input of the run.*even with --overwrite"):
+        Recorder(tmp_path / "replayed.dat", 16, 8, overwrite=True, inputs=[tmp_path / "replayed.dat"])
+    assert (tmp_path / "replayed.dat").read_bytes() == b"the capture being replayed"
     rec = Recorder(tmp_path / "x.dat", 16, 8, overwrite=True)
     with pytest.raises(ParameterError, match=r"\(n, 16\)"):
         rec.submit(np.zeros((1, 15), np.uint8))

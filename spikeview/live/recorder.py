@@ -31,6 +31,7 @@ import threading
 import time
 import weakref
 from collections import deque
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from datetime import datetime
 from pathlib import Path
@@ -95,18 +96,25 @@ class Recorder:
         tables: extra sidecar tables; ``tables["recording"]`` is completed with the counters.
         max_queue_bytes: bound of the in-memory queue (see the module docstring).
         overwrite: replace an existing file (otherwise :class:`OutputFileError`).
+        inputs: files being read (the capture being replayed, its sidecar): never replaced, even
+            with ``overwrite``.
 
     Raises:
-        OutputFileError: the file exists (without ``overwrite``), or cannot be created.
+        OutputFileError: the file exists (without ``overwrite``), is one of ``inputs``, or cannot
+            be created.
     """
 
     def __init__(self, path: str | os.PathLike[str], width: int, height: int, *, flip_vertical: bool = False,
                  flip_horizontal: bool = False, cfa: str | None = None, tick_rate: float = DEFAULT_TICK_RATE,
                  tables: dict[str, dict[str, Any]] | None = None, max_queue_bytes: int = DEFAULT_MAX_QUEUE_BYTES,
-                 overwrite: bool = False):
+                 overwrite: bool = False, inputs: Iterable[str | os.PathLike[str] | None] = ()):
+        from spikeview._files import check_writable
+
         self.path = Path(path)
-        if self.path.exists() and not overwrite:
-            raise OutputFileError(f"{self.path}: the file exists; choose another name or allow overwriting it.")
+        protected = [p for p in inputs if p]
+        protected += [sidecar_path(p) for p in protected]
+        for out in (self.path, sidecar_path(self.path)):
+            check_writable(out, overwrite, protected)
         if int(max_queue_bytes) < 1:
             raise ParameterError(f"max_queue_bytes must be positive, got {max_queue_bytes}; give the queue some memory.")
         self.max_queue_bytes = int(max_queue_bytes)
