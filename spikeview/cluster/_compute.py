@@ -17,6 +17,7 @@ so they pickle cheaply and are exactly what the store records. Frames come from 
 from __future__ import annotations
 
 import json
+import os
 import threading
 from collections.abc import Sequence
 from typing import Any
@@ -106,8 +107,10 @@ def compute_chunk(source, centres: Sequence[int], data: dict[str, Any], state, *
 
 
 # ------------------------------------------------------------------------- worker-side caches
-_CACHE: dict[tuple, Any] = {}
+_CACHE: dict[tuple, Any] = {}  # insertion order = least recently used first
 _LOCK = threading.Lock()
+#: sources kept open per process (a long-lived worker serves many runs; older ones are closed)
+CACHE_SIZE = 4
 #: how many times this process opened each input (the batch tests check it is once per worker)
 OPENS: dict[str, int] = {}
 
@@ -122,9 +125,12 @@ def worker_resources(path: str, open_kwargs: dict[str, Any], recipe: dict[str, A
     The source is opened from ``path`` (a file every worker can read); the guided sampler (``None``
     for classical methods) keeps its prior loaded. Torch runs one thread per task, as the workers do.
     """
-    key = _key(path, open_kwargs, recipe if method_of(recipe) == "guided" else None)
+    st = os.stat(path)  # a file rewritten under the same name is opened again
+    key = _key(path, (st.st_size, st.st_mtime_ns), open_kwargs, recipe if method_of(recipe) == "guided" else None)
     with _LOCK:
-        hit = _CACHE.get(key)
+        hit = _CACHE.pop(key, None)
+        if hit is not None:
+            _CACHE[key] = hit  # most recently used
     if hit is not None:
         return hit
     from spikeview.io import open_source
@@ -138,7 +144,16 @@ def worker_resources(path: str, open_kwargs: dict[str, Any], recipe: dict[str, A
         sampler = GuidedSampler(recipe_of(recipe).guided)
     with _LOCK:
         _CACHE[key] = (source, sampler)
+        evicted = [_CACHE.pop(k) for k in list(_CACHE)[:-CACHE_SIZE]]
+    for old_source, _ in evicted:
+        _close(old_source)
     return source, sampler
+
+
+def _close(source: Any) -> None:
+    close = getattr(source, "close", None)
+    if close is not None:
+        close()
 
 
 def clear_cache() -> None:
@@ -147,6 +162,4 @@ def clear_cache() -> None:
         items = list(_CACHE.values())
         _CACHE.clear()
     for source, _ in items:
-        close = getattr(source, "close", None)
-        if close is not None:
-            close()
+        _close(source)
