@@ -52,7 +52,7 @@ UNSET: Any = _Unset()
 def open_source(path: str | os.PathLike[str], *, format: str | None = None, width: int | None = None,
                 height: int | None = None, cfa: str | None = UNSET, flip_vertical: bool | None = None,
                 flip_horizontal: bool | None = None, tick_rate: float | None = None, layout: str | None = None,
-                key: str | None = None, tag_check: str | None = None) -> SpikeSource:
+                key: str | None = None, tag_check: str | None = None, check_rates: bool | None = None) -> SpikeSource:
     """Open a spike file: sidecar read automatically, explicit arguments override it.
 
     Args:
@@ -67,6 +67,10 @@ def open_source(path: str | os.PathLike[str], *, format: str | None = None, widt
         layout: ``"thw"``/``"hwt"`` axis order of ``.npy``/``.npz`` arrays.
         key: the ``.npz`` member that holds the spikes.
         tag_check: raw 1000×1000 only: ``"sequence"`` (default) or ``"lenient"``.
+        check_rates: look at the firing rates of plain and raw 400×250 files and add a warning to
+            ``info.warnings`` when they suggest a wrong width, CFA or flip (a few hundred ticks
+            are counted, 10–400 ms). Default: when the geometry, CFA or flip did not all come from a
+            sidecar. A live preview that reopens the file on every change may turn it off.
 
     Returns:
         A :class:`SpikeSource` (close it, or use it as a context manager). Its ``info.extra`` holds
@@ -145,7 +149,9 @@ def open_source(path: str | os.PathLike[str], *, format: str | None = None, widt
 
     src.info.warnings.extend(n for n in notes if n)
     from_user = width is not None or height is not None or cfa is not UNSET or flip_vertical is not None
-    if fmt in ("plain", "raw400") and (st is None or from_user) and src.n_frames > 0:
+    if check_rates is None:
+        check_rates = st is None or from_user
+    if fmt in ("plain", "raw400") and check_rates and src.n_frames > 0:
         # settings that did not come from a sidecar written with the file: say when the rates disagree
         from spikeview.io.geometry import rate_warnings
 
