@@ -3,21 +3,25 @@
 A plain file has no header: only its size is known, and many ``width × height`` pairs divide it.
 The file's own bits say which one is right, from two facts about real captures:
 
-1. **The scene changes slowly from tick to tick.** A pixel fires at about the same rate in
-   consecutive frames, so the spike counts of byte ``j`` and byte ``j + frame_bytes`` are
-   correlated; at a lag that is not a whole number of frames they are not (or much less). The
-   frame size is the *smallest* lag whose correlation is close to the best one (2, 3 … frames
-   correlate as well as 1, which is the "many ticks rather than one" rule).
-2. **Images are smooth in space.** With the right width, the firing-rate image (spikes summed
-   over a few hundred ticks) is correlated between a row and the rows below it; a wrong width
-   shears the rows and breaks that. The mean correlation over 1–4 rows down is the score: it also
-   separates ``w`` from ``2w`` (rows 2–8 apart correlate less than rows 1–4) and from ``w/2``
-   (half a row apart correlates little), and lags of 2 and 4 rows compare sites of the same
-   Bayer colour, so a colour filter does not confuse it.
+1. **Frame size: a pixel keeps its firing rate from tick to tick.** Cut a block of the file into
+   frames of a candidate size and average the spike counts of each byte position over those
+   frames. At the true frame size (or a multiple of it) a position is always the same 8 pixels,
+   so the average keeps the scene's spatial variation; at any other size a position wanders over
+   the scene and the variation averages away (:func:`frame_signal`, corrected for the tick-to-tick
+   noise). The frame size is the *smallest* one that keeps at least 90 % of the best signal
+   (multiples keep it too: this is the "many ticks rather than one" rule).
+2. **Width: images are smooth in space, so rows line up.** For each width that fits the frame
+   size, the firing-rate image (spikes summed over up to 8 MB of frames, horizontal neighbours
+   added to hide a Bayer pattern) is correlated with itself 1–4 rows down, less its correlation
+   half or a third of a row along (:func:`spatial_score`). At the right width the row below
+   matches better than anything along the row; at twice the width each "row" holds two real
+   rows side by side, so half a row along matches as well and the score falls to about 0; at
+   half the width, every other "row" below is half a real row along and matches little.
 
-Ties (no signal: a black or uniform capture) fall back on known sensor sizes (1000×1000,
-400×250), then square and common aspect ratios, then more ticks. Only a sample of the file is
-read (about 16 MB whatever its size), so ranking a multi-GB file takes a fraction of a second.
+Ties fall back on known sensor sizes (1000×1000, 400×250), then square and common aspect ratios;
+when the file shows no scene at all (black, uniform or random) the order is known sizes, common
+shapes, then more ticks. Only a sample is read (a 2 MB block, then up to 8 MB of frames), so
+ranking a 1 GB file takes well under a second (``benchmarks/bench_geometry.py``).
 
 :func:`rate_warnings` uses the same measures on an opened stream to say when the rates suggest a
 wrong width, colour filter phase or flip.
@@ -133,13 +137,6 @@ def _prior(w: int, h: int) -> float:
     if (w // g, h // g) in COMMON_ASPECTS or (h // g, w // g) in COMMON_ASPECTS:
         return 0.03 if w >= h else 0.02
     return 0.0
-
-
-def _corr(a: np.ndarray, b: np.ndarray) -> float:
-    a = a - a.mean()
-    b = b - b.mean()
-    den = math.sqrt(float(np.dot(a, a)) * float(np.dot(b, b)))
-    return float(np.dot(a, b)) / den if den > 0 else 0.0
 
 
 def read_block(buf: np.ndarray, n_bytes: int = BLOCK_BYTES) -> np.ndarray:
