@@ -112,6 +112,17 @@ def recipe_for_state(recipe: Recipe, state: SequenceState) -> Recipe:
     return recipe.with_values({"classical.alpha": [float(v) for v in state.alpha]})
 
 
+def sampler_params(recipe: Recipe, state: SequenceState) -> Any:
+    """The :class:`~spikeview.guided.GuidedConfig` the sampler runs on this sequence: η set so that the
+    sequence's white point sits at :data:`spikeview.guided.observation.EXPOSURE_LEVEL` (the prior and
+    the data term see the exposed image, never clipped); ``recipe.guided`` without a white point."""
+    if state.white is None:
+        return recipe.guided
+    from spikeview.guided.observation import exposed_eta
+
+    return recipe.guided.replace(eta=exposed_eta(recipe.classical.eta, state.white))
+
+
 def crop_roi(img: np.ndarray, roi: tuple[int, int, int, int] | None) -> tuple[np.ndarray, tuple[int, int]]:
     """``img[y:y+h, x:x+w]`` for ``roi = (x, y, w, h)`` with ``x, y`` rounded down to even pixels (the
     CFA phase stays that of the full frame); returns the crop and its ``(y, x)`` origin."""
@@ -152,11 +163,7 @@ def reconstruct_windows(source: Any, centers: Iterable[int], recipe: Recipe, sta
     if recipe.run.method == "guided":
         from spikeview.guided.video import reconstruct_sequence
 
-        from spikeview.guided.observation import exposed_eta
-
-        params = recipe.guided
-        if state.white is not None:  # the prior and the data term see the white point at EXPOSURE_LEVEL
-            params = params.replace(eta=exposed_eta(params.eta, state.white))
+        params = sampler_params(recipe, state)
         yield from reconstruct_sequence(source, centers, params, alpha=state.alpha, callback=callback,
                                         cancel=cancel, sampler=sampler, infos=infos, roi=roi,
                                         resolve=False)

@@ -209,7 +209,7 @@ PARAMS: tuple[Param, ...] = (
        "Undo the sensor's per-channel response with gray-world gains estimated once per sequence (Bayer streams)."),
     _p("classical.eta", "--eta", "eta", "Colour range η",
        "Range parameter η of the colour cast: after correction each channel's sequence mean is 1/η (2 → 0.5).",
-       lo=0.0, lo_open=True, hi=64.0, step=0.05),
+       lo=0.0, lo_open=True, hi=8.0, step=0.05),
     # --- guided sampler
     _p("guided.guidance", "--guidance", "guidance", "Guidance rule",
        "How the data steers each step: hqs (a data step on the clean estimate, fast) or dps (gradient through the prior).",

@@ -379,13 +379,10 @@ class RatesResult:
 
 
 def _site_offsets(cfa: str) -> dict[str, tuple[int, int]]:
-    """Row/column parity of each Bayer site (``R``, ``Gr``, ``Gb``, ``B``; Gr shares rows with R)."""
-    quad = {(0, 0): cfa[0], (0, 1): cfa[1], (1, 0): cfa[2], (1, 1): cfa[3]}
-    red_row = 0 if "R" in (cfa[0], cfa[1]) else 1
-    out = {}
-    for (py, px), ch in quad.items():
-        out[ch if ch != "G" else ("Gr" if py == red_row else "Gb")] = (py, px)
-    return {k: out[k] for k in SITE_NAMES}
+    """Row/column parity of each Bayer site (the core's rule, :mod:`spikeview.classical.colour_cast`)."""
+    from spikeview.classical.colour_cast import _site_slices
+
+    return _site_slices(cfa)
 
 
 def site_rates(sfr: np.ndarray, cfa: str | None, window: int, roi: tuple[int, int, int, int] | None = None,

@@ -68,6 +68,22 @@ def alpha_job(source: Any, recipe: Recipe, ctx: Any) -> tuple[np.ndarray | None,
     return np.asarray(alpha, dtype=np.float32).astype(np.float64), note
 
 
+def sequence_state(source: Any, recipe: Recipe, alpha: np.ndarray | None, ctx: Any) -> Any:
+    """The sequence-wide state the CLI would compute (:func:`spikeview.pipeline.prepare_sequence`:
+    α and the white point), with the app's α when it has one; cached per worker for the source and
+    the ``[classical]`` settings it depends on."""
+    from spikeview.pipeline import prepare_sequence
+
+    if alpha is not None and recipe.classical.colour_cast and recipe.classical.alpha is None:
+        recipe = recipe.with_values({"classical.alpha": [float(v) for v in np.asarray(alpha, dtype=np.float64)]})
+    key = (id(source), source.n_frames, tuple(sorted(recipe.classical.to_dict().items(), key=lambda kv: kv[0])).__repr__())
+    cache = ctx.state.setdefault("sequence_state", {})
+    if key not in cache:
+        cache.clear()
+        cache[key] = prepare_sequence(source, recipe)
+    return cache[key]
+
+
 @dataclass
 class DegradationView:
     """A :class:`~spikeview.gui.core.DegradationResult` with what it was computed from.
@@ -84,15 +100,14 @@ class DegradationView:
     knobs: dict[str, str | None] = field(default_factory=dict)
 
 
-def window_observation(source: Any, tick: int, recipe: Recipe, alpha: np.ndarray | None,
+def window_observation(source: Any, tick: int, cfg: Any, alpha: np.ndarray | None,
                        roi: tuple[int, int, int, int] | None):
-    """The guided sampler's :class:`~spikeview.guided.observation.Observation` of the window (ROI-cropped)."""
+    """The guided sampler's :class:`~spikeview.guided.observation.Observation` of the window (ROI-cropped),
+    for the sampler's settings ``cfg`` (:func:`spikeview.pipeline.sampler_params`)."""
     from spikeview.guided.observation import Observation
     from spikeview.guided.video import _crop_to_roi
 
-    g = recipe.guided
-    obs = Observation.from_source(source, int(tick), g.window, alpha=alpha if recipe.classical.colour_cast else None,
-                                  eta=g.eta)
+    obs = Observation.from_source(source, int(tick), cfg.window, alpha=alpha, eta=cfg.eta)
     return obs if roi is None else _crop_to_roi(obs, roi)
 
 
@@ -110,20 +125,20 @@ def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
     from spikeview.guided.knobs import knob_status
     from spikeview.guided.plan import make_plan
     from spikeview.guided.sampler import GuidedSampler
-    from spikeview.pipeline import SequenceState, reconstruct_windows
+    from spikeview.pipeline import reconstruct_windows, sampler_params
 
     recipe = req.recipe if req.recipe is not None else Recipe()
-    cfg = recipe.guided
     src = req.source
-    obs = window_observation(src, req.tick, recipe, req.alpha, req.roi)
+    state = sequence_state(src, recipe, req.alpha, ctx)
+    cfg = sampler_params(recipe, state)
+    obs = window_observation(src, req.tick, cfg, state.alpha, req.roi)
     plan = make_plan(obs, cfg)
     channels = 3 if plan.mosaic else 1
     if req.x_override is not None and req.x_override.shape[:2] == obs.shape and (req.x_override.ndim == 3) == (channels == 3):
         x, label = req.x_override, req.x_label
     else:
         tfp = recipe.with_values({"run.method": "tfp"})
-        x = next(reconstruct_windows(src, [req.tick], tfp, SequenceState(req.alpha if recipe.classical.colour_cast else None),
-                                     roi=req.roi))
+        x = next(reconstruct_windows(src, [req.tick], tfp, state, roi=req.roi))
         if channels == 1 and x.ndim == 3:
             x = x.mean(axis=-1)
         label = "TFP (classical)"
@@ -187,12 +202,13 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     from spikeview import metrics
     from spikeview.guided.knobs import knob_status
     from spikeview.guided.plan import make_plan
-    from spikeview.pipeline import SequenceState, crop_roi, reconstruct_windows
+    from spikeview.pipeline import crop_roi, reconstruct_windows, sampler_params
 
     p = req.params
     recipe = req.recipe.with_values({"run.method": "guided"})
-    cfg = recipe.guided
-    obs = window_observation(req.source, req.tick, recipe, req.alpha, req.roi)
+    state = sequence_state(req.source, recipe, req.alpha, ctx)
+    cfg = sampler_params(recipe, state)
+    obs = window_observation(req.source, req.tick, cfg, state.alpha, req.roi)
     plan = make_plan(obs, cfg)
     origin = crop_roi(np.zeros((req.source.height, req.source.width), np.uint8), req.roi)[1][::-1] if req.roi else (0, 0)
     ctx.report(GuidedUpdate("plan", req.run, total=cfg.steps * cfg.chains, text=str(plan), knobs=knob_status(cfg, plan)))
@@ -219,8 +235,7 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
         from spikeview.guided.sampler import GuidedSampler
 
         sampler = ctx.state["sampler"] = GuidedSampler(cfg)
-    alpha = req.alpha if recipe.classical.colour_cast else None
-    image = next(reconstruct_windows(req.source, [req.tick], recipe, SequenceState(alpha), roi=req.roi,
+    image = next(reconstruct_windows(req.source, [req.tick], recipe, state, roi=req.roi,
                                      callback=callback, cancel=ctx.cancelled, sampler=sampler))
     ctx.check()
     image = np.asarray(image, dtype=np.float32)
@@ -257,7 +272,7 @@ def export_job(req: ExportRequest, ctx: Any) -> list[Path]:
     """Reconstruct and write every frame with :func:`spikeview.pipeline.write_sequence` (the CLI's
     function: α once, the sequence path with reuse and warm start as configured); progress
     ``(done, total)``; Cancel keeps finished frames."""
-    from spikeview.pipeline import SequenceState, window_centres, write_sequence
+    from spikeview.pipeline import window_centres, write_sequence
 
     n = len(req.ticks)
     ctx.report((0, n))
@@ -267,8 +282,8 @@ def export_job(req: ExportRequest, ctx: Any) -> list[Path]:
 
         sampler = ctx.state["sampler"] = GuidedSampler(req.recipe.guided)
     step = window_centres(req.recipe, req.source.n_frames)[1]
-    alpha = req.alpha if req.recipe.classical.colour_cast else None
-    return write_sequence(req.source, req.recipe, list(req.ticks), req.out, state=SequenceState(alpha), roi=req.roi,
+    state = sequence_state(req.source, req.recipe, req.alpha, ctx)
+    return write_sequence(req.source, req.recipe, list(req.ticks), req.out, state=state, roi=req.roi,
                           step=step, cancel=ctx.cancelled, sampler=sampler, overwrite=req.overwrite,
                           progress=lambda done, total: ctx.report((done, total)), source_name=req.source_name)
 
