@@ -417,6 +417,30 @@ class Recipe(Config):
         return 2 * self.classical.tfi_half_window if self.run.method == "tfi" else self.classical.window
 
 
+# ----------------------------------------------------------------------------------- the help
+
+
+def help_rows() -> list[tuple[str, str, str, str]]:
+    """``(path, flag, app control, one sentence with the unit and default)`` for every parameter."""
+    defaults = Recipe()
+    rows = []
+    for p in PARAMS:
+        d = getattr(getattr(defaults, p.table), p.field)
+        shown = "the plan decides" if d is None and p.kind() is bool else ("unset" if d is None else (
+            ("on" if d else "off") if isinstance(d, bool) else f"{d:.4g}" if isinstance(d, float) else str(d)))
+        unit = f" {p.unit}" if p.unit and d is not None and not isinstance(d, str) and p.unit != "of full scale" else ""
+        rows.append((p.path, p.flag or "—", p.label if p.key else "—", f"{p.help} Default: {shown}{unit}."))
+    return rows
+
+
+def markdown_table() -> str:
+    """The README's parameter table (kept equal to :data:`PARAMS` by a test)."""
+    lines = ["| recipe path | flag | app control | meaning |", "|---|---|---|---|"]
+    for path, flag, label, text in help_rows():
+        lines.append(f"| `{path}` | `{flag}` | {label} | {text} |")
+    return "\n".join(lines)
+
+
 # ------------------------------------------------------------------------------------- the CLI
 
 

@@ -240,3 +240,17 @@ def test_session_values_map_to_recipe_paths_both_ways():
         assert to_recipe_value(key, from_recipe_value(key, r.get(p.path))) == r.get(p.path), key
     s.set("quantise", "off")
     assert s.recipe().guided.quantise is False
+
+
+def test_readme_and_the_apps_help_describe_every_knob_with_its_unit():
+    from pathlib import Path
+
+    from spikeview.recipe import help_rows, markdown_table
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    block = readme.split("<!-- params:start -->\n", 1)[1].split("\n<!-- params:end -->", 1)[0]
+    assert block == markdown_table(), "README's parameter table is stale: paste spikeview.recipe.markdown_table()"
+    rows = {path: text for path, _flag, _label, text in help_rows()}
+    assert "ticks" in rows["classical.window"] and "fraction of full scale" in rows["guided.t_start"]
+    for knob in ("guided.s", "guided.k", "guided.levels", "guided.t_start"):
+        assert rows[knob].count(". ") <= 2  # one sentence, then the default

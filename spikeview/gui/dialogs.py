@@ -216,7 +216,7 @@ SHORTCUTS = (
 
 
 class ShortcutsDialog(QtWidgets.QDialog):
-    """F1: the keyboard shortcuts and a few tips."""
+    """F1: the keyboard shortcuts, a few tips, and every parameter's control, flag and meaning."""
 
     def __init__(self, parent: QtWidgets.QWidget | None = None):
         super().__init__(parent)
@@ -235,17 +235,38 @@ class ShortcutsDialog(QtWidgets.QDialog):
             "Drop a capture or a preset (.toml) on the window to open it. Drag a slider: one undo step. "
             "The ROI button draws a region used by the rates, the degradation preview and guided runs. "
             "Wrong colours or unequal greens in the rates panel usually mean a wrong CFA or flip "
-            "(File ▸ Stream settings…)."
+            "(File ▸ Stream settings (CFA, flip)…)."
         )
         tips.setWordWrap(True)
         box = QtWidgets.QDialogButtonBox(QtWidgets.QDialogButtonBox.StandardButton.Close)
         box.rejected.connect(self.reject)
         box.accepted.connect(self.accept)
+        keys = QtWidgets.QWidget()
+        kl = QtWidgets.QVBoxLayout(keys)
+        kl.addWidget(table)
+        kl.addWidget(tips)
+        from spikeview.recipe import help_rows
+
+        rows = [r for r in help_rows() if r[2] != "—"]
+        params = QtWidgets.QTableWidget(len(rows), 3)
+        params.setObjectName("parameters_help")
+        params.setHorizontalHeaderLabels(["Control", "Flag", "Meaning (unit, default)"])
+        params.verticalHeader().setVisible(False)
+        params.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
+        params.setWordWrap(True)
+        for i, (_path, flag, label, text) in enumerate(rows):
+            for j, v in enumerate((label, flag, text)):
+                params.setItem(i, j, QtWidgets.QTableWidgetItem(v))
+        params.horizontalHeader().setStretchLastSection(True)
+        params.resizeColumnsToContents()
+        params.resizeRowsToContents()
+        self.tabs = QtWidgets.QTabWidget()
+        self.tabs.addTab(keys, "Shortcuts")
+        self.tabs.addTab(params, "Parameters")
         lay = QtWidgets.QVBoxLayout(self)
-        lay.addWidget(table)
-        lay.addWidget(tips)
+        lay.addWidget(self.tabs)
         lay.addWidget(box)
-        self.resize(520, 480)
+        self.resize(720, 520)
 
 
 def app_icon() -> QtGui.QIcon:
