@@ -84,3 +84,18 @@ def test_npy_short_close_is_an_error_and_the_exporter_stays_usable(tmp_path):
     assert [p.name for p in ex.close()] == ["s.npy", "s.npy.toml"]
     np.testing.assert_array_equal(np.load(tmp_path / "s.npy"), x)
     assert not any(PARTIAL_MARKER in p.name for p in tmp_path.iterdir())
+
+
+def test_large_npy_exports_announce_their_size_and_reserve_it(tmp_path, monkeypatch):
+    import spikeview._files as files
+    from spikeview.export import open_exporter
+
+    monkeypatch.setattr(files, "LARGE_WRITE_BYTES", 10_000)
+    said = []
+    ex = open_exporter(tmp_path / "big.npy", 4, (32, 32, 3), announce=said.append)
+    # 4 frames · 32·32·3 · 4 bytes + the 128-byte header = 49,280 bytes, reserved before the first frame
+    assert said == ["writing big.npy: 4 float32 frames, 49.3 KB"]
+    tmp = ex._file.tmp
+    assert tmp.stat().st_size == 49_280
+    ex.abort()
+    assert not tmp.exists() and not list(tmp_path.iterdir())

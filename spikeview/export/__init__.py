@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import itertools
 import os
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -108,6 +108,7 @@ def open_exporter(
     overwrite: bool = False,
     inputs: Iterable[str | os.PathLike[str] | None] = (),
     extra_outputs: Iterable[str | os.PathLike[str]] = (),
+    announce: Callable[[str], None] | None = None,
 ) -> Exporter:
     """Open an exporter for ``n_frames`` frames, choosing the format from the suffix of ``out``.
 
@@ -127,6 +128,8 @@ def open_exporter(
             ground truth are always included).
         extra_outputs: other files the caller writes beside the output (e.g. the preset),
             checked by the same rules up front.
+        announce: called with one sentence stating the size of a large output (100 MB or more)
+            before writing it, where the size is known in advance (npy); the CLI prints it.
 
     Returns:
         An :class:`Exporter`; use it as a context manager, or call ``close()``/``abort()``.
@@ -147,7 +150,7 @@ def open_exporter(
     elif isinstance(metadata, Mapping):
         metadata = ExportMetadata.from_dict(dict(metadata), where="export metadata")
     return cls(path, n_frames, frame_shape, config, metadata, cancel=cancel, progress=progress,
-               overwrite=overwrite, inputs=inputs, extra_outputs=extra_outputs)
+               overwrite=overwrite, inputs=inputs, extra_outputs=extra_outputs, announce=announce)
 
 
 def export_frames(

@@ -135,6 +135,8 @@ class Exporter(ABC):
             protected.
         extra_outputs: further files the caller will write beside the output (a preset):
             checked by the same rules, up front.
+        announce: called with one sentence giving the size of a large output (100 MB or more)
+            before it is written, where the size is known in advance (npy); the CLI prints it.
 
     Attributes:
         frames_written: frames accepted so far.
@@ -159,8 +161,10 @@ class Exporter(ABC):
         overwrite: bool = False,
         inputs: Iterable[str | os.PathLike[str] | None] = (),
         extra_outputs: Iterable[str | os.PathLike[str]] = (),
+        announce: Callable[[str], None] | None = None,
     ):
         self.path = Path(path)
+        self.announce = announce
         if isinstance(n_frames, bool) or not isinstance(n_frames, (int, np.integer)) or n_frames < 1:
             raise ParameterError(f"{self.path}: n_frames = {n_frames!r}; pass the number of frames to write (>= 1).")
         self.n_frames = int(n_frames)

@@ -75,7 +75,7 @@ class NpyExporter(Exporter):
         return len(_header((self.n_frames, *self.frame_shape))) + self.n_frames * self._frame_bytes
 
     def _open(self) -> None:
-        from spikeview._files import check_free_space, human_bytes, preallocate
+        from spikeview._files import LARGE_WRITE_BYTES, check_free_space, human_bytes, preallocate
 
         self._frame_bytes = int(np.prod(self.frame_shape)) * 4
         self._head = _header((self.n_frames, *self.frame_shape))
@@ -83,6 +83,8 @@ class NpyExporter(Exporter):
         self._frames: list[dict[str, Any]] = []
         check_free_space(self.path.parent, self.nbytes, f"{self.n_frames} frames of {self.path.name} "
                          f"({human_bytes(self.nbytes)})")
+        if self.announce is not None and self.nbytes >= LARGE_WRITE_BYTES:
+            self.announce(f"writing {self.path.name}: {self.n_frames} float32 frames, {human_bytes(self.nbytes)}")
         try:
             self._fd = os.open(self._file.tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         except OSError as e:

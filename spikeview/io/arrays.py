@@ -233,8 +233,13 @@ def write_array(path: str | os.PathLike[str], spikes: np.ndarray, *, cfa: str | 
                 np.save(f, arr)
         os.replace(tmp, path)
     except OSError as e:
-        tmp.unlink(missing_ok=True)
-        raise OutputFileError(f"{path}: cannot write ({e.strerror or e}); check the folder exists and is writable.") from None
+        from spikeview._files import os_error_sentence
+
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        raise OutputFileError(f"{path}: cannot write: {os_error_sentence(e)}.") from None
     if sidecar:
         t, h, w = arr.shape
         write_sidecar(path, StreamInfo(width=w, height=h, n_frames=t, tick_rate=check_tick_rate(tick_rate), cfa=cfa,
