@@ -1,4 +1,4 @@
-"""Time the latent-diffusion sampler (:class:`spikeview.guided.latent.LatentGuidedSampler`).
+"""Time the guided sampler with the latent-diffusion prior (:class:`spikeview.guided.sampler.GuidedSampler`, ``prior="sd"``).
 
 Random weights at the real architecture's size: the SD 2.1 UNet (865 M parameters) and the SD VAE
 (84 M), written out from their published configs (no weights are downloaded). Speed does not depend
@@ -35,7 +35,9 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from spikeview.errors import ParameterError  # noqa: E402
-from spikeview.guided.latent import LatentConfig, LatentGuidedSampler  # noqa: E402
+from spikeview.guided.config import GuidedConfig  # noqa: E402
+from spikeview.guided.observation import Observation  # noqa: E402
+from spikeview.guided.sampler import GuidedSampler  # noqa: E402
 from spikeview.guided.priors.sd import LatentDiffusionPrior, import_diffusers  # noqa: E402
 
 # SD 2.1 (stabilityai/stable-diffusion-2-1) unet/config.json, the entries that set the architecture.
@@ -106,7 +108,7 @@ def build_prior(model: str, device: str, dtype: str, seed: int = 0) -> LatentDif
     return LatentDiffusionPrior(unet, vae, sched, device=dev, dtype=dtype, source=f"random {model}")
 
 
-def make_observation(size: int, seed: int = 0) -> dict:
+def make_observation(size: int, seed: int = 0) -> Observation:
     """A 10-tick TFP observation of a smooth random scene (RGGB, η = 2, gray-world α)."""
     rng = np.random.default_rng(seed)
     yy, xx = np.mgrid[0:size, 0:size] / size
@@ -119,7 +121,7 @@ def make_observation(size: int, seed: int = 0) -> dict:
     p = 0.5 * np.take_along_axis(scene, cfa[..., None], -1)[..., 0]
     y = (rng.binomial(10, p) / 10).astype(np.float32)
     alpha = np.array([1.0 / max(y[cfa == c].mean(), 1e-3) for c in range(3)])
-    return {"y": y, "cfa": "RGGB", "window": 10, "alpha": alpha, "eta": 2.0}
+    return Observation(y, "RGGB", 10, alpha, 2.0)
 
 
 def _sync(dev: torch.device) -> None:
@@ -166,10 +168,10 @@ def component_times(prior: LatentDiffusionPrior, size: int, repeats: int) -> dic
             (("unet_fwd", unet_fwd), ("unet_fwd_bwd", unet_bwd), ("decode_fwd", dec_fwd), ("decode_fwd_bwd", dec_bwd))}
 
 
-def time_sampler(prior: LatentDiffusionPrior, obs: dict, cfg: LatentConfig, repeats: int) -> dict:
-    """Median seconds per frame of ``LatentGuidedSampler.run`` (one warm-up frame first)."""
+def time_sampler(prior: LatentDiffusionPrior, obs: Observation, cfg: GuidedConfig, repeats: int) -> dict:
+    """Median seconds per frame of ``GuidedSampler.run`` with the latent prior (one warm-up frame first)."""
     dev = prior.device
-    sampler = LatentGuidedSampler(prior)
+    sampler = GuidedSampler(cfg, prior=prior)
     out: dict = {}
 
     def frame():
@@ -196,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dtype", nargs="+", default=["float16"], choices=("float32", "float16", "bfloat16"))
     ap.add_argument("--device", default="auto")
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--t-start", type=float, default=0.5)
+    ap.add_argument("--t-start", type=float, default=50 / 255, help="start noise level t_s, fraction of full scale (as everywhere)")
     ap.add_argument("--s", type=float, default=1.0)
     ap.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     ap.add_argument("--no-components", action="store_true")
@@ -223,7 +225,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"[{dtype}] components (ms): " + ", ".join(f"{k} {1000 * v:.1f}" for k, v in comp.items()), flush=True)
             rows.append({"dtype": dtype, "what": "components", **{k: 1000 * v for k, v in comp.items()}})
         for steps in args.steps:
-            base = LatentConfig(steps=steps, t_start=args.t_start, s=0.0, dtype=dtype)
+            base = GuidedConfig(prior="sd", guidance="dps", diffusion="always", steps=steps, t_start=args.t_start, s=0.0,
+                                dtype=dtype, device=args.device)
             dps = base.replace(s=args.s)
             r0 = time_sampler(prior, obs, base, args.repeats)
             r1 = time_sampler(prior, obs, dps, args.repeats)
