@@ -192,8 +192,18 @@ def connect(cluster: str, timeout: float = 10.0):
     from distributed import Client, LocalCluster
 
     if kind == "local":
-        lc = LocalCluster(n_workers=value, threads_per_worker=1, processes=True, dashboard_address=None,
-                          silence_logs=logging.ERROR)
+        # workers inherit an ignored SIGINT: Ctrl-C stops the run through this process (one message, the
+        # finished chunks kept) instead of printing a KeyboardInterrupt traceback from every worker
+        import signal
+
+        main_thread = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
+        try:
+            lc = LocalCluster(n_workers=value, threads_per_worker=1, processes=True, dashboard_address=None,
+                              silence_logs=logging.ERROR)
+        finally:
+            if main_thread:
+                signal.signal(signal.SIGINT, previous)
         client = Client(lc)
 
         def close() -> None:
