@@ -53,13 +53,31 @@ def test_the_true_geometry_ranks_first(tmp_path, w, h, ticks, cfa):
     assert all(size % (g.width * g.height // 8) == 0 for g in guesses)
 
 
-def test_a_simulated_capture_ranks_first(tmp_path):
-    from spikeview.sim import SimConfig, demo_scene, simulate_to_file
+def still_image(path, w: int = 400, h: int = 300):
+    import OpenImageIO as oiio
 
-    files = simulate_to_file(demo_scene(size=96, seed=1), SimConfig(n_ticks=120, width=96, height=96, seed=1),
-                             tmp_path / "sim.dat")
+    yy, xx = np.mgrid[0:h, 0:w] / h
+    img = np.stack([0.5 + 0.4 * np.sin(5 * xx + c) * np.cos(3 * yy - c) for c in range(3)], -1)
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(w, h, 3, "uint8"))
+    out.write_image((img * 255).astype(np.uint8))
+    out.close()
+    return path
+
+
+@pytest.mark.parametrize("w, h, ticks, cfa", [(96, 96, 120, "demo"), (250, 400, 40, "none"), (160, 120, 100, "RGGB")])
+def test_simulated_captures_rank_first(tmp_path, w, h, ticks, cfa):
+    """The project's simulator (realistic noise, nearly periodic integrate-and-fire spikes, a panning scene)."""
+    from spikeview.sim import MotionScene, SimConfig, demo_scene, simulate_to_file
+
+    if cfa == "demo":
+        scene, cfg = demo_scene(size=w, seed=1), SimConfig(n_ticks=ticks, width=w, height=h, seed=1)
+    else:
+        scene = MotionScene(still_image(tmp_path / "still.png"), (h, w), pan=(300.0, 100.0))
+        cfg = SimConfig(n_ticks=ticks, width=w, height=h, cfa=cfa, seed=1)
+    files = simulate_to_file(scene, cfg, tmp_path / "sim.dat")
     files.sidecar.unlink()
-    assert rank_plain_geometries(files.dat)[0].size == (96, 96)
+    assert rank_plain_geometries(files.dat)[0].size == (w, h)
 
 
 def test_info_without_a_sidecar_names_the_likely_size_and_lists_it_first(tmp_path, capsys):

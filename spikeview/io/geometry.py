@@ -7,8 +7,8 @@ The file's own bits say which one is right, from two facts about real captures:
    frames of a candidate size and average the spike counts of each byte position over those
    frames. At the true frame size (or a multiple of it) a position is always the same 8 pixels,
    so the average keeps the scene's spatial variation; at any other size a position wanders over
-   the scene and the variation averages away (:func:`frame_signal`, corrected for the tick-to-tick
-   noise). The frame size is the *smallest* one that keeps at least 90 % of the best signal
+   the scene and the variation averages away (:func:`frame_signal`: the covariance of the averages
+   of the first and the second half of the frames, which the tick-to-tick noise does not reach). The frame size is the *smallest* one that keeps at least 90 % of the best signal
    (multiples keep it too: this is the "many ticks rather than one" rule).
 2. **Width: images are smooth in space, so rows line up.** For each width that fits the frame
    size, the firing-rate image (spikes summed over up to 8 MB of frames, horizontal neighbours
@@ -152,8 +152,9 @@ def frame_signal(block: np.ndarray, frame_bytes: int, buf: np.ndarray | None = N
     The block of per-byte spike counts is cut into frames of ``frame_bytes`` and averaged over
     them. At the true frame size (or a multiple) every byte position is one set of pixels, so the
     average keeps the scene's full spatial variance; at any other size a position mixes different
-    parts of the scene and most of that variance averages away. The estimate is unbiased: the
-    variance the tick-to-tick noise adds to the average is subtracted.
+    parts of the scene and most of that variance averages away. The estimate is the covariance
+    across positions of the averages of the first and the second half of the frames, so noise
+    (which differs between the halves) does not count, however it is correlated in time.
 
     Frames larger than a quarter of the block are taken from ``buf`` instead (a few spread over
     the file), when given.
@@ -170,9 +171,13 @@ def frame_signal(block: np.ndarray, frame_bytes: int, buf: np.ndarray | None = N
         frames = np.stack([_POPCOUNT[buf[i * frame_bytes:i * frame_bytes + part]] for i in idx])
     else:
         return 0.0
-    mean = frames.mean(axis=0)
-    within = float(frames.var(axis=0, ddof=1).mean()) / m
-    return max(0.0, float(mean.var()) - within)
+    # the covariance between the averages of the first and the second half of the frames: the
+    # scene is in both, the tick-to-tick noise in one only (whatever its correlation in time:
+    # integrate-and-fire pixels fire almost periodically, so the usual s²/m noise term is wrong)
+    half = m // 2
+    a = frames[:half].mean(axis=0, dtype=np.float64)
+    b = frames[half:2 * half].mean(axis=0, dtype=np.float64)
+    return max(0.0, float(np.mean((a - a.mean()) * (b - b.mean()))))
 
 
 def rate_vector(buf: np.ndarray, frame_bytes: int, budget: int = SAMPLE_BYTES, runs: int = 4) -> np.ndarray:
