@@ -156,33 +156,39 @@ class Param:
             if _optional(self.table, self.field):
                 return None
             raise ParameterError(f"{name} needs a value; see --help for its range.")
-        if kind is bool:
-            if not isinstance(value, bool):
-                raise ParameterError(f"{name} must be true or false, got {value!r}.")
-            return value
-        if kind is str:
-            value = str(value)
-            if self.choices and value not in self.choices:
-                raise ParameterError(f"{name} = {value!r} is not valid: use one of {', '.join(self.choices)}.")
-            return value
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
-            raise ParameterError(f"{name} must be a finite number, got {value!r}.")
-        if kind is int:
-            if float(value) != int(value):
-                raise ParameterError(f"{name} must be a whole number, got {value!r}.")
-            value = int(value)
-        else:
-            value = float(value)
-        lo, hi = self.lo, self.hi
-        bad_lo = lo is not None and (value <= lo if self.lo_open else value < lo)
-        bad_hi = hi is not None and value > hi
-        if bad_lo or bad_hi:
-            unit = f" {self.unit}" if self.unit and self.scale == 1.0 else ""
-            lo_s = "" if lo is None else (f"> {lo:g}" if self.lo_open else f">= {lo:g}")
-            hi_s = "" if hi is None else f"<= {hi:g}"
-            rng = " and ".join(s for s in (lo_s, hi_s) if s)
-            raise ParameterError(f"{name} = {value:g} is out of range: use a value {rng}{unit}.")
+        return check_value(name, kind, value, self.lo, self.hi, self.choices, lo_open=self.lo_open,
+                           unit=self.unit if self.scale == 1.0 else "")
+
+
+def check_value(name: str, kind: Any, value: Any, lo: float | None = None, hi: float | None = None,
+                choices: tuple[str, ...] = (), *, lo_open: bool = False, unit: str = "") -> Any:
+    """``value`` converted to ``kind`` (bool, str, int or float) and checked against the range or
+    choices; :class:`ParameterError` naming ``name`` (the word the person typed) otherwise."""
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ParameterError(f"{name} must be true or false, got {value!r}.")
         return value
+    if kind is str:
+        value = str(value)
+        if choices and value not in choices:
+            raise ParameterError(f"{name} = {value!r} is not valid: use one of {', '.join(choices)}.")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
+        raise ParameterError(f"{name} must be a finite number, got {value!r}.")
+    if kind is int:
+        if float(value) != int(value):
+            raise ParameterError(f"{name} must be a whole number, got {value!r}.")
+        value = int(value)
+    else:
+        value = float(value)
+    bad_lo = lo is not None and (value <= lo if lo_open else value < lo)
+    bad_hi = hi is not None and value > hi
+    if bad_lo or bad_hi:
+        lo_s = "" if lo is None else (f"> {lo:g}" if lo_open else f">= {lo:g}")
+        hi_s = "" if hi is None else f"<= {hi:g}"
+        rng = " and ".join(x for x in (lo_s, hi_s) if x)
+        raise ParameterError(f"{name} = {value:g} is out of range: use a value {rng}{' ' + unit if unit else ''}.")
+    return value
 
 
 def _p(path: str, flag: str, key: str, label: str, help: str, **kw: Any) -> Param:

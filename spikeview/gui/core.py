@@ -320,9 +320,10 @@ def stream_frames(source: SpikeSource, tick: int, params: dict[str, Any], alpha:
     if use_cast and alpha is None:
         alpha = alpha_note(_channel_means(block[a - lo:b - lo], cfa))[0]
     levels = {"black": params["black"], "white": max(params["white"], params["black"] + 1e-3), "gamma": display_gamma(params)}
-    tfp_img = preview_rgb(sub, tick - lo, window, alpha=alpha, colour_cast=use_cast, eta=params["eta"],
-                          demosaic_method=params["demosaic"], **levels)
     sfr = block[a - lo:b - lo].sum(axis=0, dtype=np.uint16).astype(np.float32) * np.float32(1.0 / (b - a))
+    method = demosaic_for(sfr, cfa, params["demosaic"])
+    tfp_img = preview_rgb(sub, tick - lo, window, alpha=alpha, colour_cast=use_cast, eta=params["eta"],
+                          demosaic_method=method, **levels)
     tfi_img = None
     if want_tfi:
         tfi_img = _colour_frame(tfi_array(block, tick - lo, hw), cfa, params, alpha if use_cast else None)
@@ -359,9 +360,21 @@ def _colour_frame(mosaic: np.ndarray, cfa: str | None, params: dict[str, Any], a
     if cfa is None:
         img = show(mosaic, params)
         return np.repeat(img[..., None], 3, axis=-1)
+    method = demosaic_for(mosaic, cfa, params["demosaic"])
     if alpha is not None:
         mosaic = apply_colour_cast_mosaic(mosaic, cfa, alpha, params["eta"])
-    return show(demosaic(mosaic, cfa, params["demosaic"]), params)
+    return show(demosaic(mosaic, cfa, method), params)
+
+
+def demosaic_for(mosaic: np.ndarray, cfa: str | None, requested: str) -> str:
+    """The demosaic the TFP/TFI outputs use for this frame (``"auto"``: the plan's rule from its noise)."""
+    if requested != "auto":
+        return requested
+    if cfa is None:
+        return "bilinear"  # nothing to demosaic; any valid name
+    from spikeview.classical.reconstruct import auto_demosaic
+
+    return auto_demosaic(mosaic, cfa, requested)[0]
 
 
 # ----------------------------------------------------------------------------- firing rates

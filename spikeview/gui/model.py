@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from spikeview.errors import ParameterError
-from spikeview.recipe import BY_KEY, PARAMS, Param, Recipe
+from spikeview.recipe import BY_KEY, PARAMS, Param, Recipe, check_value
 
 # ------------------------------------------------------------------------------------------ events
 
@@ -111,29 +111,8 @@ class ParamSpec:
     help: str = ""
 
     def validate(self, value: Any) -> Any:
-        """Return ``value`` converted to ``kind``; raise :class:`ParameterError` if it does not fit."""
-        kind = self.kind
-        if kind is bool:
-            if not isinstance(value, bool):
-                raise ParameterError(f"{self.label} must be true or false, got {value!r}.")
-            return value
-        if kind is str:
-            value = str(value)
-            if self.choices and value not in self.choices:
-                raise ParameterError(f"{self.label} must be one of {', '.join(self.choices)}, got {value!r}.")
-            return value
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or (isinstance(value, float) and not math.isfinite(value)):
-            raise ParameterError(f"{self.label} must be a finite number, got {value!r}.")
-        if kind is int:
-            if float(value) != int(value):
-                raise ParameterError(f"{self.label} must be a whole number, got {value!r}.")
-            value = int(value)
-        else:
-            value = float(value)
-        lo, hi = self.minimum, self.maximum
-        if (lo is not None and value < lo) or (hi is not None and value > hi):
-            raise ParameterError(f"{self.label} must lie in [{lo:g}, {hi:g}]{' ' + self.unit if self.unit else ''}, got {value:g}.")
-        return value
+        """Return ``value`` converted to ``kind``; raise :class:`ParameterError` (naming the control) if it does not fit."""
+        return check_value(self.label, self.kind, value, self.minimum, self.maximum, self.choices, unit=self.unit)
 
 
 #: the app's group of each recipe parameter (which previews a change makes stale); default: its table
