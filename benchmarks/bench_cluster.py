@@ -75,7 +75,7 @@ def _cluster(n: int):
     from distributed import Client, LocalCluster
 
     t0 = time.perf_counter()
-    lc = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+    lc = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                       silence_logs=logging.ERROR)
     client = Client(lc)
     return lc, client, time.perf_counter() - t0

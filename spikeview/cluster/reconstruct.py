@@ -63,21 +63,9 @@ def reconstruct_to_store(input_path: str | os.PathLike[str], recipe: Any, out: s
         ParameterError: bad ``chunk``/``cluster``; ``out`` exists (without ``resume``/``overwrite``);
             a store of another input or other settings; a worker that died repeatedly.
     """
-    from spikeview._files import write_atomic
-    from spikeview.classical.windows import window_range
-    from spikeview.cluster._compute import DEFAULT_CHUNK, DEFAULT_KEYFRAME, chained, state_from_attrs, state_to_attrs
-    from spikeview.cluster.run import BatchJob, parse_cluster, run_batch
-    from spikeview.cluster.store import (
-        check_compatible,
-        create_store,
-        done_mask,
-        input_fingerprint,
-        open_store,
-        store_attrs,
-    )
-    from spikeview.io import open_source
-    from spikeview.pipeline import prepare_sequence, recipe_for_state, window_centres
-    from spikeview.recipe import StreamTable
+    from spikeview.cluster._compute import DEFAULT_CHUNK
+    from spikeview.cluster.run import connect, parse_cluster
+    from spikeview.cluster.store import open_store, store_attrs
 
     say = notes if notes is not None else (lambda text: None)
     out = Path(out).absolute()
@@ -86,7 +74,7 @@ def reconstruct_to_store(input_path: str | os.PathLike[str], recipe: Any, out: s
     if chunk is not None and chunk < 1:
         raise ParameterError(f"--chunk {chunk}: use a whole number of windows >= 1, e.g. --chunk {DEFAULT_CHUNK}.")
     if cluster is not None:
-        parse_cluster(cluster)  # a bad address fails before any work
+        parse_cluster(cluster)  # bad text fails before any work
     attrs = None
     if out.exists() and not (overwrite and not resume):
         if not resume:
@@ -94,8 +82,28 @@ def reconstruct_to_store(input_path: str | os.PathLike[str], recipe: Any, out: s
                                  "again, or choose another --out.")
         attrs = store_attrs(open_store(out))
     chunk = chunk or (int(attrs["chunk"]) if attrs else DEFAULT_CHUNK)
+    where = f"on {cluster}" if cluster else ("on the given Dask client" if client is not None else "in-process")
+    close = None
+    if cluster is not None and client is None:
+        client, close = connect(cluster)  # an unreachable scheduler fails before the store is made
+    try:
+        return _run(input_path, recipe, out, chunk, attrs, client, progress, cancel, say,
+                    {**recipe.stream.open_kwargs(), **(open_kwargs or {})}, layout, where)
+    finally:
+        if close is not None:
+            close()
 
-    kwargs = {**recipe.stream.open_kwargs(), **(open_kwargs or {})}
+
+def _run(input_path, recipe, out: Path, chunk: int, attrs, client, progress, cancel, say, kwargs, layout, where):
+    from spikeview._files import write_atomic
+    from spikeview.classical.windows import window_range
+    from spikeview.cluster._compute import DEFAULT_KEYFRAME, chained, state_from_attrs, state_to_attrs
+    from spikeview.cluster.run import BatchJob, run_batch
+    from spikeview.cluster.store import check_compatible, create_store, done_mask, input_fingerprint, open_store
+    from spikeview.io import open_source
+    from spikeview.pipeline import prepare_sequence, recipe_for_state, window_centres
+    from spikeview.recipe import StreamTable
+
     with open_source(input_path, **kwargs) as src:
         stream = StreamTable.from_info(src.info, layout).to_dict()
         recipe = recipe.with_values({f"stream.{k}": v for k, v in stream.items()})
@@ -126,16 +134,16 @@ def reconstruct_to_store(input_path: str | os.PathLike[str], recipe: Any, out: s
     done = done_mask(open_store(out))
     total = len(centres)
     n_done = sum(job.bounds(i)[1] - job.bounds(i)[0] for i in range(job.n_chunks) if done[i])
-    where = f"on {cluster}" if cluster else ("on the given Dask client" if client is not None else "in-process")
     say(f"{total} windows in {job.n_chunks} chunks of {chunk} ({method}, {where})"
         + (f"; {int(done.sum())} chunks already done" if done.any() else ""))
     if chunk % job.keyframe and chained(settings):
         say(f"note: --chunk {chunk} is not a multiple of the keyframe interval {job.keyframe}: chunks that start "
             f"between keyframes recompute up to {job.keyframe - 1} lead-in windows (same frames, more time).")
+
     def on_chunk(n: int) -> None:
         if progress is not None:
             progress(n_done + n, total)
 
     if progress is not None:
         progress(n_done, total)
-    return run_batch(job, state, cluster=cluster, progress=on_chunk, cancel=cancel, client=client)
+    return run_batch(job, state, progress=on_chunk, cancel=cancel, client=client)

@@ -199,7 +199,8 @@ def connect(cluster: str, timeout: float = 10.0):
         main_thread = threading.current_thread() is threading.main_thread()
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
         try:
-            lc = LocalCluster(n_workers=value, threads_per_worker=1, processes=True, dashboard_address=None,
+            # dashboard on a free port: the default 8787 may belong to another cluster on this machine
+            lc = LocalCluster(n_workers=value, threads_per_worker=1, processes=True, dashboard_address=":0",
                               silence_logs=logging.ERROR)
         finally:
             if main_thread:
@@ -211,13 +212,28 @@ def connect(cluster: str, timeout: float = 10.0):
             lc.close()
 
         return client, close
+    def unreachable(e: BaseException) -> ParameterError:
+        return ParameterError(
+            f"cannot reach a Dask scheduler at {value} within {timeout:g} s ({type(e).__name__}); "
+            "check the address (dask scheduler prints it) and that the scheduler is running."
+        )
+
+    if value.startswith("tcp://"):
+        # probe first: a Client that fails to connect leaves sockets behind
+        import socket
+
+        host, _, port = value[len("tcp://"):].rstrip("/").rpartition(":")
+        try:
+            with socket.create_connection((host.strip("[]") or "127.0.0.1", int(port)), timeout=timeout):
+                pass
+        except ValueError:
+            raise ParameterError(f"--cluster {value!r}: the address needs a port, e.g. tcp://HOST:8786.") from None
+        except OSError as e:
+            raise unreachable(e) from None
     try:
         client = Client(value, timeout=timeout)
     except (OSError, TimeoutError) as e:
-        raise ParameterError(
-            f"cannot reach a Dask scheduler at {value} within {timeout:g} s ({type(e).__name__}); "
-            "check the address (dask scheduler prints it) and that the scheduler is running."
-        ) from None
+        raise unreachable(e) from None
     return client, client.close
 
 
