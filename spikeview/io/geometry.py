@@ -45,6 +45,8 @@ COMMON_ASPECTS: tuple[tuple[int, int], ...] = ((1, 1), (4, 3), (3, 2), (16, 9), 
 MAX_ASPECT = 4.0
 #: smallest side considered (pixels)
 MIN_SIDE = 8
+#: largest frame considered (bytes): 16 megapixels, far above any spike sensor (1 megapixel)
+MAX_FRAME_BYTES = 2 << 20
 #: bytes of the file read to measure the spatial score
 SAMPLE_BYTES = 8 << 20
 #: bytes folded at every candidate frame size to find the frame size
@@ -108,8 +110,8 @@ def _divisors(n: int) -> list[int]:
 def candidate_sizes(size: int) -> list[tuple[int, int]]:
     """Every ``(width, height)`` whose plain frames divide ``size`` bytes exactly.
 
-    Both sides at least :data:`MIN_SIDE` and an aspect ratio within :data:`MAX_ASPECT` (known
-    sensor sizes always included when they fit). Not ranked.
+    Both sides at least :data:`MIN_SIDE`, an aspect ratio within :data:`MAX_ASPECT`, frames of at
+    most :data:`MAX_FRAME_BYTES` (known sensor sizes always included when they fit). Not ranked.
     """
     out: set[tuple[int, int]] = {(w, h) for (w, h) in KNOWN_SIZES if size > 0 and size % (w * h // 8) == 0}
     if size <= 0:
@@ -117,7 +119,7 @@ def candidate_sizes(size: int) -> list[tuple[int, int]]:
     widths = _divisors(8 * size)  # every width is a divisor of 8·frame_bytes, hence of 8·size
     for fb in _divisors(size):
         pixels = 8 * fb
-        if pixels < MIN_SIDE * MIN_SIDE:
+        if pixels < MIN_SIDE * MIN_SIDE or fb > MAX_FRAME_BYTES:
             continue
         lo = max(MIN_SIDE, math.ceil(math.sqrt(pixels / MAX_ASPECT)))
         hi = math.isqrt(int(pixels * MAX_ASPECT))
@@ -197,7 +199,7 @@ def rate_vector(buf: np.ndarray, frame_bytes: int, budget: int = SAMPLE_BYTES, r
             packed = buf[a * frame_bytes:b * frame_bytes].reshape(b - a, frame_bytes)
             total += np.unpackbits(packed, axis=1, bitorder="little").sum(axis=0, dtype=np.uint32)
             count += b - a
-    return total / max(1, count)
+    return (total / max(1, count)).astype(np.float32)
 
 
 def pair_sums(rates: np.ndarray) -> np.ndarray:
@@ -302,7 +304,8 @@ def rank_geometries(buf: np.ndarray, *, limit: int | None = 8) -> list[GeometryG
     guesses: list[GeometryGuess] = []
     for rank, fb in enumerate(frame_order):
         group = []
-        measure = rank < 3 and (signal or rank == 0)
+        # the best frame size is measured; the next two only when small (they order the rest of the list)
+        measure = (rank == 0 and fb <= SAMPLE_BYTES) or (0 < rank < 3 and signal and fb <= SAMPLE_BYTES // 8)
         rates = pair_sums(rate_vector(buf, fb, SAMPLE_BYTES if rank == 0 else SAMPLE_BYTES // 8)) if measure else None
         lags = _Lags(rates) if rates is not None else None
         for w, h in by_fb[fb]:
