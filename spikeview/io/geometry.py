@@ -217,7 +217,7 @@ def pair_sums(rates: np.ndarray) -> np.ndarray:
 
 
 #: pixel pairs compared per lag (a fixed random subset: enough for three decimals, cheap at 1000×1000)
-_PAIRS = 1 << 17
+_PAIRS = 1 << 16
 
 
 class _Lags:
