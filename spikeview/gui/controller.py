@@ -205,6 +205,7 @@ class Controller(QtCore.QObject):
             self.play_timer.stop()
             self.request_degradation()
             self.request_rates()
+            self.request_tfi()  # every pane catches up with the tick playback stopped on
 
     # ------------------------------------------------------------------------------ playback
     def _play_tick(self) -> None:

@@ -673,7 +673,12 @@ def install_live(window: Any, backend: Any = None) -> LivePanel:
                      | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetFloatable
                      | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetClosable)
     if not window.restoreDockWidget(dock):
-        window.addDockWidget(QtCore.Qt.DockWidgetArea.LeftDockWidgetArea, dock)
+        below = getattr(window, "docks", {}).get("degradation")
+        if below is not None:  # a tab beside the degradation preview: the window still fits 1366×768
+            window.tabifyDockWidget(below, dock)
+            below.raise_()
+        else:
+            window.addDockWidget(QtCore.Qt.DockWidgetArea.LeftDockWidgetArea, dock)
     panel.dock = dock
 
     act = QtGui.QAction("Open &camera…", window)

@@ -26,6 +26,7 @@ from spikeview.gui.panels.export import ExportPanel
 from spikeview.gui.panels.guided import GuidedPanel
 from spikeview.gui.panels.rates import RatesPanel
 from spikeview.gui.panels.stream import StreamPanel
+from spikeview.gui.widgets import app_words
 from spikeview.gui.workers import Worker
 
 MAX_RECENT = 10
@@ -45,6 +46,10 @@ class NotificationBar(QtWidgets.QFrame):
         self.label = QtWidgets.QLabel()
         self.label.setWordWrap(True)
         self.label.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
+        # at most three lines (the whole text is in the tooltip): a long message must not push the docks
+        # and the status bar off a 768-pixel-high screen
+        self.label.setMaximumHeight(3 * self.label.fontMetrics().lineSpacing() + 4)
+        self.label.setSizePolicy(QtWidgets.QSizePolicy.Policy.Preferred, QtWidgets.QSizePolicy.Policy.Maximum)
         self.buttons = QtWidgets.QHBoxLayout()
         close = QtWidgets.QToolButton(text="✕")
         close.setAutoRaise(True)
@@ -72,6 +77,7 @@ class NotificationBar(QtWidgets.QFrame):
         colour = {"error": "#5a1f1f", "warning": "#574515", "info": "#1f3a57", "success": "#1f4a2a"}.get(kind, "#333")
         self.setStyleSheet(f"#notification {{ background: {colour}; border-radius: 3px; }} QLabel {{ color: #f0f0f0; }}")
         self.label.setText(text)
+        self.label.setToolTip(text)
         self.kind = kind
         self._set_shown(True)
 
@@ -182,7 +188,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.splitDockWidget(d["guided"], d["rates"], QtCore.Qt.Orientation.Horizontal)
         self.splitDockWidget(d["rates"], d["export"], QtCore.Qt.Orientation.Vertical)
         self.resizeDocks([d["stream"], d["guided"], d["rates"]], [820, 440, 420], QtCore.Qt.Orientation.Horizontal)
-        self.resizeDocks([d["stream"], d["degradation"]], [520, 430], QtCore.Qt.Orientation.Vertical)
+        self.resizeDocks([d["stream"], d["degradation"]], [450, 550], QtCore.Qt.Orientation.Vertical)
         self.resizeDocks([d["rates"], d["export"]], [620, 330], QtCore.Qt.Orientation.Vertical)
 
     def _restore_layout(self) -> None:
@@ -192,8 +198,10 @@ class MainWindow(QtWidgets.QMainWindow):
             state = None
         if isinstance(geo, QtCore.QByteArray):
             self.restoreGeometry(geo)
-        else:
-            self.resize(1700, 1000)
+        else:  # first start: large, but never larger than the screen (a 1366×768 laptop)
+            screen = QtGui.QGuiApplication.primaryScreen()
+            avail = screen.availableGeometry() if screen is not None else QtCore.QRect(0, 0, 1700, 1000)
+            self.resize(min(1700, avail.width()), min(1000, avail.height() - 30))
         if isinstance(state, QtCore.QByteArray):
             self.restoreState(state)
 
@@ -262,6 +270,8 @@ class MainWindow(QtWidgets.QMainWindow):
         for dock in self.docks.values():
             v.addAction(dock.toggleViewAction())
         v.addSeparator()
+        self._action(v, "&Fit images (reset zoom)", self.fit_images, "Ctrl+0",
+                     "Show the whole image in every pane again (double-click a pane for one group)", name="act_fit")
         self._action(v, "Reset layout", self.default_layout)
 
         h = mb.addMenu("&Help")
@@ -277,6 +287,7 @@ class MainWindow(QtWidgets.QMainWindow):
         c.alpha_history.connect(self.rates_panel.show_alpha_history)
         c.alpha_ready.connect(self.rates_panel.show_sequence_alpha)
         c.degradation_ready.connect(self.degradation_panel.show_result)
+        c.degradation_ready.connect(lambda view: self.guided_panel.show_knobs(view.knobs))
         c.guided_update.connect(self.guided_panel.show_update)
         c.guided_done.connect(self.guided_panel.show_result)
         c.guided_state.connect(self.guided_panel.set_state)
@@ -346,6 +357,8 @@ class MainWindow(QtWidgets.QMainWindow):
     def set_stream(self, stream: OpenedStream) -> None:
         """Make ``stream`` the session's stream (closing the previous file)."""
         old = self.session.stream
+        if self.notice.kind != "" and not self.controller.exporter.is_active():
+            self.notice.dismiss()  # messages about the previous capture (an export error…) no longer apply
         self.session.open_stream(stream)
         if old is not None and old is not stream and old.path is not None and old.path != stream.path:
             old.source.close()
@@ -355,8 +368,10 @@ class MainWindow(QtWidgets.QMainWindow):
         warnings = list(getattr(stream.source.info, "warnings", []) or [])
         msg = f"Opened {stream.label}: {stream.source.width}×{stream.source.height}, {stream.source.n_frames} ticks, CFA {stream.source.cfa or 'none'}."
         self.statusBar().showMessage(msg, 8000)
-        if warnings:
-            self.notice.show_message(f"{stream.label}: " + " ".join(warnings), "warning")
+        if warnings:  # each reader warning already starts with the file name: say it once
+            label = f"{stream.label}: "
+            text = " ".join(w[len(label):] if w.startswith(label) else w for w in warnings)
+            self.notice.show_message(app_words(label + text), "warning")
         self.stream_opened.emit(stream)
 
     def ask_stream_settings(self, path: Path, initial: dict[str, Any] | None = None,
@@ -510,8 +525,22 @@ class MainWindow(QtWidgets.QMainWindow):
         if not out:
             self.show_error("Choose an output file in the Export panel first.")
             return
-        if self.controller.start_export(out):
+        existing = existing_outputs(out)
+        if existing and not self.ask_overwrite(Path(out), existing):
+            self.statusBar().showMessage("Export not started: the existing files are kept.", 8000)
+            return
+        if self.controller.start_export(out, overwrite=bool(existing)):
             self.settings.setValue("last_export_dir", str(Path(out).parent))
+
+    def ask_overwrite(self, out: Path, existing: list[Path]) -> bool:
+        """Ask before replacing files (tests replace this method)."""
+        what = existing[0].name if len(existing) == 1 else f"{len(existing)} files named like {existing[0].name}"
+        answer = QtWidgets.QMessageBox.question(
+            self, "Replace existing files?", f"{what} already exist{'s' if len(existing) == 1 else ''} in {out.parent}. "
+            "Replace them with this export?",
+            QtWidgets.QMessageBox.StandardButton.Yes | QtWidgets.QMessageBox.StandardButton.Cancel,
+            QtWidgets.QMessageBox.StandardButton.Cancel)
+        return answer == QtWidgets.QMessageBox.StandardButton.Yes
 
     def _on_export_done(self, paths: list[Path]) -> None:
         if not paths:
@@ -526,6 +555,7 @@ class MainWindow(QtWidgets.QMainWindow):
     # ------------------------------------------------------------------------------ messages
     def show_error(self, message: str, dialog_title: str | None = None) -> None:
         """Show an error in the notification strip (never modal, never a crash) and the status bar."""
+        message = app_words(message)
         self.notice.show_message(message, "error")
         self.statusBar().showMessage(message.splitlines()[0], 10000)
 
@@ -548,6 +578,13 @@ class MainWindow(QtWidgets.QMainWindow):
         self.notice.show_message(
             f"spikeview {__version__} — viewer, simulator and zero-shot guided reconstruction for chromatic spike cameras. "
             "GPL-3.0-or-later (FFDNet weights GPL-3.0).", "info")
+
+    def fit_images(self) -> None:
+        """View ▸ Fit images (reset zoom): every image pane shows its whole image again."""
+        from spikeview.gui.widgets import ImagePane
+
+        for pane in self.findChildren(ImagePane):
+            pane.reset_zoom()
 
     # ------------------------------------------------------------------------------ session → window
     def _on_source(self) -> None:
@@ -615,6 +652,26 @@ class MainWindow(QtWidgets.QMainWindow):
         if st is not None and st.path is not None:
             st.source.close()
         super().closeEvent(ev)
+
+
+def existing_outputs(out: str | os.PathLike[str]) -> list[Path]:
+    """Files an export to ``out`` could replace: ``out`` itself, or for a ``name_%04d.png`` pattern every
+    file in its folder that fits the pattern (whatever the frame numbers)."""
+    import re
+
+    out = Path(out)
+    if "%" not in out.name:
+        return [out] if out.exists() else []
+    parts = re.split(r"%0?(\d*)d", out.name.replace("%%", "\0"), maxsplit=1)
+    if len(parts) != 3:
+        return []
+    head, width, tail = (p.replace("\0", "%") for p in parts)
+    digits = rf"\d{{{width},}}" if width else r"\d+"
+    rx = re.compile(re.escape(head) + digits + re.escape(tail) + "$")
+    try:
+        return sorted(p for p in out.parent.iterdir() if rx.match(p.name))
+    except OSError:
+        return []
 
 
 def _only(d: dict[str, Any], *keys: str) -> dict[str, Any]:

@@ -17,6 +17,32 @@ from PySide6 import QtCore, QtGui, QtWidgets
 from spikeview.errors import ParameterError
 from spikeview.gui.model import SPECS, Session
 
+# ------------------------------------------------------------------------------------ messages
+
+#: command-line words in messages from the core, and what the app calls the same thing
+_APP_WORDS = (
+    ("check --layout, --width and --height", "check the array layout, width and height"),
+    ("check --width and --height", "check the width and height (the sidecar FILE.toml beside the capture sets "
+                                   "them; without one, File ▸ Open… asks)"),
+    ("drop --width/--height or change --format", "change the width, height or format"),
+    ("pass --format, --width and --height to be explicit", "choose the format, width and height in the Open dialog"),
+    ("pass --width and --height (and --format if it is not plain)", "choose the width and height in the Open dialog"),
+    ("check --format", "check the file format"),
+    ("--tag-check lenient (tag_check='lenient')", "lenient tag checking (tag_check = \"lenient\" in the sidecar)"),
+)
+
+
+def app_words(message: str) -> str:
+    """``message`` with the command-line flags the core names replaced by what the app shows.
+
+    The core (readers, writers) speaks the command line's language ("check --width and --height");
+    in the app the same advice must name controls and menus that exist.
+    """
+    for cli, app in _APP_WORDS:
+        message = message.replace(cli, app)
+    return message
+
+
 # ------------------------------------------------------------------------------------- images
 
 
@@ -49,6 +75,15 @@ class ImagePane(QtWidgets.QWidget):
         lay.addWidget(self.title)
         lay.addWidget(self.view, 1)
         self._shape: tuple[int, ...] | None = None
+        #: panes that zoom and pan together (see :meth:`link`); they share one fit state
+        self._group: list[ImagePane] = [self]
+        #: while True the view shows the whole image and follows size changes; a zoom or pan by the user
+        #: ends it, :meth:`reset_zoom` (double-click) brings it back
+        self.fit = True
+        self.vb.sigRangeChangedManually.connect(self._user_zoomed)
+        self.vb.sigResized.connect(self._resized)
+        self.view.setToolTip("Wheel: zoom · drag: pan · double-click: fit the whole image")
+        self.view.mouseDoubleClickEvent = self._double_click  # type: ignore[method-assign]
 
     def set_image(self, img: np.ndarray | None, extent: tuple[int, int] | None = None) -> None:
         """Show ``img`` (uint8) with levels (0, 255); ``None`` clears the pane.
@@ -68,7 +103,44 @@ class ImagePane(QtWidgets.QWidget):
         self.item.setRect(QtCore.QRectF(0, 0, w, h))
         if self._shape != (h, w):
             self._shape = (h, w)
-            self.vb.autoRange(padding=0.01)
+            if self.fit or not any(p is not self and p._shape == (h, w) for p in self._group):
+                self.fit_view()  # a new frame size: the old zoom means nothing
+
+    # --- zoom: fit unless the user zoomed --------------------------------------------------
+    def fit_view(self) -> None:
+        """Show the whole image (the panes linked to this one follow)."""
+        if self._shape is None or not self.isVisible() or self.vb.width() < 2 or self.vb.height() < 2:
+            return  # hidden or not laid out yet: done on the next resize
+        h, w = self._shape
+        self.vb.setRange(QtCore.QRectF(0, 0, w, h), padding=0.01)
+
+    def reset_zoom(self) -> None:
+        """Back to fitting the whole image, for this pane and the ones linked to it."""
+        for p in self._group:
+            p.fit = True
+        for p in self._group:
+            p.fit_view()
+
+    def covers_image(self) -> bool:
+        """Whether the view shows the whole image and the image fills at least half of it (tests, asserts)."""
+        if self._shape is None:
+            return True
+        h, w = self._shape
+        (x0, x1), (y0, y1) = self.vb.viewRange()
+        whole = x0 <= 0.5 and y0 <= 0.5 and x1 >= w - 0.5 and y1 >= h - 0.5
+        return whole and max(w / (x1 - x0), h / (y1 - y0)) >= 0.5
+
+    def _user_zoomed(self, *_: Any) -> None:
+        for p in self._group:
+            p.fit = False
+
+    def _resized(self, *_: Any) -> None:
+        if self.fit:
+            QtCore.QTimer.singleShot(0, self.fit_view)  # after the layout settles (linked views resize in turn)
+
+    def _double_click(self, ev: QtGui.QMouseEvent) -> None:
+        self.reset_zoom()
+        ev.accept()
 
     def display_factor(self) -> int:
         """How many frame pixels share one screen pixel now (1 when zoomed in)."""
@@ -84,8 +156,14 @@ class ImagePane(QtWidgets.QWidget):
         return self.item.image
 
     def link(self, other: ImagePane) -> None:
+        """Zoom and pan together with ``other`` (and everything linked to it)."""
         self.vb.setXLink(other.vb)
         self.vb.setYLink(other.vb)
+        group = other._group
+        for p in self._group:
+            if p not in group:
+                group.append(p)
+            p._group = group
 
     def set_title(self, text: str) -> None:
         self.title.setText(text)
@@ -131,7 +209,7 @@ class ParamSlider(QtWidgets.QWidget):
         self.spin.setKeyboardTracking(False)
         if spec.unit:
             self.spin.setSuffix(f" {spec.unit}")
-        self.spin.setMinimumWidth(84)
+        self.spin.setMinimumWidth(72)
         lay = QtWidgets.QHBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
         lay.addWidget(self.label)

@@ -1,18 +1,20 @@
 """Degradation preview panel: the forward model operator by operator, beside the observation.
 
-Shows the current reconstruction X, then M X (mosaic), C M X (colour cast η/α), Q(C M X) (soft
-quantisation with sharpness k onto the Δτ-tick grid), the observed TFP Y and the residual
-Y − Q(C M X) (optionally per Laplacian pyramid level). Changing k, η, L or Δτ recomputes at once.
+Shows the stages of the very forward model the guided sampler runs on this window (its data term:
+the plan's M, C and Q, the noise weights and the pyramid): the current reconstruction X, M X, C M X,
+A X = Q(C M X) (Q only when the plan turns it on), the observed TFP Y and the noise-weighted residual
+√w̃ (Y − A X) (optionally per pyramid band). Changing k, η, L, Q or Δτ recomputes at once; a knob
+that cannot act on this window is disabled with the plan's reason.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from PySide6 import QtWidgets
+from PySide6 import QtCore, QtWidgets
 
 from spikeview.gui.core import RESIDUAL_RANGE
-from spikeview.gui.model import Session
+from spikeview.gui.model import SPECS, Session
 from spikeview.gui.widgets import (
     ImagePane,
     ParamCheck,
@@ -27,9 +29,16 @@ TITLES = {
     "cmx": "C M X (colour cast)",
     "qcmx": "Q(C M X) (quantised)",
     "y": "Y (observed TFP)",
-    "residual": f"Y − Q(C M X)  (±{RESIDUAL_RANGE:g})",
+    "residual": f"√w̃ (Y − A X), noise-weighted  (±{RESIDUAL_RANGE:g})",
 }
 MAX_BANDS = 7  # L ≤ 6 band-pass levels + the coarse residual
+#: what the panes area shows: all six stages, or fewer, larger panes to judge k and the residual by eye
+LAYOUTS = {
+    "all": ("All six stages", tuple(TITLES)),
+    "compare": ("Q(C M X) beside Y", ("qcmx", "y")),
+    "residual": ("Y beside the residual", ("y", "residual")),
+    "x": ("X beside Y", ("x", "y")),
+}
 
 
 class DegradationPanel(QtWidgets.QWidget):
@@ -37,12 +46,19 @@ class DegradationPanel(QtWidgets.QWidget):
         super().__init__(parent)
         self.session = session
         self.panes = {k: ImagePane(t, min_size=90) for k, t in TITLES.items()}
-        grid = QtWidgets.QGridLayout()
+        self.grid = grid = QtWidgets.QGridLayout()
         grid.setSpacing(2)
-        for i, k in enumerate(TITLES):
-            grid.addWidget(self.panes[k], i // 3, i % 3)
+        for k in TITLES:
             if k != "x":
                 self.panes[k].link(self.panes["x"])
+        self.layout_combo = QtWidgets.QComboBox(objectName="degradation_layout")
+        for key, (text, _keys) in LAYOUTS.items():
+            self.layout_combo.addItem(text, key)
+        self.layout_combo.setToolTip("Show all stages, or two large panes side by side")
+        self.layout_combo.currentIndexChanged.connect(lambda _i: self.set_layout(self.layout_combo.currentData()))
+        self.fit_btn = QtWidgets.QToolButton(text="Fit", objectName="degradation_fit")
+        self.fit_btn.setToolTip("Reset the zoom: show the whole image in every pane (or double-click a pane)")
+        self.fit_btn.clicked.connect(self.reset_zoom)
         self.bands = [ImagePane(f"level {i}", min_size=60) for i in range(MAX_BANDS)]
         self.band_box = QtWidgets.QWidget()
         bl = QtWidgets.QHBoxLayout(self.band_box)
@@ -72,15 +88,50 @@ class DegradationPanel(QtWidgets.QWidget):
         lay.addLayout(grid, 3)
         lay.addWidget(self.band_box, 1)
         lay.addLayout(controls)
-        lay.addWidget(self.info)
+        bottom = QtWidgets.QHBoxLayout()
+        bottom.addWidget(self.info, 1)
+        self.info.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored, QtWidgets.QSizePolicy.Policy.Preferred)
+        bottom.addWidget(QtWidgets.QLabel("Show"))
+        bottom.addWidget(self.layout_combo)
+        bottom.addWidget(self.fit_btn)
+        lay.addLayout(bottom)
         subscribe(self, session.events.param_changed, self._on_param)
         subscribe(self, session.events.source_changed, self._on_source)
+        subscribe(self, session.events.playback_changed, self._on_playback)
         self.last: Any = None
         self.updates = 0
+        self.set_layout("all")
+
+    # ------------------------------------------------------------------------------ view
+    def set_layout(self, key: str) -> None:
+        """Arrange the panes: ``"all"`` six in a 3 × 2 grid, or two large ones (see :data:`LAYOUTS`)."""
+        keys = LAYOUTS[key][1]
+        for p in self.panes.values():
+            self.grid.removeWidget(p)
+            p.setVisible(False)
+        cols = 3 if len(keys) > 2 else 2
+        for i, k in enumerate(keys):
+            self.grid.addWidget(self.panes[k], i // cols, i % cols)
+            self.panes[k].setVisible(True)
+        for c in range(3):
+            self.grid.setColumnStretch(c, 1 if c < cols else 0)
+        with QtCore.QSignalBlocker(self.layout_combo):
+            self.layout_combo.setCurrentIndex(self.layout_combo.findData(key))
+        self.reset_zoom()
+
+    def reset_zoom(self) -> None:
+        """Show the whole image in every pane again (after the user zoomed or panned)."""
+        self.panes["x"].reset_zoom()
+        for b in self.bands:
+            b.reset_zoom()
 
     def _on_source(self) -> None:
         for p in list(self.panes.values()) + self.bands:
             p.set_image(None)
+
+    def _on_playback(self, playing: bool) -> None:
+        if playing and self.last is not None:  # the preview stays on its tick while the stream plays: say so
+            self.info.setText(f"Preview of tick {self.last.tick}; it follows the stream when playback pauses.")
 
     def _on_param(self, name: str, value: Any) -> None:
         if name == "show_pyramid":
@@ -103,6 +154,10 @@ class DegradationPanel(QtWidgets.QWidget):
                 pane.set_title(f"level {i}" + (" (low-pass)" if i == len(r.bands) - 1 else ""))
             else:
                 pane.setVisible(False)
+        for path, control in (("guided.k", self.k), ("guided.levels", self.levels)):
+            why = getattr(view, "knobs", {}).get(path)
+            control.setEnabled(why is None)
+            control.setToolTip(SPECS[path.split(".")[1]].help if why is None else f"No effect on this window: {why}.")
         p = self.session.params
         h, w = view.shape
         self.info.setText(f"tick {view.tick} · {w}×{h} · Δτ = {p['window']} · k = {p['k']:g} · η = {p['eta']:g} · "

@@ -118,6 +118,9 @@ class ExportPanel(QtWidgets.QWidget):
         if stream is not None and stream.path is not None:
             self.folder = stream.path.parent
         self._auto_name = True
+        if not self.cancel_btn.isEnabled():  # a finished or failed export of the previous capture: forget it
+            self.status.setText("")
+            self.status.setStyleSheet("")
         self.refresh()
 
     def _on_tick(self, _tick: int) -> None:
@@ -157,6 +160,9 @@ class ExportPanel(QtWidgets.QWidget):
             self.slowmo.setText("")
             return
         self.count.setText(f"{n} frame(s), centre ticks {ticks[0]}…{ticks[-1]}" if n > 1 else f"1 frame at tick {ticks[0]}")
+        if not self.cancel_btn.isEnabled():  # idle: the bar reads 0 / the frames this export would write
+            self.progress.setRange(0, max(n, 1))
+            self.progress.setValue(0)
         try:
             from spikeview.export import describe_slow_motion, slow_motion_factor
 

@@ -168,6 +168,8 @@ class GuidedPanel(QtWidgets.QWidget):
     def _on_param(self, name: str, value: Any) -> None:
         if name == "t_start":
             self.t_note.setText(f"σ = {255 * value:.0f}/255")
+        elif name == "steps" and not self.cancel_btn.isEnabled():  # idle: a run sets its own range
+            self._idle_progress()
         elif name == "model_path":
             self.model_path.setText(value)
         elif name == "prior":
@@ -186,6 +188,15 @@ class GuidedPanel(QtWidgets.QWidget):
         self.metrics_box.setVisible(sim)
         self.preview.set_image(None)
         self.plan.setPlainText("")
+        # nothing of the previous capture's runs stays on screen (issue 10: its run and PSNR stayed)
+        self.clear_curves()
+        self.status.setText("Idle.")
+        self.status.setStyleSheet("")
+        self._idle_progress()
+
+    def _idle_progress(self) -> None:
+        """Idle, the bar reads 0 / (the steps set), not Qt's default 0 / 100."""
+        self.progress.setRange(0, max(int(self.session.get("steps")), 1))
         self.progress.setValue(0)
 
     def _browse_model(self) -> None:

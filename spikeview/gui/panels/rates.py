@@ -93,7 +93,8 @@ class RatesPanel(QtWidgets.QWidget):
         where = "ROI" if s.roi is not None else "frame"
         means = "  ".join(f"{k} {v:.3f}" for k, v in r.means.items())
         alpha = ", ".join(f"{a:.2f}" for a in r.alpha)
-        self.summary.setText(f"Mean SFR ({where}, tick {r.tick}): {means}   ·   window α = ({alpha})")
+        note = " (refreshed 4×/s while playing)" if s.playing else ""
+        self.summary.setText(f"Mean SFR ({where}, tick {r.tick}{note}): {means}   ·   window α = ({alpha})")
         self.hint.setText(cfa_hint(r.means))
 
     def show_alpha_history(self, data: tuple[np.ndarray, np.ndarray]) -> None:
@@ -127,7 +128,7 @@ def cfa_hint(means: dict[str, float]) -> str:
         return ""
     if abs(gr - gb) / g > 0.25:
         return (f"The two green sites differ by {100 * abs(gr - gb) / g:.0f} %: the CFA phase or the vertical flip is "
-                "probably wrong (Stream ▸ Settings…).")
+                "probably wrong (File ▸ Stream settings (CFA, flip)…).")
     if g < min(r, b):
-        return "The green sites are darker than red and blue: the CFA is probably wrong (try another pattern in Stream ▸ Settings…)."
+        return "The green sites are darker than red and blue: the CFA is probably wrong (try another pattern in File ▸ Stream settings (CFA, flip)…)."
     return ""

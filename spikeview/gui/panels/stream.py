@@ -60,6 +60,7 @@ class StreamPanel(QtWidgets.QWidget):
         self.tfp.link(self.raw)
         self.tfi.link(self.raw)
         self.roi_item: pg.RectROI | None = None
+        self.tfi_tick: int | None = None
         self._factor = 1
         self._factor_timer = QtCore.QTimer(self, singleShot=True, interval=150)
         self._factor_timer.timeout.connect(self._check_factor)
@@ -85,7 +86,7 @@ class StreamPanel(QtWidgets.QWidget):
         self.scrub.valueChanged.connect(lambda v: session.set_tick(v))
         self.time_label = QtWidgets.QLabel()
         self.time_label.setObjectName("time")
-        self.time_label.setMinimumWidth(250)
+        self.time_label.setMinimumWidth(200)
         self.time_label.setFont(QtGui.QFontDatabase.systemFont(QtGui.QFontDatabase.SystemFont.FixedFont))
         transport = QtWidgets.QHBoxLayout()
         for w in (self.home_btn, self.back_btn, self.play_btn, self.fwd_btn, self.end_btn):
@@ -95,6 +96,8 @@ class StreamPanel(QtWidgets.QWidget):
 
         # --- playback options, window, marks
         self.speed = ParamCombo(session, "speed", SPEED_TEXT)
+        self.speed.setSizeAdjustPolicy(QtWidgets.QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
+        self.speed.setMinimumContentsLength(7)  # the list shows the full names
         self.slowmo = ParamSpin(session, "slowmo")
         self.slowmo.spin.setPrefix("N = ")
         self.loop = ParamCheck(session, "loop")
@@ -109,6 +112,7 @@ class StreamPanel(QtWidgets.QWidget):
         self.tfi_check.setChecked(True)
         self.tfi_check.setToolTip("Compute the TFI preview (costs time on large frames)")
         self.tfi_check.toggled.connect(self.tfi.setVisible)
+        # two rows, so that the panel fits beside the others on a 1366-pixel-wide screen
         options = QtWidgets.QHBoxLayout()
         options.addWidget(QtWidgets.QLabel("Speed"))
         options.addWidget(self.speed)
@@ -116,13 +120,15 @@ class StreamPanel(QtWidgets.QWidget):
         options.addWidget(self.loop)
         options.addSpacing(10)
         options.addWidget(QtWidgets.QLabel("Window Δτ"))
-        options.addWidget(self.window)
-        options.addSpacing(10)
-        for w in (self.mark_in, self.mark_out, self.mark_clear, self.marks_label):
-            options.addWidget(w)
-        options.addStretch(1)
-        options.addWidget(self.tfi_check)
-        options.addWidget(self.roi_btn)
+        options.addWidget(self.window, 1)
+        marks = QtWidgets.QHBoxLayout()
+        marks.addWidget(QtWidgets.QLabel("Range"))
+        for w in (self.mark_in, self.mark_out, self.mark_clear):
+            marks.addWidget(w)
+        marks.addWidget(self.marks_label, 1)
+        self.marks_label.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored, QtWidgets.QSizePolicy.Policy.Preferred)
+        marks.addWidget(self.tfi_check)
+        marks.addWidget(self.roi_btn)
 
         # --- display
         self.black = ParamSlider(session, "black", label="Black")
@@ -143,6 +149,7 @@ class StreamPanel(QtWidgets.QWidget):
         lay.addLayout(images, 1)
         lay.addLayout(transport)
         lay.addLayout(options)
+        lay.addLayout(marks)
         lay.addLayout(display)
 
         ev = session.events
@@ -164,6 +171,7 @@ class StreamPanel(QtWidgets.QWidget):
         self.window.spin.setMaximum(max(1, min(4096, s.n_frames or 4096)))
         for pane in (self.raw, self.tfp, self.tfi):
             pane.set_image(None)
+        self.tfi_tick = None
         self._on_tick(s.tick)
         self._on_marks(s.mark_in, s.mark_out)
         self._on_roi(s.roi)
@@ -221,7 +229,10 @@ class StreamPanel(QtWidgets.QWidget):
     def show_tfi(self, tick: int, img: Any, shape: tuple[int, int]) -> None:
         """Show the TFI pane (computed on its own thread; during playback it may trail the others)."""
         self.tfi.set_image(img, shape)
-        self.tfi.set_title(f"TFI at tick {tick}  (±{int(self.session.get('tfi_half_window'))} ticks)")
+        #: the tick the TFI pane shows (during playback it is refreshed a few times a second, so it trails)
+        self.tfi_tick = int(tick)
+        note = "  · refreshed 5×/s while playing" if self.session.playing else ""
+        self.tfi.set_title(f"TFI at tick {tick}  (±{int(self.session.get('tfi_half_window'))} ticks){note}")
 
     # ------------------------------------------------------------------------------ ROI
     def _toggle_roi(self, on: bool) -> None:
