@@ -3,8 +3,9 @@
 What it measures:
 
 * **accuracy** — for smooth synthetic captures of many sizes (Bayer RGGB with the simulator's
-  spectral gains, and monochrome; Bernoulli spikes per tick from a fixed rate image) and one
-  capture from the simulator's demo scene, the rank of the true ``width × height`` in
+  spectral gains, and monochrome; Bernoulli spikes per tick from a fixed rate image) and captures
+  from the project's simulator (its demo scene, and a still image panning at 300 px/s, with the
+  realistic noise model), the rank of the true ``width × height`` in
   :func:`spikeview.io.geometry.rank_plain_geometries`, against the size-only list the project
   used before (:func:`spikeview.io.plain_geometry_candidates`: known sizes, then common aspect
   ratios, largest first) as the baseline;
@@ -65,18 +66,32 @@ def accuracy(tmp: Path) -> tuple[list[str], int, int, int]:
             rows.append(f"| {w}×{h} | {'RGGB' if cfa else 'mono'} | {ticks} | {r} | {ranked[0][0]}×{ranked[0][1]} | "
                         f"{b} | {dt * 1e3:.0f} |")
             path.unlink()
-    # one capture from the simulator (demo scene, realistic noise, RGGB)
-    from spikeview.sim import SimConfig, demo_scene, simulate_to_file
+    # captures from the simulator (realistic noise, integrate-and-fire): the demo scene, and a panning still
+    from test_geometry_guess import still_image
 
-    files = simulate_to_file(demo_scene(size=96, seed=1), SimConfig(n_ticks=200, width=96, height=96, seed=1),
-                             tmp / "sim.dat")
-    ranked = [g.size for g in rank_plain_geometries(files.dat, limit=None)]
-    base = plain_geometry_candidates(files.dat.stat().st_size)
-    r, b = rank_of(ranked, (96, 96)), rank_of(base, (96, 96))
-    first += r == "1"
-    base_first += b == "1"
-    total += 1
-    rows.append(f"| 96×96 (simulator, demo scene) | RGGB | 200 | {r} | {ranked[0][0]}×{ranked[0][1]} | {b} | – |")
+    from spikeview.sim import MotionScene, SimConfig, demo_scene, simulate_to_file
+
+    still = still_image(tmp / "still.png")
+    for i, (w, h, ticks, cfa) in enumerate([(96, 96, 200, "demo"), (128, 96, 200, "RGGB"), (96, 128, 200, "none"),
+                                            (160, 120, 200, "RGGB"), (320, 240, 60, "none"), (250, 400, 40, "RGGB"),
+                                            (250, 400, 40, "none"), (64, 64, 400, "RGGB")]):
+        if cfa == "demo":
+            scene, cfg = demo_scene(size=w, seed=1), SimConfig(n_ticks=ticks, width=w, height=h, seed=1)
+        else:
+            scene = MotionScene(still, (h, w), pan=(300.0, 100.0))
+            cfg = SimConfig(n_ticks=ticks, width=w, height=h, cfa=cfa, seed=1)
+        files = simulate_to_file(scene, cfg, tmp / f"sim{i}.dat")
+        t0 = time.perf_counter()
+        ranked = [g.size for g in rank_plain_geometries(files.dat, limit=None)]
+        dt = time.perf_counter() - t0
+        base = plain_geometry_candidates(files.dat.stat().st_size)
+        r, b = rank_of(ranked, (w, h)), rank_of(base, (w, h))
+        first += r == "1"
+        base_first += b == "1"
+        total += 1
+        what = "demo scene" if cfa == "demo" else "panning still"
+        rows.append(f"| {w}×{h} (simulator, {what}) | {'RGGB' if cfa != 'none' else 'mono'} | {ticks} | {r} | "
+                    f"{ranked[0][0]}×{ranked[0][1]} | {b} | {dt * 1e3:.0f} |")
     return rows, first, base_first, total
 
 
