@@ -115,6 +115,18 @@ def test_second_chunk_depends_on_its_lead_in(cap):
     assert not np.array_equal(chained, alone)
 
 
+@pytest.mark.parametrize("method, first", [("tfp", 15), ("guided", 0)])
+def test_a_task_carries_only_its_windows_and_lead_in(method, first):
+    from spikeview.cluster.run import BatchJob
+
+    job = BatchJob(input="x", open_kwargs={}, recipe={"run": {"method": method}}, centres=tuple(range(5, 405, 10)),
+                   chunk=3, store="s")
+    sub = job.for_chunk(5)  # windows 15-17; a guided chain restarts at the keyframe 0
+    assert (sub.offset, sub.total, sub.n_chunks, sub.bounds(5)) == (first, 40, 14, (15, 18))
+    assert sub.centres == job.centres[first:18]
+    assert job.for_chunk(13).centres[-1] == 395  # the last, short chunk (window 39)
+
+
 def test_killed_worker_is_retried_and_the_run_completes(cap, tmp_path, cluster):
     from spikeview.cli import batch
 

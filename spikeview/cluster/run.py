@@ -39,16 +39,19 @@ RETRIES = 2
 
 @dataclasses.dataclass(frozen=True)
 class BatchJob:
-    """Everything a worker needs for any chunk (small: it travels with every task).
+    """What the workers need (each task gets :meth:`for_chunk`: only its own windows' ticks).
 
     Attributes:
         input: absolute path of the spike file, readable by every worker.
         open_kwargs: :func:`spikeview.io.open_source` arguments (format, geometry, CFA, flips…).
         recipe: the preset tables (``run``, ``stream``, ``classical`` / ``guided``, ``export``).
-        centres: centre tick of every window, in output order.
+        centres: centre ticks of windows ``offset, offset + 1, …`` in output order (all of them in
+            the driver's job; a task's own windows and lead-in in :meth:`for_chunk`).
         chunk: windows per work chunk (= the Zarr chunk along the window axis).
         store: absolute path of the ``.zarr`` store.
         keyframe: guided reuse / warm-start chains restart at window indices that are multiples of it.
+        offset: index of the window ``centres[0]`` is the centre of.
+        n_windows: windows of the whole run (``None``: ``len(centres)``).
     """
 
     input: str
@@ -58,19 +61,33 @@ class BatchJob:
     chunk: int
     store: str
     keyframe: int = DEFAULT_KEYFRAME
+    offset: int = 0
+    n_windows: int | None = None
+
+    @property
+    def total(self) -> int:
+        return len(self.centres) if self.n_windows is None else self.n_windows
 
     @property
     def n_chunks(self) -> int:
-        return -(-len(self.centres) // self.chunk)
+        return -(-self.total // self.chunk)
 
     def bounds(self, index: int) -> tuple[int, int]:
         """Window indices ``[lo, hi)`` of work chunk ``index``."""
         lo = index * self.chunk
-        return lo, min(lo + self.chunk, len(self.centres))
+        return lo, min(lo + self.chunk, self.total)
 
     def chain_start(self, lo: int) -> int:
         """First window to compute for a chunk starting at ``lo``: the previous keyframe when windows chain."""
         return (lo // self.keyframe) * self.keyframe if chained(self.recipe) else lo
+
+    def for_chunk(self, index: int) -> BatchJob:
+        """The job a task of chunk ``index`` needs: the ticks of its windows and lead-in only (a 20,000-window
+        run would otherwise send every task all 20,000 ticks through the scheduler)."""
+        lo, hi = self.bounds(index)
+        start = self.chain_start(lo)
+        return dataclasses.replace(self, centres=self.centres[start - self.offset:hi - self.offset], offset=start,
+                                   n_windows=self.total)
 
 
 @dataclasses.dataclass
@@ -145,7 +162,8 @@ def run_chunk(job: BatchJob, index: int, state: dict[str, Any], topic: str | Non
             last[0] = time.perf_counter()
             get_worker().log_event(topic, {"chunk": index, "done": k})
 
-    frames = compute_chunk(source, job.centres[start:hi], job.recipe, state_from_attrs(state), sampler=sampler,
+    frames = compute_chunk(source, job.centres[start - job.offset:hi - job.offset], job.recipe, state_from_attrs(state),
+                           sampler=sampler,
                            on_window=window_done)
     frames = frames[lo - start:]
     seconds = time.perf_counter() - t0
@@ -297,7 +315,7 @@ def run_batch(job: BatchJob, state: Any, *, cluster: str | None = None,
 
         try:
             for i in pending:
-                finished(run_chunk(job, i, sd, on_window=partial))
+                finished(run_chunk(job.for_chunk(i), i, sd, on_window=partial))
                 if cancel is not None and cancel():
                     raise Cancelled()
         finally:
@@ -319,7 +337,8 @@ def run_batch(job: BatchJob, state: Any, *, cluster: str | None = None,
             partial(int(msg["chunk"]), int(msg["done"]))
 
     client.subscribe_topic(topic, on_event)
-    futures = [client.submit(run_chunk, job, i, sd, topic, pure=False, retries=RETRIES, key=f"spikeview-chunk-{i}-{token}")
+    futures = [client.submit(run_chunk, job.for_chunk(i), i, sd, topic, pure=False, retries=RETRIES,
+                             key=f"spikeview-chunk-{i}-{token}")
                for i in pending]
     try:
         for fut in as_completed(futures):
