@@ -137,12 +137,11 @@ def run_chunk(job: BatchJob, index: int, state: dict[str, Any], topic: str | Non
     from spikeview.cluster.store import write_chunk
 
     in_worker = _in_dask_worker()
-    if not _TORCH_THREADS_SET and in_worker:
-        # one task per worker thread: torch must not spawn its own pool on top (the "one thread each")
-        if job.recipe.get("run", {}).get("method") == "guided":
-            import torch
+    if not _TORCH_THREADS_SET and in_worker and job.recipe.get("run", {}).get("method") == "guided":
+        # one task per worker thread: torch must not start its own pool on top of the worker's threads
+        import torch
 
-            torch.set_num_threads(1)
+        torch.set_num_threads(1)
         _TORCH_THREADS_SET = True
     source, sampler = worker_resources(job.input, job.open_kwargs, job.recipe)
     lo, hi = job.bounds(index)
@@ -162,9 +161,8 @@ def run_chunk(job: BatchJob, index: int, state: dict[str, Any], topic: str | Non
             last[0] = time.perf_counter()
             get_worker().log_event(topic, {"chunk": index, "done": k})
 
-    frames = compute_chunk(source, job.centres[start - job.offset:hi - job.offset], job.recipe, state_from_attrs(state),
-                           sampler=sampler,
-                           on_window=window_done)
+    centres = job.centres[start - job.offset:hi - job.offset]
+    frames = compute_chunk(source, centres, job.recipe, state_from_attrs(state), sampler=sampler, on_window=window_done)
     frames = frames[lo - start:]
     seconds = time.perf_counter() - t0
     write_chunk(job.store, index, lo, frames, seconds)
