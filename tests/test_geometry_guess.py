@@ -141,3 +141,13 @@ def test_a_wrong_colour_filter_phase_is_reported(tmp_path, capsys):
                    for w in src.info.warnings), src.info.warnings
     assert main(["info", str(path), "--width", "128", "--height", "96", "--cfa", "GBRG"]) == 0
     assert "warning:     the two green sites of the GBRG filter" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_captures_with_given_settings_get_no_false_warning(tmp_path, seed):
+    rng = np.random.default_rng(seed)
+    h, w = (8, 8) if seed % 2 else (16, 24)
+    spikes = rng.random((int(rng.integers(2, 60)), h, w)) < rng.uniform(0.05, 0.9)
+    path = write_plain(tmp_path / "r.dat", spikes, sidecar=False)
+    with open_source(path, width=w, height=h, cfa="RGGB") as src:
+        assert src.info.warnings == [], src.info.warnings

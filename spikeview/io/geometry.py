@@ -419,12 +419,16 @@ def rate_warnings(src, *, check_width: bool = True) -> list[str]:
                    "row, which no sensor does; check --width, or pass --cfa none for a monochrome capture.")
     elif cfa is not None and not out:
         he, we = h - h % 2, w - w % 2
-        site = {(py, px): float(rates[py:he:2, px:we:2].mean()) for py in (0, 1) for px in (0, 1)}
+        sites = {(py, px): rates[py:he:2, px:we:2].ravel() for py in (0, 1) for px in (0, 1)}
+        site = {k: float(v.mean()) for k, v in sites.items()}
         g_pos = [p for p, c in zip(((0, 0), (0, 1), (1, 0), (1, 1)), cfa) if c == "G"]
         other = [p for p in site if p not in g_pos]
         g_imb = _imbalance(site[g_pos[0]], site[g_pos[1]])
         o_imb = _imbalance(site[other[0]], site[other[1]])
-        if g_imb > 0.1 and g_imb > 3 * o_imb:
+        # evidence, not chance: the difference must stand far above the spread of the site means
+        se = math.sqrt(sum(float(sites[p].var()) / max(1, sites[p].size) for p in g_pos))
+        z = abs(site[g_pos[0]] - site[g_pos[1]]) / se if se > 0 else 0.0
+        if g_imb > 0.1 and g_imb > 3 * o_imb and z > 8:
             names = ("GRBG or GBRG") if (0, 1) in g_pos else ("RGGB or BGGR")
             out.append(f"the two green sites of the {cfa_to_str(cfa)} filter fire at different rates "
                        f"({site[g_pos[0]]:.3f} and {site[g_pos[1]]:.3f} spikes per tick) while the other two fire "
