@@ -281,6 +281,9 @@ def test_export_store_to_npy_and_mp4_with_the_stores_settings(cap, tmp_path, cap
 
     rec = read_export_metadata(tmp_path / "f.npy")
     assert rec["method"] == "tfp" and rec["params"]["classical"]["window"] == 10
+    # the preset written beside the export re-runs the same frames through the plain file path
+    assert _reconstruct(cap, "--preset", tmp_path / "f.npy.preset.toml", "--out", tmp_path / "again.npy") == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "again.npy"), np.load(tmp_path / "f.npy"))
 
 
 def test_export_refuses_an_incomplete_store(cap, tmp_path, capsys):

@@ -33,7 +33,8 @@ def run(args: argparse.Namespace) -> int:
     from spikeview.cli.commands import progress
     from spikeview.cli.reconstruct import preset_path
     from spikeview.cluster.store import done_mask, open_store, store_attrs
-    from spikeview.export import ExportConfig, ExportMetadata, describe_slow_motion, open_exporter, slow_motion_factor
+    from spikeview.export import ExportMetadata, describe_slow_motion, open_exporter, slow_motion_factor
+    from spikeview.recipe import Recipe
 
     store = Path(args.store)
     if store.suffix.lower() != ".zarr":
@@ -44,20 +45,18 @@ def run(args: argparse.Namespace) -> int:
     if not done.all():
         raise ParameterError(f"{store.name} is incomplete ({int(done.sum())} of {done.size} chunks done); "
                              f"finish it with spikeview reconstruct {attrs.get('input', 'INPUT')} --out {store} --resume.")
-    recipe_text = attrs["recipe"]
-    recipe = tomllib.loads(recipe_text)
-    edict = dict(recipe.get("export", {}))
-    for key in ("fps", "compression"):
-        if getattr(args, key) is not None:
-            edict[key] = getattr(args, key)
-    ecfg = ExportConfig.from_dict(edict, where="export settings")
+    recipe = Recipe.from_dict(tomllib.loads(attrs["recipe"]), where=f"{store.name} (its recipe)")
+    overrides = {f"export.{k}": getattr(args, k) for k in ("fps", "compression") if getattr(args, k) is not None}
+    if overrides:
+        recipe = recipe.with_values(overrides, names={f"export.{k[7:]}": f"--{k[7:]}" for k in overrides})
+    ecfg = recipe.export
     method = attrs["method"]
     windows = group["window"][:]
     centres = group["centre_tick"][:]
     step = int(attrs["step"])
     meta = ExportMetadata(source=attrs["input"], method=method, tick_rate=float(attrs["tick_rate"]),
                           window=tuple(int(v) for v in windows[0]), centre_tick=int(centres[0]), step_ticks=step,
-                          params=recipe)
+                          params=recipe.to_dict())
     frames = group["frames"]
     n, h, w, c = frames.shape
     shape = (h, w, 3) if c == 3 else (h, w)
@@ -74,13 +73,6 @@ def run(args: argparse.Namespace) -> int:
                 ex.write(f if c == 3 else f[..., 0], window=tuple(int(v) for v in windows[lo + i]),
                          centre_tick=int(centres[lo + i]))
                 bar.update(1)
-    from spikeview._files import write_atomic
-
-    recipe_out = dict(recipe)
-    recipe_out["export"] = ecfg.to_dict()
-    import tomli_w
-
-    write_atomic(preset_path(out), f"# spikeview reconstruct preset for {attrs['input']}\n" + tomli_w.dumps(recipe_out),
-                 "the preset")
+    recipe.save(preset_path(out), header=f"# spikeview reconstruct preset for {attrs['input']}")
     print(f"wrote {n} frame{'s' if n != 1 else ''} to {out}; settings in {preset_path(out)}")
     return 0
