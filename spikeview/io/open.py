@@ -229,7 +229,11 @@ def _detect(path: Path, *, width: int | None, height: int | None,
             if not guesses or guesses[0].temporal <= 0:  # no scene in the spikes: nothing to add
                 pass
             elif guesses[0].size in geoms:  # list the one the spikes agree with first
-                geoms = [guesses[0].size, *(g for g in geoms if g != guesses[0].size)]
+                best = guesses[0]
+                geoms = [best.size, *(g for g in geoms if g != best.size)]
+                cands = sorted(cands, key=lambda c: (c[0] != "plain" or (c[1], c[2]) != best.size))
+                listed = "; ".join(f"--format {f} --width {w} --height {h}" for f, w, h in cands)
+                hint = f" (its spikes point to the first, {best.width}x{best.height} with {best.n_frames} ticks)"
             else:
                 # the spikes point elsewhere: offer that first
                 best = guesses[0]
