@@ -151,3 +151,11 @@ def test_random_captures_with_given_settings_get_no_false_warning(tmp_path, seed
     path = write_plain(tmp_path / "r.dat", spikes, sidecar=False)
     with open_source(path, width=w, height=h, cfa="RGGB") as src:
         assert src.info.warnings == [], src.info.warnings
+
+
+def test_a_size_that_fits_both_sensors_names_the_one_the_spikes_match(tmp_path):
+    path = write_capture(tmp_path / "c.dat", 400, 250, 40)  # 500,000 bytes: also four 1000x1000 frames
+    with pytest.raises(GeometryError, match="--width 400 --height 250; --format plain --width 1000.*point to the "
+                                            "first, 400x250 with 40 ticks") as e:
+        open_source(path)
+    assert e.value.candidates == [(400, 250), (1000, 1000)]
