@@ -162,6 +162,13 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     res["load_before"], res["load_after"] = load_before, _load()
+    try:
+        import subprocess
+
+        res["commit"] = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
+                                       text=True, timeout=10).stdout.strip()
+    except OSError:  # pragma: no cover - no git
+        res["commit"] = ""
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     res["args"] = vars(a)
@@ -249,7 +256,8 @@ def report(res: dict, a) -> str:
                       f"workers write about {64 * 12 / per:.0f} MB/s in total, 24 GB for the whole second, which the "
                       "shared file system must absorb. Reuse (on by default) makes mostly static scenes faster than "
                       "these figures."]
-    lines += ["", f"Machine: {res['machine']['platform']}, os.cpu_count() = {res['machine']['cpus']}, Python "
+    lines += ["", (f"Code: commit {res['commit']}. " if res.get("commit") else "")
+              + f"Machine: {res['machine']['platform']}, os.cpu_count() = {res['machine']['cpus']}, Python "
                   f"{res['machine']['python']}. **Shared with other jobs while measuring** (load average 1/5/15 min "
                   f"before {res['load_before']}, after {res['load_after']}): seconds are upper bounds; with 2 cores "
                   "and other engineers' jobs, `local:2` cannot show a clean 2×.", "",
