@@ -29,7 +29,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from spikeview.classical.config import ClassicalConfig
+from spikeview.classical_config import ClassicalConfig
 from spikeview.config import Config, load_toml
 from spikeview.errors import ParameterError
 from spikeview.export.settings import EXR_COMPRESSIONS, TRANSFERS, X264_PRESETS, ExportConfig

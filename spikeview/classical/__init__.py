@@ -5,42 +5,64 @@ Data flow for one frame (see :mod:`spikeview.classical.reconstruct`)::
     source ─► window_range ─► tfp / tfi ─► apply_colour_cast_mosaic ─► demosaic ─► to_display
               (ticks [a, b))  (H, W) SFR    (Y_c·α_c/η, α per sequence)  (H, W, 3)    uint8
 
-Everything here imports only numpy, scipy, numba and ``spikeview.io/cfa/errors/config``; the package
-exports are lazy, so ``spikeview.classical.config`` (the settings) loads without numba.
+Everything here imports only numpy, scipy, numba and ``spikeview.io/cfa/errors/config``.
 """
 
-from spikeview._lazy import lazy_exports
+from spikeview.classical.colour_cast import (
+    DEFAULT_ETA,
+    ColourCastWarning,
+    alpha_from_means,
+    alpha_from_sfr,
+    alpha_with_note,
+    apply_colour_cast,
+    apply_colour_cast_mosaic,
+    channel_means,
+    estimate_alpha,
+    sequence_channel_means,
+    site_rates,
+)
+from spikeview.classical.demosaic import DEMOSAIC_METHODS, demosaic
+from spikeview.classical.display import to_display, transfer
+from spikeview.classical.reconstruct import (
+    CLASSICAL_METHODS,
+    ClassicalConfig,
+    preview_rgb,
+    reconstruct_frame,
+    reconstruct_frames,
+    resolve_alpha,
+)
+from spikeview.classical.tfi import DEFAULT_HALF_WINDOW, tfi, tfi_array
+from spikeview.classical.tfp import counts_to_sfr, tfp, tfp_array, window_counts
+from spikeview.classical.windows import window_range
 
-_EXPORTS = {
-    "CLASSICAL_METHODS": "spikeview.classical.config",
-    "ClassicalConfig": "spikeview.classical.config",
-    "ColourCastWarning": "spikeview.classical.colour_cast",
-    "DEFAULT_ETA": "spikeview.classical.colour_cast",
-    "DEFAULT_HALF_WINDOW": "spikeview.classical.tfi",
-    "DEMOSAIC_METHODS": "spikeview.classical.demosaic",
-    "alpha_from_means": "spikeview.classical.colour_cast",
-    "alpha_from_sfr": "spikeview.classical.colour_cast",
-    "alpha_with_note": "spikeview.classical.colour_cast",
-    "apply_colour_cast": "spikeview.classical.colour_cast",
-    "apply_colour_cast_mosaic": "spikeview.classical.colour_cast",
-    "channel_means": "spikeview.classical.colour_cast",
-    "counts_to_sfr": "spikeview.classical.tfp",
-    "demosaic": "spikeview.classical.demosaic",
-    "estimate_alpha": "spikeview.classical.colour_cast",
-    "preview_rgb": "spikeview.classical.reconstruct",
-    "reconstruct_frame": "spikeview.classical.reconstruct",
-    "reconstruct_frames": "spikeview.classical.reconstruct",
-    "resolve_alpha": "spikeview.classical.reconstruct",
-    "sequence_channel_means": "spikeview.classical.colour_cast",
-    "site_rates": "spikeview.classical.colour_cast",
-    "tfi": "spikeview.classical.tfi",
-    "tfi_array": "spikeview.classical.tfi",
-    "tfp": "spikeview.classical.tfp",
-    "tfp_array": "spikeview.classical.tfp",
-    "to_display": "spikeview.classical.display",
-    "transfer": "spikeview.classical.display",
-    "window_counts": "spikeview.classical.tfp",
-    "window_range": "spikeview.classical.windows",
-}
-__all__ = sorted(_EXPORTS)
-__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
+__all__ = [
+    "CLASSICAL_METHODS",
+    "DEFAULT_ETA",
+    "DEFAULT_HALF_WINDOW",
+    "DEMOSAIC_METHODS",
+    "ClassicalConfig",
+    "ColourCastWarning",
+    "alpha_from_means",
+    "alpha_from_sfr",
+    "alpha_with_note",
+    "apply_colour_cast",
+    "apply_colour_cast_mosaic",
+    "channel_means",
+    "counts_to_sfr",
+    "demosaic",
+    "estimate_alpha",
+    "preview_rgb",
+    "reconstruct_frame",
+    "reconstruct_frames",
+    "resolve_alpha",
+    "sequence_channel_means",
+    "site_rates",
+    "tfi",
+    "tfi_array",
+    "tfp",
+    "tfp_array",
+    "to_display",
+    "transfer",
+    "window_counts",
+    "window_range",
+]

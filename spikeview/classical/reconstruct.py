@@ -31,7 +31,7 @@ from spikeview.classical.display import Gamma, _check_gamma, _check_levels, enco
 from spikeview.classical.tfi import DEFAULT_HALF_WINDOW, tfi
 from spikeview.classical.tfp import counts_to_sfr, tfp, window_counts
 from spikeview.classical.windows import window_range
-from spikeview.classical.config import CLASSICAL_METHODS, ClassicalConfig  # noqa: F401 (re-exported)
+from spikeview.classical_config import CLASSICAL_METHODS, ClassicalConfig  # noqa: F401 (re-exported)
 from spikeview.errors import ParameterError
 from spikeview.io.source import SpikeSource
 

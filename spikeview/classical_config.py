@@ -1,0 +1,82 @@
+"""Settings of the classical reconstructions (TFP/TFI), the ``[classical]`` table of a recipe.
+
+Light on purpose (no numba, no torch): the CLI builds its flags from these settings at start-up.
+The observation fields here (window Δτ, demosaic, colour cast, η, α) are shared with the guided
+sampler; their one home is this table (:mod:`spikeview.recipe`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from spikeview.config import Config
+from spikeview.errors import ParameterError
+
+#: η: after the gray-world correction each channel's sequence mean is ``1/η``
+DEFAULT_ETA = 2.0
+#: windows sampled from a long stream for the gray-world estimate
+DEFAULT_ALPHA_WINDOWS = 64
+#: TFI search half-window in ticks
+DEFAULT_HALF_WINDOW = 32
+#: demosaicking methods (one file each in :mod:`spikeview.classical.demosaic`)
+DEMOSAICS = ("auto", "bilinear", "malvar2004", "menon2007")
+
+#: valid values of :attr:`ClassicalConfig.method`
+CLASSICAL_METHODS = ("tfp", "tfi")
+
+
+@dataclasses.dataclass
+class ClassicalConfig(Config):
+    """Settings of a classical reconstruction (saved to / loaded from TOML).
+
+    Attributes:
+        method: ``"tfp"`` (spike count over a window) or ``"tfi"`` (inter-spike interval).
+        window: TFP window Δτ in ticks (10 ticks = 0.5 ms at 20 kHz, the SpikeDiff observation).
+        tfi_half_window: TFI search half-window in ticks (missing spikes cap the interval at twice it).
+        demosaic: ``"auto"`` (the plan's rule from the measured noise: bilinear where noise dominates,
+            Malvar-2004 where the window is clean or the prior denoises afterwards;
+            :func:`spikeview.guided.plan.choose_demosaic`), or one of ``"bilinear"``,
+            ``"malvar2004"``, ``"menon2007"`` (Bayer streams only).
+        colour_cast: undo the sensor's colour cast with gray-world gains (Bayer streams only;
+            monochrome frames are returned uncorrected).
+        eta: range parameter η: after correction each channel's sequence mean is ``1/η``.
+        alpha: fixed gray-world gains ``[α_R, α_G, α_B]``; ``None`` estimates them once per
+            sequence with :func:`estimate_alpha`.
+        alpha_window, alpha_max_windows: how :func:`estimate_alpha` samples the sequence.
+        clip: clip frames to ``[0, 1]`` (the package's frame convention); turn off to keep
+            values above 1 (bright regions after the gains) and Malvar/Menon overshoot.
+    """
+
+    method: str = "tfp"
+    window: int = 10
+    tfi_half_window: int = DEFAULT_HALF_WINDOW
+    demosaic: str = "auto"
+    colour_cast: bool = True
+    eta: float = DEFAULT_ETA
+    alpha: list[float] | None = None
+    alpha_window: int = 10
+    alpha_max_windows: int = DEFAULT_ALPHA_WINDOWS
+    clip: bool = True
+
+    def __post_init__(self) -> None:
+        self.method = str(self.method).strip().lower()
+        if self.method not in CLASSICAL_METHODS:
+            raise ParameterError(f"Unknown classical method {self.method!r}: use one of {', '.join(CLASSICAL_METHODS)}.")
+        if self.demosaic not in DEMOSAICS:
+            raise ParameterError(f"classical.demosaic = {self.demosaic!r} is not valid: use one of {', '.join(DEMOSAICS)}.")
+        from spikeview.recipe import check_table
+
+        check_table("classical", self)
+        for name in ("window", "tfi_half_window", "alpha_window", "alpha_max_windows"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ParameterError(f"{name} must be a whole number >= 1, got {value!r}; fix the setting.")
+        if not (np.isfinite(self.eta) and self.eta > 0):
+            raise ParameterError(f"eta must be a finite positive number, got {self.eta!r}; use e.g. {DEFAULT_ETA}.")
+        if self.alpha is not None:
+            a = [float(v) for v in self.alpha]
+            if len(a) != 3 or not all(np.isfinite(v) and v > 0 for v in a):
+                raise ParameterError(f"alpha must be three finite positive gains [R, G, B], got {self.alpha!r}; or leave it unset to estimate it.")
+            self.alpha = a
