@@ -494,9 +494,12 @@ def test_undo_shortcut_and_help(opened, qtbot):
     assert s.get("eta") == 2.0
     dlg = w.show_help()
     qtbot.waitUntil(dlg.isVisible)
-    table = dlg.findChild(QtWidgets.QTableWidget)
+    table = dlg.findChild(QtWidgets.QTableWidget, "shortcuts_table")
     keys = {table.item(i, 0).text() for i in range(table.rowCount())}
     assert {"Space", "Ctrl+O", "Ctrl+E", "F1", "Home / End"} <= keys
+    params = dlg.findChild(QtWidgets.QTableWidget, "parameters_help")  # every knob: control, flag, one sentence
+    rows = {params.item(i, 1).text(): params.item(i, 2).text() for i in range(params.rowCount())}
+    assert "ticks" in rows["--window"] and "Q is on" in rows["--k"] and "full scale" in rows["--t-start"]
     dlg.close()
 
 

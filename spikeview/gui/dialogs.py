@@ -223,6 +223,7 @@ class ShortcutsDialog(QtWidgets.QDialog):
         self.setWindowTitle("spikeview — keyboard shortcuts")
         self.setObjectName("shortcuts")
         table = QtWidgets.QTableWidget(len(SHORTCUTS), 2)
+        table.setObjectName("shortcuts_table")
         table.setHorizontalHeaderLabels(["Keys", "Action"])
         table.verticalHeader().setVisible(False)
         table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
