@@ -9,7 +9,9 @@ The batch path behind ``spikeview reconstruct INPUT --range A:B:STEP --out OUT.z
 * :mod:`spikeview.cluster.store` — the Zarr layout: ``frames`` (N, H, W, C) float32 in chunks of
   W windows, the window ticks, the recipe as attributes, per-chunk completion markers.
 * :mod:`spikeview.cluster.run` — the driver: in-process loop or Dask client (``local:N`` or
-  ``tcp://HOST:PORT``), resume, retries, progress.
+  ``tcp://HOST:PORT``), resume, retries, progress (window by window; workers send events).
+* :mod:`spikeview.cluster.reconstruct` — :func:`reconstruct_to_store`, the one call for front ends
+  (the CLI's ``--out OUT.zarr``; the app's export panel can call it from a background job).
 
 Chunking changes nothing: α is resolved before the split, the sampler seeds per window, and the
 guided sampler's reuse / warm start restart at fixed *keyframes* (every ``keyframe`` windows, the
