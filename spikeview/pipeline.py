@@ -186,8 +186,13 @@ def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str
                    state: SequenceState | None = None, roi: tuple[int, int, int, int] | None = None,
                    step: int | None = None, callback: Callback | None = None, cancel: Any = None,
                    sampler: Any = None, progress: Callable[[int, int], Any] | None = None,
-                   overwrite: bool = False, source_name: str | None = None) -> list[Path]:
+                   overwrite: bool = False, source_name: str | None = None, inputs: Sequence[Any] = (),
+                   extra_outputs: Sequence[Any] = (), announce: Callable[[str], Any] | None = None) -> list[Path]:
     """Reconstruct ``centers`` and write them to ``out`` (format from its suffix), with the recipe in the metadata.
+
+    Nothing existing is replaced without ``overwrite``, and never the source or one of ``inputs``
+    (checked for ``out`` and ``extra_outputs``, e.g. the preset written beside it, before any work);
+    ``announce`` gets one sentence about a large output's size first.
 
     Returns:
         The files written (one for MP4/npy, one per frame for EXR/PNG patterns).
@@ -212,7 +217,8 @@ def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str
     if cancel is not None:
         kwargs["cancel"] = cancel.is_set if hasattr(cancel, "is_set") else cancel
     ex = open_exporter(Path(out), len(centers), head.shape, recipe.export, meta, overwrite=overwrite,
-                       inputs=[getattr(source.info, "path", None)], **kwargs)
+                       inputs=[getattr(source.info, "path", None), *inputs], extra_outputs=extra_outputs,
+                       announce=announce, **kwargs)
     with ex:
         ex.write(head, window=first, centre_tick=int(centers[0]))
         for c, frame in zip(centers[1:], frames):

@@ -124,8 +124,9 @@ def run(args: argparse.Namespace) -> int:
                 bar.update(1)
 
             write_sequence(src, recipe, centres, out, state=state, step=step, callback=on_step,
-                           overwrite=bool(getattr(args, "overwrite", False)))
-        _write_preset(out, recipe, src, overwrite=bool(getattr(args, "overwrite", False)))
+                           overwrite=bool(getattr(args, "overwrite", False)), inputs=[getattr(args, "preset", None)],
+                           extra_outputs=[preset_path(out)], announce=lambda text: print(text, file=sys.stderr))
+        _write_preset(out, recipe, src)
     print(f"wrote {len(centres)} frame{'s' if len(centres) != 1 else ''} to {out}; settings in {preset_path(out)}")
     return 0
 
@@ -136,13 +137,10 @@ def _parse(text: str, step: int) -> tuple[int, int, int]:
     return parse_range(text, step)
 
 
-def _write_preset(out: Path, recipe: Recipe, src: Any, overwrite: bool = False) -> Path:
-    """The recipe beside the output (``<out>.preset.toml``); ``--preset`` re-runs it exactly."""
-    from spikeview._files import check_writable
-
+def _write_preset(out: Path, recipe: Recipe, src: Any) -> Path:
+    """The recipe beside the output (``<out>.preset.toml``; checked with the output before any work:
+    never an input, replaced only with ``--overwrite``); ``--preset`` re-runs it exactly."""
     path = preset_path(out)
-    # the preset belongs to the output just written: it is replaced with it, but never an input
-    check_writable(path, overwrite=True, inputs=[getattr(src.info, "path", None)])
     return recipe.save(path, header=f"# spikeview reconstruct preset for {src.info.path}")
 
 
