@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import signal
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -304,3 +305,70 @@ def test_monochrome_store_has_one_channel_and_exports_2d_frames(tmp_path):
     assert _frames(tmp_path / "m.zarr").shape == (8, 32, 32, 1)
     assert main(["export", str(tmp_path / "m.zarr"), "--out", str(tmp_path / "m.npy")]) == 0
     assert np.load(tmp_path / "m.npy").shape == (8, 32, 32)
+
+
+# ---------------------------------------------------------------------------------- the app
+def test_app_export_of_a_marked_range_to_zarr_matches_the_cli(cap, tmp_path):
+    """The export panel's job (no Qt: spikeview.gui.jobs) with a .zarr output writes the CLI's store,
+    reports (windows done, total) and returns the store."""
+    import threading
+
+    from spikeview.gui import jobs
+    from spikeview.io import open_source
+    from spikeview.recipe import Recipe
+
+    assert _reconstruct(cap, *GEOM, "--range", "5:100:10", "--chunk", "4", "--out", tmp_path / "cli.zarr") == 0
+    reports = []
+
+    class Ctx:
+        cancelled = threading.Event()
+        state: dict = {}
+
+        def report(self, payload):
+            reports.append(payload)
+
+    with open_source(cap, width=32, height=32, cfa="RGGB") as src:
+        recipe = Recipe().with_values({"run.range": "5:100:10", "stream.width": 32, "stream.height": 32,
+                                       "stream.cfa": "RGGB"})
+        ticks = jobs.export_ticks(recipe, src.n_frames)
+        req = jobs.ExportRequest(src, str(cap), ticks, recipe, None, tmp_path / "app.zarr")
+        assert jobs.export_job(req, Ctx()) == [tmp_path / "app.zarr"]
+    np.testing.assert_array_equal(_frames(tmp_path / "app.zarr"), _frames(tmp_path / "cli.zarr"))
+    assert reports[0] == (0, 10) and reports[-1] == (10, 10)
+
+
+@pytest.mark.gui
+def test_app_export_panel_sends_the_marked_range_to_a_scheduler(cap, tmp_path, qtbot, cluster):
+    """Export panel: a scheduler address turns the output into a .zarr store written by the Dask workers,
+    with the panel's progress; the store's preset re-runs the same frames through the CLI."""
+    pytest.importorskip("PySide6")
+    from PySide6 import QtCore
+
+    from spikeview.gui import core
+    from spikeview.gui.main_window import MainWindow
+
+    _, client = cluster
+    w = MainWindow(settings=QtCore.QSettings(str(tmp_path / "s.ini"), QtCore.QSettings.Format.IniFormat))
+    qtbot.addWidget(w)
+    w.show()
+    try:
+        w.set_stream(core.open_file(cap, width=32, height=32, cfa="RGGB"))
+        s, panel = w.session, w.export_panel
+        s.set_mark_in(20)
+        s.set_mark_out(79)
+        s.set("export_range", "marked")
+        panel.cluster.setText(client.scheduler.address)
+        out = Path(panel.path.text())
+        assert out.suffix == ".zarr" and out.parent == tmp_path and "Zarr store" in panel.count.text()
+        ticks = panel.ticks()
+        panel.export_btn.click()
+        qtbot.waitUntil(lambda: w.notice.kind in ("success", "error") and not w.controller.exporter.is_active(),
+                        timeout=120_000)
+        assert w.notice.kind == "success", panel.status.text()
+        assert panel.progress.value() == len(ticks) == panel.progress.maximum()
+        g = zarr.open_group(str(out), mode="r")
+        np.testing.assert_array_equal(g["centre_tick"][:], ticks)
+        assert _reconstruct(cap, "--preset", f"{out}.preset.toml", "--out", tmp_path / "again.npy") == 0
+        np.testing.assert_array_equal(_frames(out), np.load(tmp_path / "again.npy"))
+    finally:
+        w.close()

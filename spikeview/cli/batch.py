@@ -36,13 +36,9 @@ def wants_zarr(args: argparse.Namespace) -> bool:
 
 
 def _require_extra() -> None:
-    try:
-        import dask  # noqa: F401
-        import distributed  # noqa: F401
-        import zarr  # noqa: F401
-    except ImportError as e:
-        raise ParameterError(f"a .zarr output needs the cluster extra ({e.name} is missing); "
-                             "install it with pip install 'spikeview[cluster]'.") from None
+    from spikeview.cluster.reconstruct import require_extra
+
+    require_extra()
 
 
 def _recipe(args: argparse.Namespace, base):

@@ -21,6 +21,17 @@ from typing import Any
 from spikeview.errors import ParameterError
 
 
+def require_extra() -> None:
+    """Raise one sentence when the ``cluster`` extra (dask, distributed, zarr) is not installed."""
+    try:
+        import dask  # noqa: F401
+        import distributed  # noqa: F401
+        import zarr  # noqa: F401
+    except ImportError as e:
+        raise ParameterError(f"a .zarr output needs the cluster extra ({e.name} is missing); "
+                             "install it with pip install 'spikeview[cluster]'.") from None
+
+
 def store_recipe(out: str | os.PathLike[str]):
     """The :class:`~spikeview.recipe.Recipe` a store was written with, as given (``None`` if ``out`` does not exist)."""
     from spikeview.cluster.store import open_store, store_attrs
@@ -63,6 +74,7 @@ def reconstruct_to_store(input_path: str | os.PathLike[str], recipe: Any, out: s
         ParameterError: bad ``chunk``/``cluster``; ``out`` exists (without ``resume``/``overwrite``);
             a store of another input or other settings; a worker that died repeatedly.
     """
+    require_extra()
     from spikeview.cluster._compute import DEFAULT_CHUNK
     from spikeview.cluster.run import connect, parse_cluster
     from spikeview.cluster.store import open_store, store_attrs

@@ -335,8 +335,9 @@ class Controller(QtCore.QObject):
         self.run_guided()
 
     # ------------------------------------------------------------------------------ export
-    def start_export(self, out: str | Path, overwrite: bool = False) -> bool:
-        """Export the current frame or the marked range (session's export settings) to ``out``."""
+    def start_export(self, out: str | Path, overwrite: bool = False, cluster: str | None = None) -> bool:
+        """Export the current frame or the marked range (session's export settings) to ``out``
+        (a ``.zarr`` store: in chunks, in-process or on the Dask ``cluster``)."""
         s = self.session
         if s.source is None:
             self._error("Open a capture first, then export.")
@@ -355,7 +356,7 @@ class Controller(QtCore.QObject):
             return False
         name = str(s.stream.path) if s.stream.path is not None else s.stream.label
         roi = s.roi if recipe.run.method == "guided" else None
-        req = jobs.ExportRequest(s.source, name, ticks, recipe, self.alpha, Path(out), roi, overwrite)
+        req = jobs.ExportRequest(s.source, name, ticks, recipe, self.alpha, Path(out), roi, overwrite, cluster)
         self.exporter.submit("export", lambda ctx, r=req: jobs.export_job(r, ctx))
         self.export_state.emit("running", f"Exporting {len(ticks)} frame(s) to {out}…")
         return True

@@ -259,6 +259,8 @@ class ExportRequest:
     out: Path
     roi: tuple[int, int, int, int] | None = None
     overwrite: bool = False
+    #: ``.zarr`` outputs: ``None`` in-process, ``"local:N"`` or a Dask scheduler address
+    cluster: str | None = None
 
 
 def export_ticks(recipe: Recipe, n_frames: int) -> tuple[int, ...]:
@@ -274,6 +276,8 @@ def export_job(req: ExportRequest, ctx: Any) -> list[Path]:
     ``(done, total)``; Cancel keeps finished frames."""
     from spikeview.pipeline import window_centres, write_sequence
 
+    if req.out.suffix.lower() == ".zarr":
+        return store_job(req, ctx)
     n = len(req.ticks)
     ctx.report((0, n))
     sampler = ctx.state.get("sampler")
@@ -286,6 +290,25 @@ def export_job(req: ExportRequest, ctx: Any) -> list[Path]:
     return write_sequence(req.source, req.recipe, list(req.ticks), req.out, state=state, roi=req.roi,
                           step=step, cancel=ctx.cancelled, sampler=sampler, overwrite=req.overwrite,
                           progress=lambda done, total: ctx.report((done, total)), source_name=req.source_name)
+
+
+def store_job(req: ExportRequest, ctx: Any) -> list[Path]:
+    """The marked range into a Zarr store, in chunks, in-process or on Dask (``req.cluster``): the CLI's
+    :func:`spikeview.cluster.reconstruct.reconstruct_to_store`. Workers read the capture from its file;
+    progress ``(windows done, total)``; Cancel stops after the running chunks (finished ones are kept and
+    ``spikeview reconstruct … --resume`` completes the store)."""
+    from spikeview.errors import ParameterError
+
+    path = getattr(req.source.info, "path", None)
+    if path is None:
+        raise ParameterError("A Zarr export reads the capture from its file, and this capture has none: "
+                             "save it (File menu) or open a capture file, then export again.")
+    from spikeview.cluster.reconstruct import reconstruct_to_store
+
+    ctx.report((0, len(req.ticks)))
+    reconstruct_to_store(path, req.recipe, req.out, cluster=req.cluster, overwrite=req.overwrite,
+                         progress=lambda done, total: ctx.report((done, total)), cancel=ctx.cancelled.is_set)
+    return [req.out]
 
 
 class _Ctx:

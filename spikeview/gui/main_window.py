@@ -529,7 +529,7 @@ class MainWindow(QtWidgets.QMainWindow):
         if existing and not self.ask_overwrite(Path(out), existing):
             self.statusBar().showMessage("Export not started: the existing files are kept.", 8000)
             return
-        if self.controller.start_export(out, overwrite=bool(existing)):
+        if self.controller.start_export(out, overwrite=bool(existing), cluster=self.export_panel.cluster_address()):
             self.settings.setValue("last_export_dir", str(Path(out).parent))
 
     def ask_overwrite(self, out: Path, existing: list[Path]) -> bool:

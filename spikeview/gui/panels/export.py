@@ -62,6 +62,13 @@ class ExportPanel(QtWidgets.QWidget):
         self.slowmo.setWordWrap(True)
         self.count = QtWidgets.QLabel()
         self.count.setObjectName("export_count")
+        self.cluster = QtWidgets.QLineEdit()
+        self.cluster.setObjectName("export_cluster")
+        self.cluster.setPlaceholderText("optional: local:2 or tcp://HOST:8786")
+        self.cluster.setToolTip("Reconstruct in chunks on Dask workers (local:N worker processes, or a running "
+                                "scheduler's address) into a Zarr store (.zarr); the workers read the capture "
+                                "from its file. spikeview export turns the store into MP4/EXR/npy.")
+        self.cluster.textChanged.connect(lambda _text: self.refresh())
         self.path = QtWidgets.QLineEdit()
         self.path.setObjectName("export_path")
         self.path.setToolTip("Output file; image sequences need a frame field such as %04d")
@@ -96,7 +103,7 @@ class ExportPanel(QtWidgets.QWidget):
         lay = QtWidgets.QVBoxLayout(self)
         lay.setContentsMargins(3, 3, 3, 3)
         lay.addWidget(form([("Format", self.fmt), ("Frames", self.range), ("Method", self.method), ("Output fps", self.fps),
-                            ("", self.slowmo), ("", self.count), ("File", pw)]))
+                            ("", self.slowmo), ("", self.count), ("Dask", self.cluster), ("File", pw)]))
         lay.addLayout(buttons)
         lay.addWidget(self.status)
         lay.addStretch(1)
@@ -170,12 +177,25 @@ class ExportPanel(QtWidgets.QWidget):
             self.slowmo.setText(describe_slow_motion(factor) + (" — for MP4" if fmt != "mp4" else ""))
         except SpikeviewError as e:  # a note only; the export itself reports real errors
             self.slowmo.setText(str(e))
-        if self._auto_name:
+        if self.cluster_address():  # a batch export writes a Zarr store
+            self.count.setText(self.count.text() + f" → a Zarr store, on {self.cluster_address()}")
+            current = Path(self.path.text().strip() or self.stem())
+            if self._auto_name:
+                self.path.setText(str(self.folder / f"{self.stem()}.zarr"))
+            elif current.suffix.lower() != ".zarr":
+                stem = re.sub(r"[_.\-]?%0?\d*d", "", current.stem)
+                self.path.setText(str(current.with_name(f"{stem}.zarr")))
+        elif self._auto_name:
             self.path.setText(str(self.folder / suggested_name(self.stem(), fmt, n)))
         else:
             adapted = matching_name(self.path.text().strip(), fmt, n)
             if adapted != self.path.text().strip():
                 self.path.setText(adapted)
+
+    def cluster_address(self) -> str | None:
+        """The Dask target typed in the panel (``local:N`` or a scheduler address), ``None`` when empty."""
+        text = self.cluster.text().strip()
+        return text or None
 
     def _browse(self) -> None:
         fmt = self.session.get("export_format")
