@@ -152,3 +152,25 @@ def test_classical_auto_demosaic_measures_the_noise_of_the_mosaic():
     name, why = auto_demosaic(noisy, "RGGB")
     assert name == "bilinear" and "noise dominates" in why
     assert auto_demosaic(noisy, "RGGB", "malvar2004")[0] == "malvar2004"
+
+
+def test_demosaic_auto_starts_sparse_counts_bilinearly():
+    from spikeview.guided.plan import SPARSE_COUNT, choose_demosaic
+
+    assert choose_demosaic(0.2, denoised=True, mean_count=SPARSE_COUNT / 2)[0] == "bilinear"
+    assert choose_demosaic(0.2, denoised=True, mean_count=2 * SPARSE_COUNT)[0] == "malvar2004"
+    rates = scene_rates("texture", 32, 32) * 0.02  # about 0.07 spikes per photosite per 10-tick window
+    src = ArraySource(spikes_from_rates(rates, 40, seed=1), cfa="RGGB")
+    plan = make_plan(Observation.from_source(src, 20, 10, alpha=CAST, eta=1.0), GuidedConfig(diffusion="always"))
+    assert plan.demosaic == "bilinear" and "sparse counts" in plan.reasons["demosaic"]
+
+
+def test_noise_model_uses_the_local_rate_not_the_photosite_count():
+    # a lone spike among zeros: its neighbours get the variance of the local rate, not of a zero count
+    y = np.zeros((16, 16), dtype=np.float32)
+    y[8, 8] = 0.1
+    obs = Observation(y, None, 10)
+    rate = obs.local_rate()
+    assert rate[8, 8] == pytest.approx(0.1 / 9) and rate[7, 7] == pytest.approx(0.1 / 9) and rate[0, 0] == 0.0
+    var = obs.variance()
+    assert var[7, 7] == pytest.approx(var[8, 8]) and var[7, 7] > var[0, 0]

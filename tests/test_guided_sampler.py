@@ -136,7 +136,8 @@ def test_fallbacks_follow_the_plan():
     np.testing.assert_array_equal(tfp, start_estimate(obs, demosaic=GuidedConfig().demosaic))
     assert smp.info.mode == "tfp"
     base = smp.run(obs, GuidedConfig(diffusion="never", fallback="baseline", eta=1.0))
-    np.testing.assert_allclose(base, baseline(obs, BlurDenoiser(), sigma_scale=1.5, demosaic=GuidedConfig().demosaic), atol=1e-6)
+    np.testing.assert_allclose(base, baseline(obs, BlurDenoiser(), sigma_scale=GuidedConfig().sigma_scale,
+                                             demosaic=GuidedConfig().demosaic), atol=1e-6)
     assert smp.info.mode == "baseline"
 
 
