@@ -29,6 +29,9 @@ import numpy as np
 from spikeview.errors import ParameterError
 from spikeview.recipe import Recipe
 
+#: guided reuse / warm-start chains restart every this many windows of a range (see reconstruct_windows)
+KEYFRAME = 16
+
 #: ``callback(frame_index, n_frames, step, n_steps, preview)`` (guided: every sampler step; classical: every frame)
 Callback = Callable[[int, int, int, int, np.ndarray], Any]
 
@@ -164,9 +167,15 @@ def reconstruct_windows(source: Any, centers: Iterable[int], recipe: Recipe, sta
         from spikeview.guided.video import reconstruct_sequence
 
         params = sampler_params(recipe, state)
-        yield from reconstruct_sequence(source, centers, params, alpha=state.alpha, callback=callback,
-                                        cancel=cancel, sampler=sampler, infos=infos, roi=roi,
-                                        resolve=False)
+        # reuse / warm-start chains restart at every KEYFRAME-th window: a window's result then never
+        # depends on how a long range is split into chunks (spikeview.cluster), only on its keyframe
+        for g0 in range(0, n, KEYFRAME):
+            cb = None
+            if callback is not None:
+                def cb(fi: int, _n: int, step: int, total: int, preview: np.ndarray, _g0: int = g0) -> None:
+                    callback(fi + _g0, n, step, total, preview)
+            yield from reconstruct_sequence(source, centers[g0:g0 + KEYFRAME], params, alpha=state.alpha, callback=cb,
+                                            cancel=cancel, sampler=sampler, infos=infos, roi=roi, resolve=False)
         return
     from spikeview.classical.reconstruct import reconstruct_frames
     from spikeview.errors import Cancelled

@@ -27,7 +27,7 @@ import numpy as np
 #: windows per chunk when ``--chunk`` is not given
 DEFAULT_CHUNK = 16
 #: guided reuse / warm-start chains restart every this many windows (independent of the chunk size)
-DEFAULT_KEYFRAME = 16
+from spikeview.pipeline import KEYFRAME as DEFAULT_KEYFRAME  # noqa: E402  (the pipeline's rule)
 
 
 def recipe_of(data: dict[str, Any]):
