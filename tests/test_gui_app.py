@@ -317,21 +317,26 @@ def _largest_tick_gap(qtbot, during, until, timeout_ms: int) -> tuple[float, int
     return (float(gaps.max()) if len(gaps) else float("inf")), len(gaps)
 
 
-def test_window_keeps_ticking_while_a_guided_run_works(opened, qtbot):
-    """The UI-stall test: the largest gap between ticks of a 10 ms QTimer while the sampler runs, < 50 ms.
+#: the largest gap the stall test accepts. The target is 50 ms, measured by
+#: ``benchmarks/bench_gui.py --stall`` at 256×256 and 1000×1000 (BENCHMARKS.md). This test runs on shared
+#: machines (2 cores, other jobs): there the operating system alone holds the process off the CPU for
+#: up to ~50 ms with the window idle (the benchmark's same-process baseline measured 26–46 ms), so the
+#: test allows 100 ms, in one measured run without retries. A real freeze stalls for the whole blocked
+#: work: at least 200 ms in the control below, twice this bound.
+STALL_LIMIT_S = 0.100
 
-    Measured over the first 10 steps of a 40-step run, after a warm-up run (torch and the prior
-    load once per session). A shared test machine can hold any process off the CPU for tens of ms
-    now and then, so up to three runs are measured and the best counts; a real freeze (the sampler
-    or a blocking wait on the GUI thread) stalls every run by at least one sampler step, as the
-    control below shows.
+
+def test_window_keeps_ticking_while_a_guided_run_works(opened, qtbot):
+    """The UI-stall test: the largest gap between ticks of a 10 ms QTimer while the sampler runs (see STALL_LIMIT_S).
+
+    Measured once, over the first 10 steps of a 40-step run at 64×64, after a warm-up run (torch and
+    the prior load once per session).
     """
     w, s = opened, opened.session
     s.set("steps", 2)
     w.controller.run_guided()
     qtbot.waitUntil(lambda: w.controller.guided_result is not None, timeout=WAIT_MS * 3)
     s.set("steps", 40)
-    results = []
     state: dict[str, int] = {}
 
     def start() -> None:
@@ -341,15 +346,11 @@ def test_window_keeps_ticking_while_a_guided_run_works(opened, qtbot):
         r = w.controller.guided_result
         return w.guided_panel.progress.value() >= 10 or (r is not None and r.run == state["run"])
 
-    for _ in range(3):
-        results.append(_largest_tick_gap(qtbot, start, done, WAIT_MS * 3))
-        w.controller.cancel_guided()
-        qtbot.waitUntil(lambda: not w.controller.guided.is_active(), timeout=WAIT_MS)
-        if results[-1][0] < 0.050:
-            break
-    assert all(n > 20 for _, n in results)
-    best = min(g for g, _ in results)
-    assert best < 0.050, "largest gaps per run: " + ", ".join(f"{1000 * g:.0f} ms" for g, _ in results)
+    gap, n = _largest_tick_gap(qtbot, start, done, WAIT_MS * 3)
+    w.controller.cancel_guided()
+    qtbot.waitUntil(lambda: not w.controller.guided.is_active(), timeout=WAIT_MS)
+    assert n > 20
+    assert gap < STALL_LIMIT_S, f"largest gap {1000 * gap:.0f} ms"
 
 
 def test_the_stall_measurement_sees_a_freeze(opened, qtbot):
@@ -357,7 +358,7 @@ def test_the_stall_measurement_sees_a_freeze(opened, qtbot):
     from spikeview.gui import jobs
 
     w, s = opened, opened.session
-    s.set("steps", 20)
+    s.set("steps", 40)
     req = jobs.GuidedRequest(s.source, s.tick, dict(s.params), w.controller.alpha, None, recipe=s.recipe())
 
     class Ctx:
@@ -379,7 +380,7 @@ def test_the_stall_measurement_sees_a_freeze(opened, qtbot):
         flag["blocked"] = time.perf_counter() - t0
 
     gap, _n = _largest_tick_gap(qtbot, lambda: QtCore.QTimer.singleShot(30, block), lambda: "blocked" in flag, WAIT_MS)
-    assert flag["blocked"] > 0.050  # 20 prior calls take longer than the allowed gap
+    assert flag["blocked"] > 2 * STALL_LIMIT_S  # 40 prior calls: a freeze well beyond the allowed gap
     assert gap >= flag["blocked"] - 0.002  # … and the measurement sees all of it
 
 

@@ -46,6 +46,11 @@ TFI_INTERVAL_MS = 200
 GUIDED_DEBOUNCE_MS = 400
 #: playback timer period (ms): the display asks for a frame at most this often
 PLAY_INTERVAL_MS = 10
+#: the display rate playback never exceeds: a screen shows at most 60 frames a second, and painting
+#: faster only takes the GUI thread from everything else (issue 10: 144 ms stalls while playing)
+MAX_DISPLAY_FPS = 60
+#: OS priority (Linux nice value) of the preview, TFI and export worker threads; the GUI thread keeps 0
+WORKER_NICE = 5
 
 
 class Controller(QtCore.QObject):
@@ -69,11 +74,15 @@ class Controller(QtCore.QObject):
     def __init__(self, session: Session, parent: QtCore.QObject | None = None):
         super().__init__(parent)
         self.session = session
-        self.preview = Worker("spikeview-preview", priority=("frames", "degradation", "rates", "alpha"), parent=self)
+        # Preview, TFI and export workers run at a lower OS priority (nice 5) than the GUI thread: on a
+        # loaded machine they otherwise took the cores from it and the window froze for 100+ ms
+        # (benchmarks/bench_gui.py --stall). The guided worker keeps its own setting.
+        self.preview = Worker("spikeview-preview", priority=("frames", "degradation", "rates", "alpha"), parent=self,
+                              nice=WORKER_NICE)
         # the sampler leaves one core to the window: a single torch thread, at a lower priority
         self.guided = Worker("spikeview-guided", parent=self, nice=0, torch_threads=max(1, (os.cpu_count() or 2) - 1))
-        self.exporter = Worker("spikeview-export", parent=self)
-        self.tfi = Worker("spikeview-tfi", parent=self)
+        self.exporter = Worker("spikeview-export", parent=self, nice=WORKER_NICE)
+        self.tfi = Worker("spikeview-tfi", parent=self, nice=WORKER_NICE)
         for w in (self.preview, self.guided, self.exporter, self.tfi):
             w.finished.connect(self._on_finished)
             w.failed.connect(self._on_failed)
@@ -212,6 +221,8 @@ class Controller(QtCore.QObject):
         if self.preview.is_active("frames"):
             return  # back-pressure: the last frame is not shown yet
         now = time.perf_counter()
+        if now - self._last_advance < 1.0 / MAX_DISPLAY_FPS:
+            return  # the play timer comes back in PLAY_INTERVAL_MS
         elapsed, self._last_advance = now - self._last_advance, now
         self.session.advance(elapsed)
 
