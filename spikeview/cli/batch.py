@@ -42,18 +42,10 @@ def _require_extra() -> None:
 
 
 def _recipe(args: argparse.Namespace, base):
-    """``base`` ← the geometry flags ← the recipe flags given ← ``--at``/``--range`` (as ``recipe_from_args``)."""
-    from spikeview.cli.reconstruct import STREAM_FLAGS
-    from spikeview.recipe import apply_flags
+    """``base`` ← the geometry flags ← the recipe flags given ← ``--at``/``--range`` (``recipe_from_args``)."""
+    from spikeview.cli.reconstruct import recipe_from_args
 
-    recipe = base
-    stream = {k: getattr(args, k) for k in STREAM_FLAGS if getattr(args, k, None) is not None}
-    if stream:
-        recipe = recipe.with_values({f"stream.{k}": v for k, v in stream.items()})
-    recipe = apply_flags(recipe, args)
-    if getattr(args, "at", None) is not None or getattr(args, "range", None) is not None:
-        recipe = recipe.with_values({"run.at": args.at, "run.range": args.range})
-    return recipe
+    return recipe_from_args(args, base)
 
 
 class _Progress:

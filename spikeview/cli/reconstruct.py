@@ -38,9 +38,12 @@ def _load_preset(path: str | None) -> dict[str, Any]:
     return recipe.to_dict()
 
 
-def recipe_from_args(args: argparse.Namespace) -> Recipe:
-    """Defaults ← ``--preset`` ← the flags given (errors name the flag or the file)."""
-    recipe = Recipe.load(args.preset) if getattr(args, "preset", None) else Recipe()
+def recipe_from_args(args: argparse.Namespace, base: Recipe | None = None) -> Recipe:
+    """Defaults (or ``base``) ← ``--preset`` ← the flags given (errors name the flag or the file)."""
+    if base is not None:
+        recipe = base
+    else:
+        recipe = Recipe.load(args.preset) if getattr(args, "preset", None) else Recipe()
     stream = {k: getattr(args, k) for k in STREAM_FLAGS if getattr(args, k, None) is not None}
     if stream:
         recipe = recipe.with_values({f"stream.{k}": v for k, v in stream.items()})
