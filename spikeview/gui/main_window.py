@@ -190,7 +190,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.splitDockWidget(d["rates"], d["export"], QtCore.Qt.Orientation.Vertical)
         self.resizeDocks([d["stream"], d["guided"], d["rates"]], [820, 440, 420], QtCore.Qt.Orientation.Horizontal)
         self.resizeDocks([d["stream"], d["degradation"]], [450, 550], QtCore.Qt.Orientation.Vertical)
-        self.resizeDocks([d["rates"], d["export"]], [620, 330], QtCore.Qt.Orientation.Vertical)
+        self.resizeDocks([d["rates"], d["export"]], [520, 430], QtCore.Qt.Orientation.Vertical)
 
     def _restore_layout(self) -> None:
         geo = self.settings.value("window/geometry")

@@ -60,6 +60,8 @@ class ExportPanel(QtWidgets.QWidget):
         self.slowmo = QtWidgets.QLabel()
         self.slowmo.setObjectName("slowmo_note")
         self.slowmo.setWordWrap(True)
+        # room for two lines: at its narrowest (a 1366-pixel screen) the note wraps, and must not overlap
+        self.slowmo.setMinimumHeight(2 * self.slowmo.fontMetrics().lineSpacing() + 2)
         self.count = QtWidgets.QLabel()
         self.count.setObjectName("export_count")
         self.cluster = QtWidgets.QLineEdit()

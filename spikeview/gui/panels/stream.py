@@ -115,7 +115,7 @@ class StreamPanel(QtWidgets.QWidget):
         # two rows, so that the panel fits beside the others on a 1366-pixel-wide screen
         options = QtWidgets.QHBoxLayout()
         options.addWidget(QtWidgets.QLabel("Speed"))
-        options.addWidget(self.speed)
+        options.addWidget(self.speed, 1)  # narrow when the window is, its whole name when there is room
         options.addWidget(self.slowmo)
         options.addWidget(self.loop)
         options.addSpacing(10)
