@@ -174,3 +174,16 @@ def test_noise_model_uses_the_local_rate_not_the_photosite_count():
     assert rate[8, 8] == pytest.approx(0.1 / 9) and rate[7, 7] == pytest.approx(0.1 / 9) and rate[0, 0] == 0.0
     var = obs.variance()
     assert var[7, 7] == pytest.approx(var[8, 8]) and var[7, 7] > var[0, 0]
+
+
+def test_q_is_on_for_hqs_at_low_rates_only():
+    from spikeview.guided.plan import Q_COUNT
+
+    low = ArraySource(spikes_from_rates(scene_rates("texture", 32, 32) * 0.1, 40, seed=1), cfa="RGGB")  # ~0.3 spikes
+    high = ArraySource(spikes_from_rates(np.full((32, 32), 0.5), 40, seed=1), cfa="RGGB")  # 5 spikes per window
+    for src, on in ((low, True), (high, False)):
+        obs = Observation.from_source(src, 20, 10, alpha=CAST, eta=1.0)
+        assert (float(obs.y.mean()) * 10 < Q_COUNT) == on
+        plan = make_plan(obs, GuidedConfig(diffusion="always"))
+        assert plan.quantise == on and ("low rate" if on else ">=") in plan.reasons["quantise"]
+        assert make_plan(obs, GuidedConfig(quantise=False)).quantise is False  # the override wins

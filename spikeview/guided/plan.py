@@ -16,6 +16,8 @@ diffusion     skipped when the data-derived noise σ of the corrected TFP estima
               or below ``noise_target`` (bright or long windows: TFP already meets the
               target); then ``fallback`` is ``"tfp"`` when σ <= noise_target / 4, else
               the one-pass ``"baseline"``
+quantise (Q)  DPS: on; HQS: on at low rates (mean spikes per photosite per window below   ``quantise``
+              ``Q_COUNT`` = 1.1: small integer counts, where Q gains), off above
 demosaic      ``auto``: Malvar-2004 for an estimate the prior denoises (diffusion start,  ``demosaic``
               one-pass input); the TFP fallback: bilinear where the noise σ exceeds
               ``DEMOSAIC_CLEAN_SIGMA`` (8/255), Malvar-2004 where the window is clean
@@ -95,6 +97,11 @@ class Plan:
 DEMOSAIC_CLEAN_SIGMA = 8.0 / 255.0
 #: mean spikes per photosite per window below which counts are "sparse" (isolated single spikes)
 SPARSE_COUNT = 0.3
+#: HQS: mean spikes per photosite per window below which Q (soft quantisation) is switched on.
+#: Chosen on the tuning scenes of the guided benchmark (256×256, k = 20): Q gained +0.02 to +0.16 dB
+#: PSNR and +0.04 to +0.08 SSIM at 0.16–0.95 spikes, lost 0.22–0.34 dB at 1.3–2.1 spikes; the
+#: threshold sits between (benchmarks/results/guided.md)
+Q_COUNT = 1.1
 
 
 def choose_demosaic(sigma: float, requested: str = "auto", *, denoised: bool = False,
@@ -225,8 +232,13 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     elif p.guidance == "dps" or p.prior == "sd":
         quantise, r["quantise"] = True, "DPS guidance: the residual of the non-squared loss sees the TFP's 1/Δτ steps"
     else:
-        quantise, r["quantise"] = False, ("HQS data step: Q lowered PSNR by 1.6 dB on the tuning scenes "
-                                          "(its slope swings between 0 and k/2Δτ); --quantise turns it on")
+        count = float(obs.y.mean()) * obs.window
+        if count < Q_COUNT:
+            quantise, r["quantise"] = True, (f"low rate ({count:.2f} spikes per photosite per window < {Q_COUNT:g}): the counts "
+                                             f"are small integers and Q models their 1/Δτ steps")
+        else:
+            quantise, r["quantise"] = False, (f"rate {count:.2f} spikes per photosite per window >= {Q_COUNT:g}: Q's slope, "
+                                              "between 0 and k/2Δτ, costs PSNR in the HQS data step here; --quantise turns it on")
 
     # --- levels
     top = max_levels(*obs.shape)
