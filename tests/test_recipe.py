@@ -218,11 +218,12 @@ def test_loading_a_preset_and_saving_it_back_changes_no_field(capture, tmp_path)
     s.set_tick(50)
     first = save_preset(s, tmp_path / "first.toml")
     # fields without a control, and controls moved away from their defaults
-    text = first.read_text()
-    text = text.replace("data_steps = 1", "data_steps = 2").replace("lam = 2.0", "lam = 3.5")
-    text = text.replace("zeta = 0.0", "zeta = 0.25").replace("k = 50.0", "k = 33.0")
+    import tomli_w
+
+    data = load_toml(first)
+    data["guided"].update(data_steps=2, lam=3.5, zeta=0.25, k=33.0)
     edited = tmp_path / "edited.toml"
-    edited.write_text(text + "\n")
+    edited.write_text(tomli_w.dumps(data))
     t = _app_session(capture)
     t.set_tick(50)
     load_preset(t, edited)
