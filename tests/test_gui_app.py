@@ -611,6 +611,8 @@ def test_the_window_fits_a_1366x768_screen(window, qtbot):
     window.show_error("A long notice to show that the notification strip does not widen the window. " * 4)
     hint = window.minimumSizeHint()
     assert hint.width() <= 1280 and hint.height() <= SMALL_SCREEN[1], hint
+    window.resize(1366, 768)  # the whole screen (a maximised window without decorations)
+    qtbot.waitUntil(lambda: (window.width(), window.height()) == (1366, 768), timeout=WAIT_MS)
     window.resize(*SMALL_SCREEN)
     qtbot.waitUntil(lambda: (window.width(), window.height()) == SMALL_SCREEN, timeout=WAIT_MS)
     qtbot.wait(50)  # the dock layout settles
