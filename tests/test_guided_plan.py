@@ -187,3 +187,11 @@ def test_q_is_on_for_hqs_at_low_rates_only():
         plan = make_plan(obs, GuidedConfig(diffusion="always"))
         assert plan.quantise == on and ("low rate" if on else ">=") in plan.reasons["quantise"]
         assert make_plan(obs, GuidedConfig(quantise=False)).quantise is False  # the override wins
+
+
+def test_demosaic_auto_is_bilinear_for_frames_too_small_for_malvar():
+    from spikeview.classical.reconstruct import auto_demosaic
+
+    assert auto_demosaic(np.zeros((2, 2), np.float32), "RGGB")[0] == "bilinear"
+    plan = make_plan(Observation(np.full((2, 4), 0.5, np.float32), "RGGB", 10, CAST, 1.0), GuidedConfig(diffusion="always"))
+    assert plan.demosaic == "bilinear" and "too small" in plan.reasons["demosaic"]

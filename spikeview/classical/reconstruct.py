@@ -101,7 +101,7 @@ def auto_demosaic(mosaic: np.ndarray, cfa: str, requested: str = "auto") -> tupl
 
     var = [haar_noise_variance(mosaic[i::2, j::2]) for i in (0, 1) for j in (0, 1)]
     sigma = max((float(np.sqrt(v)) for v in var if v is not None), default=0.0)
-    return choose_demosaic(sigma, "auto", denoised=False)
+    return choose_demosaic(sigma, "auto", denoised=False, shape=mosaic.shape[-2:])
 
 
 def reconstruct_frames(source: SpikeSource, centers: Iterable[int], config: ClassicalConfig | None = None,

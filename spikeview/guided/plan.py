@@ -105,7 +105,7 @@ Q_COUNT = 1.1
 
 
 def choose_demosaic(sigma: float, requested: str = "auto", *, denoised: bool = False,
-                    mean_count: float | None = None) -> tuple[str, str]:
+                    mean_count: float | None = None, shape: tuple[int, int] | None = None) -> tuple[str, str]:
     """The demosaic for a window with noise ``sigma``, and the reason (``requested`` other than
     ``"auto"`` is used as set).
 
@@ -122,6 +122,8 @@ def choose_demosaic(sigma: float, requested: str = "auto", *, denoised: bool = F
     """
     if requested != "auto":
         return requested, f"set by demosaic={requested}"
+    if shape is not None and min(shape) < 3:
+        return "bilinear", f"a {shape[0]}x{shape[1]} frame is too small for Malvar-2004 (3x3 at least)"
     if denoised and mean_count is not None and mean_count < SPARSE_COUNT:
         return "bilinear", (f"sparse counts ({mean_count:.2f} spikes per photosite per window < {SPARSE_COUNT:g}): "
                             "Malvar would ring around isolated spikes, bilinear averages them")
@@ -283,5 +285,6 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
         r["reuse"] = f"{int(changed.sum())} of {changed.size} blocks changed beyond their noise"
     # --- demosaic (of the start estimate / the one-pass input / the TFP fallback)
     denoised = diffusion or fallback == "baseline"
-    demosaic, r["demosaic"] = choose_demosaic(smax, p.demosaic, denoised=denoised, mean_count=float(obs.y.mean()) * obs.window)
+    demosaic, r["demosaic"] = choose_demosaic(smax, p.demosaic, denoised=denoised, mean_count=float(obs.y.mean()) * obs.window,
+                                              shape=obs.shape)
     return Plan(mosaic, cast, levels, diffusion, fallback, reuse, changed, sigma, r, quantise, demosaic)
