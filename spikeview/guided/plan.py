@@ -19,8 +19,9 @@ diffusion     skipped when the data-derived noise σ of the corrected TFP estima
 quantise (Q)  DPS: on; HQS: on at low rates (mean spikes per photosite per window below   ``quantise``
               ``Q_COUNT`` = 1.1: small integer counts, where Q gains), off above
 demosaic      ``auto``: Malvar-2004 for an estimate the prior denoises (diffusion start,  ``demosaic``
-              one-pass input); the TFP fallback: bilinear where the noise σ exceeds
-              ``DEMOSAIC_CLEAN_SIGMA`` (8/255), Malvar-2004 where the window is clean
+              one-pass input) unless counts are sparse (< ``SPARSE_COUNT`` = 0.3 spikes per
+              photosite per window: bilinear); the TFP fallback: bilinear where the noise
+              σ exceeds ``DEMOSAIC_CLEAN_SIGMA`` (8/255), Malvar-2004 where it is clean
 reuse         the previous window's result is reused when the counts of this window and   ``reuse``
               the previous one agree within their noise (χ² test at level
               ``reuse_alpha``); ``changed`` marks the 16×16 blocks that did change
