@@ -45,8 +45,9 @@ class ClassicalConfig(Config):
         alpha: fixed gray-world gains ``[α_R, α_G, α_B]``; ``None`` estimates them once per
             sequence with :func:`estimate_alpha`.
         alpha_window, alpha_max_windows: how :func:`estimate_alpha` samples the sequence.
-        clip: clip frames to ``[0, 1]`` (the package's frame convention); turn off to keep
-            values above 1 (bright regions after the gains) and Malvar/Menon overshoot.
+        clip: clip frames to ``[0, 1]``; off (default), frames keep scene-linear values above 1
+            (highlights brighter than 1/η's scale, Malvar/Menon overshoot): the exports map them by the
+            sequence's white point (:func:`spikeview.pipeline.write_sequence`).
     """
 
     method: str = "tfp"
@@ -58,7 +59,7 @@ class ClassicalConfig(Config):
     alpha: list[float] | None = None
     alpha_window: int = 10
     alpha_max_windows: int = DEFAULT_ALPHA_WINDOWS
-    clip: bool = True
+    clip: bool = False
 
     def __post_init__(self) -> None:
         self.method = str(self.method).strip().lower()

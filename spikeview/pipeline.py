@@ -20,6 +20,7 @@ call these functions::
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Sequence
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -109,10 +110,50 @@ def prepare_sequence(source: Any, recipe: Recipe) -> SequenceState:
 
 
 def recipe_for_state(recipe: Recipe, state: SequenceState) -> Recipe:
-    """``recipe`` with the sequence's α recorded (a saved preset then reproduces the frames exactly)."""
-    if state.alpha is None or recipe.classical.alpha is not None:
-        return recipe
-    return recipe.with_values({"classical.alpha": [float(v) for v in state.alpha]})
+    """``recipe`` with the sequence's α and white point recorded (a saved preset then reproduces the
+    frames exactly)."""
+    values: dict[str, Any] = {}
+    if state.alpha is not None and recipe.classical.alpha is None:
+        values["classical.alpha"] = [float(v) for v in state.alpha]
+    out = recipe.with_values(values) if values else recipe
+    if state.white is not None and recipe.export.white is None:  # recorded as found (no slider range applies)
+        out = dataclasses.replace(out, export=out.export.replace(white=float(state.white)))
+    return out
+
+
+def guided_scale(state: SequenceState) -> float:
+    """Factor from the sampler's exposed frames to linear-frame units (``white / EXPOSURE_LEVEL``; 1 without a white point)."""
+    if state.white is None:
+        return 1.0
+    from spikeview.guided.observation import EXPOSURE_LEVEL
+
+    return float(state.white) / EXPOSURE_LEVEL
+
+
+def output_white(recipe: Recipe, state: SequenceState) -> float:
+    """The white point the outputs use: ``[export] white`` when set, else the sequence's estimate (else 1)."""
+    if recipe.export.white is not None:
+        return float(recipe.export.white)
+    return float(state.white) if state.white else 1.0
+
+
+def exposure_mapping(recipe: Recipe, state: SequenceState, out: str | Path) -> tuple[Any, Callable[[np.ndarray], np.ndarray]]:
+    """The exporter settings and the frame mapping of an output (the one exposure rule of every writer).
+
+    Every frame is divided by the white point (:func:`output_white`): EXR keeps the result
+    scene-linear (above 1 where the scene is brighter than the white point), npy is clipped to
+    [0, 1], PNG and MP4 map ``black``..``white`` to the display range (clipped) and apply the curve.
+    """
+    white = output_white(recipe, state)
+    cfg = recipe.export.replace(white=1.0, black=min(recipe.export.black / white, 0.999))
+    clip = Path(str(out)).suffix.lower() == ".npy"
+    inv = np.float32(1.0 / white)
+
+    def mapping(frame: np.ndarray) -> np.ndarray:
+        x = np.asarray(frame, dtype=np.float32) * inv
+        return np.clip(x, 0.0, 1.0) if clip else x
+
+    return cfg, mapping
 
 
 def sampler_params(recipe: Recipe, state: SequenceState) -> Any:
@@ -167,15 +208,19 @@ def reconstruct_windows(source: Any, centers: Iterable[int], recipe: Recipe, sta
         from spikeview.guided.video import reconstruct_sequence
 
         params = sampler_params(recipe, state)
+        # the sampler works at the exposure that puts the white point at EXPOSURE_LEVEL; its frames go
+        # back to the linear-frame units Y·α/η of the classical methods
+        scale = np.float32(guided_scale(state))
         # reuse / warm-start chains restart at every KEYFRAME-th window: a window's result then never
         # depends on how a long range is split into chunks (spikeview.cluster), only on its keyframe
         for g0 in range(0, n, KEYFRAME):
             cb = None
             if callback is not None:
                 def cb(fi: int, _n: int, step: int, total: int, preview: np.ndarray, _g0: int = g0) -> None:
-                    callback(fi + _g0, n, step, total, preview)
-            yield from reconstruct_sequence(source, centers[g0:g0 + KEYFRAME], params, alpha=state.alpha, callback=cb,
-                                            cancel=cancel, sampler=sampler, infos=infos, roi=roi, resolve=False)
+                    callback(fi + _g0, n, step, total, preview * scale)
+            for frame in reconstruct_sequence(source, centers[g0:g0 + KEYFRAME], params, alpha=state.alpha, callback=cb,
+                                              cancel=cancel, sampler=sampler, infos=infos, roi=roi, resolve=False):
+                yield frame * scale
         return
     from spikeview.classical.reconstruct import reconstruct_frames
     from spikeview.errors import Cancelled
@@ -219,17 +264,18 @@ def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str
                           centre_tick=int(centers[0]), step_ticks=step if len(centers) > 1 else None,
                           params=recipe.to_dict())
     frames = reconstruct_windows(source, centers, recipe, state, roi=roi, callback=callback, cancel=cancel, sampler=sampler)
-    head = next(frames)
+    cfg, expose = exposure_mapping(recipe, state, out)
+    head = expose(next(frames))
     kwargs: dict[str, Any] = {}
     if progress is not None:
         kwargs["progress"] = progress
     if cancel is not None:
         kwargs["cancel"] = cancel.is_set if hasattr(cancel, "is_set") else cancel
-    ex = open_exporter(Path(out), len(centers), head.shape, recipe.export, meta, overwrite=overwrite,
+    ex = open_exporter(Path(out), len(centers), head.shape, cfg, meta, overwrite=overwrite,
                        inputs=[getattr(source.info, "path", None), *inputs], extra_outputs=extra_outputs,
                        announce=announce, **kwargs)
     with ex:
         ex.write(head, window=first, centre_tick=int(centers[0]))
         for c, frame in zip(centers[1:], frames):
-            ex.write(frame, window=window_range(c, span, source.n_frames), centre_tick=int(c))
+            ex.write(expose(frame), window=window_range(c, span, source.n_frames), centre_tick=int(c))
         return ex.close()

@@ -257,8 +257,9 @@ PARAMS: tuple[Param, ...] = (
     _p("export.preset", "--x264-preset", "", "x264 preset", "libx264 speed/size preset.", choices=X264_PRESETS),
     _p("export.black", "--black", "black", "Black level",
        "Linear value shown as black in PNG/MP4 and the app (fixed, never per frame).", lo=0.0, hi=1.0, step=0.01),
-    _p("export.white", "--white", "white", "White level",
-       "Linear value shown as white in PNG/MP4 and the app (fixed, never per frame).", lo=0.0, lo_open=True, hi=64.0, step=0.01),
+    _p("export.white", "--white", "white", "White point",
+       "Exposure: the linear value (Y·α/η units) that becomes 1.0 in EXR and full scale in npy/PNG/MP4 and the app; "
+       "unset, the sequence's 99.9th percentile, chosen once and printed.", lo=0.0, lo_open=True, hi=16.0, step=0.01),
     _p("export.transfer", "--transfer", "transfer", "Display curve",
        "Display encoding of PNG/MP4 and the app: srgb, gamma (power 1/gamma) or linear.", choices=TRANSFERS),
     _p("export.gamma", "--gamma", "gamma", "Gamma", "Exponent of the gamma display curve.", lo=0.2, hi=5.0, step=0.05),

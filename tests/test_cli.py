@@ -99,12 +99,19 @@ def test_reconstruct_npy_matches_library_and_preset_reproduces(capture, tmp_path
     frames = np.load(out)
     assert frames.shape == (8, 64, 96, 3) and frames.dtype == np.float32
     assert 0.0 <= frames.min() and frames.max() <= 1.0
-    with open_source(path, width=96, height=64, cfa="RGGB") as src:
-        ref = np.stack(list(reconstruct_frames(src, range(0, 400, 50), ClassicalConfig(window=10, demosaic="bilinear"))))
-    np.testing.assert_array_equal(frames, ref)
-    # the preset beside the output re-runs the same reconstruction exactly
+    # the npy holds the linear frames divided by the sequence's white point (printed, recorded in the
+    # preset), clipped to [0, 1]
+    from spikeview.config import load_toml
+
     preset = tmp_path / "frames.npy.preset.toml"
     assert preset.exists()
+    white = load_toml(preset)["export"]["white"]
+    assert f"white point {white:.4g}" in capsys.readouterr().err
+    with open_source(path, width=96, height=64, cfa="RGGB") as src:
+        ref = np.stack(list(reconstruct_frames(src, range(0, 400, 50), ClassicalConfig(window=10, demosaic="bilinear"))))
+    np.testing.assert_array_equal(frames, np.clip(ref * np.float32(1.0 / white), 0.0, 1.0))
+    assert (ref * np.float32(1.0 / white) > 1.0).mean() <= 0.002  # clipped: the white point is the 99.9th percentile
+    # the preset beside the output re-runs the same reconstruction exactly
     again = tmp_path / "again.npy"
     assert main(["reconstruct", str(path), "--preset", str(preset), "--out", str(again)]) == 0
     np.testing.assert_array_equal(np.load(again), frames)

@@ -199,7 +199,7 @@ def test_a_recipe_saved_by_the_app_gives_the_cli_the_apps_pixels(capture, tmp_pa
     recipe = session_recipe(s)
     ticks = jobs.export_ticks(recipe, s.n_frames)
     assert len(ticks) >= 2
-    alpha, _ = jobs.alpha_job(s.source, recipe, Ctx())
+    alpha, _note, _white = jobs.alpha_job(s.source, recipe, Ctx())
     app_out = tmp_path / "app.npy"
     jobs.export_job(jobs.ExportRequest(s.source, str(capture), ticks, recipe, alpha, app_out), Ctx())
     preset = save_preset(s, tmp_path / "app.toml")

@@ -65,12 +65,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"{n} frames, one per {step} ticks, at {ecfg.fps:g} fps: "
               f"{describe_slow_motion(slow_motion_factor(float(attrs['tick_rate']), step, ecfg.fps))}", file=sys.stderr)
     chunk = int(attrs["chunk"])
+    from spikeview.cluster._compute import state_from_attrs
+    from spikeview.pipeline import exposure_mapping
+
+    # the store holds linear frames; the output maps them by the white point, as reconstruct does
+    ecfg, expose = exposure_mapping(recipe, state_from_attrs(attrs), out)
     with open_exporter(out, n, shape, ecfg, meta, overwrite=args.overwrite, inputs=[store],
                        extra_outputs=[preset_path(out)]) as ex, progress(n, f"{store.name} → {out.name}") as bar:
         for lo in range(0, n, chunk):
             block = frames[lo:lo + chunk]
             for i, f in enumerate(block):
-                ex.write(f if c == 3 else f[..., 0], window=tuple(int(v) for v in windows[lo + i]),
+                ex.write(expose(f if c == 3 else f[..., 0]), window=tuple(int(v) for v in windows[lo + i]),
                          centre_tick=int(centres[lo + i]))
                 bar.update(1)
     recipe.save(preset_path(out), header=f"# spikeview reconstruct preset for {attrs['input']}")

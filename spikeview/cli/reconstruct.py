@@ -114,6 +114,11 @@ def run(args: argparse.Namespace) -> int:
                       f"the last window is centred on tick {centres[-1]}.", file=sys.stderr)
         state = prepare_sequence(src, recipe)
         recipe = recipe_for_state(recipe, state)
+        how = "set by --white" if "export.white" in given_flags(args) else (
+            "from the preset" if getattr(args, "preset", None) and state.white is not None and
+            recipe.export.white != state.white else "the 99.9th percentile of the sequence's corrected rates")
+        print(f"white point {recipe.export.white:.4g} ({how}): EXR keeps values above it, npy/PNG/MP4 map it to full scale.",
+              file=sys.stderr)
         for note in inactive_notes(recipe, args, src, centres[0], state):
             print(f"note: {note}", file=sys.stderr)
         if out.suffix.lower() == ".mp4":

@@ -46,8 +46,12 @@ class ExportConfig(Config):
         preset: libx264 speed/size preset, one of :data:`X264_PRESETS`.
         compression: EXR compression, one of :data:`EXR_COMPRESSIONS` (all lossless).
         png_bits: PNG bit depth, 8 or 16.
-        black, white: fixed display levels in linear units for PNG and MP4: ``black`` maps to 0
-            and ``white`` to full scale, values outside are clipped. Never chosen per frame (no
+        black, white: fixed levels in linear units: ``white`` is the exposure's white point
+            (``None``: the sequence's own, :func:`spikeview.classical.colour_cast.estimate_white`,
+            chosen once per sequence by :func:`spikeview.pipeline.write_sequence`, which divides
+            every frame by it: EXR keeps values above 1, npy is clipped to [0, 1]); for PNG and MP4
+            ``black`` maps to 0 and ``white`` to full scale, values outside are clipped. An exporter
+            used directly treats ``None`` as 1. Never chosen per frame (no
             auto-levels), so brightness is comparable across a sequence. EXR and npy ignore
             them and keep the linear values as they are.
         transfer: display encoding for PNG and MP4 after the levels: ``"srgb"`` (IEC 61966-2-1
@@ -65,7 +69,7 @@ class ExportConfig(Config):
     compression: str = "zip"
     png_bits: int = 8
     black: float = 0.0
-    white: float = 1.0
+    white: float | None = None
     transfer: str = "srgb"
     gamma: float = 2.2
     first_frame: int = 0
@@ -85,7 +89,7 @@ class ExportConfig(Config):
             raise bad("compression", self.compression, f"use one of {', '.join(EXR_COMPRESSIONS)}")
         if self.png_bits not in (8, 16):
             raise bad("png_bits", self.png_bits, "use 8 or 16")
-        if not (math.isfinite(self.black) and math.isfinite(self.white) and self.black < self.white):
+        if not (math.isfinite(self.black) and (self.white is None or (math.isfinite(self.white) and self.black < self.white))):
             raise bad("black/white", (self.black, self.white), "black must be less than white, e.g. 0 and 1")
         if self.transfer not in TRANSFERS:
             raise bad("transfer", self.transfer, f"use one of {', '.join(TRANSFERS)}")

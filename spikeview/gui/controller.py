@@ -181,7 +181,7 @@ class Controller(QtCore.QObject):
         self._alpha_hist.clear()
         self.alpha_history.emit((np.zeros(0), np.zeros((0, 3))))
         src = self.session.source
-        if src is not None and src.cfa is not None:
+        if src is not None:  # α (Bayer streams) and the white point (every stream), once per sequence
             recipe = self.session.recipe()
             self.preview.submit("alpha", lambda ctx, s=src, r=recipe: jobs.alpha_job(s, r, ctx))
         self.request_frames()
@@ -413,9 +413,14 @@ class Controller(QtCore.QObject):
             self.alpha_history.emit((ticks, np.array([self._alpha_hist[t] for t in ticks])))
             self.rates_ready.emit(result)
         elif channel == "alpha":
-            self.alpha, self.alpha_note = result
+            self.alpha, self.alpha_note, white = result
             if self.alpha_note:
                 self._error(self.alpha_note)
+            if white is not None:  # the exposure: the sequence's white point, as the CLI chooses it
+                from spikeview.gui.model import SPECS
+
+                spec = SPECS["white"]
+                self.session.set("white", float(min(max(white, spec.minimum or 0.0), spec.maximum or white)), record=False)
             self.alpha_ready.emit(self.alpha)
             self.request_frames()
             self.request_degradation()

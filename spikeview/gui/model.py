@@ -137,6 +137,8 @@ def _recipe_spec(p: Param) -> ParamSpec:
         kind, default, choices = str, TRI_STATE[default], tuple(TRI_STATE.values())
     elif kind is str and default is None:
         default = ""
+    elif kind is float and default is None:
+        default = 1.0  # the app shows a number; it sets the sequence's estimate when a capture opens
     lo = p.lo
     if lo is not None and p.lo_open:
         lo = lo + (p.step or 0.01)
