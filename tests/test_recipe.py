@@ -255,3 +255,11 @@ def test_readme_and_the_apps_help_describe_every_knob_with_its_unit():
     assert "ticks" in rows["classical.window"] and "fraction of full scale" in rows["guided.t_start"]
     for knob in ("guided.s", "guided.k", "guided.levels", "guided.t_start"):
         assert rows[knob].count(". ") <= 2  # one sentence, then the default
+
+
+def test_the_shipped_fast_preset_is_a_valid_recipe():
+    from pathlib import Path
+
+    fast = Recipe.load(Path(__file__).resolve().parents[1] / "resources" / "presets" / "guided-fast.toml")
+    assert fast.run.method == "guided" and fast.guided.steps == 3
+    assert fast.guided.t_start == Recipe().guided.t_start  # everything else at the defaults
