@@ -333,14 +333,14 @@ STALL_LIMIT_S = 0.100
 def test_window_keeps_ticking_while_a_guided_run_works(opened, qtbot):
     """The UI-stall test: the largest gap between ticks of a 10 ms QTimer while the sampler runs (see STALL_LIMIT_S).
 
-    Measured once, over the first 10 steps of a 40-step run at 64×64, after a warm-up run (torch and
-    the prior load once per session).
+    Measured once, over a whole 100-step run at 64×64 (at least 20 timer intervals however fast the
+    machine), after a warm-up run (torch and the prior load once per session).
     """
     w, s = opened, opened.session
     s.set("steps", 2)
     w.controller.run_guided()
     qtbot.waitUntil(lambda: w.controller.guided_result is not None, timeout=WAIT_MS * 3)
-    s.set("steps", 40)
+    s.set("steps", 100)
     state: dict[str, int] = {}
 
     def start() -> None:
@@ -348,7 +348,7 @@ def test_window_keeps_ticking_while_a_guided_run_works(opened, qtbot):
 
     def done() -> bool:
         r = w.controller.guided_result
-        return w.guided_panel.progress.value() >= 10 or (r is not None and r.run == state["run"])
+        return r is not None and r.run == state["run"]
 
     gap, n = _largest_tick_gap(qtbot, start, done, WAIT_MS * 3)
     w.controller.cancel_guided()
