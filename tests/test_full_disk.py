@@ -45,8 +45,10 @@ def digest(folder: Path) -> dict[str, str]:
 
 
 def one_sentence(err: str, *needles: str) -> None:
-    err = err.strip()
-    assert err.startswith("spikeview: error:") and "\n" not in err, err
+    assert "Traceback" not in err, err
+    errors = [line for line in err.strip().splitlines() if line.startswith("spikeview: error:")]
+    assert len(errors) == 1 and err.strip().endswith(errors[0]), err  # notes may come first; one error, last
+    err = errors[0]
     assert "Traceback" not in err and "this is a bug" not in err, err
     for n in needles:
         assert n in err, err
