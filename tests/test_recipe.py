@@ -263,3 +263,19 @@ def test_the_shipped_fast_preset_is_a_valid_recipe():
     fast = Recipe.load(Path(__file__).resolve().parents[1] / "resources" / "presets" / "guided-fast.toml")
     assert fast.run.method == "guided" and fast.guided.steps == 3
     assert fast.guided.t_start == Recipe().guided.t_start  # everything else at the defaults
+
+
+def test_the_apps_guided_metrics_compare_like_with_like():
+    """The app scores its guided run at the sampler's exposure against the aligned ground truth (a unit
+    mix-up once read 6 dB where the frame was fine)."""
+    from spikeview.gui import core, jobs
+    from spikeview.gui.model import Session
+
+    st = core.demo_stream(size=48, n_ticks=120)
+    s = Session()
+    s.open_stream(st)
+    s.set_tick(60)
+    alpha, _note, white = jobs.alpha_job(st.source, s.recipe(), Ctx())
+    res = jobs.guided_job(jobs.GuidedRequest(st.source, 60, dict(s.params), alpha, None, st.ground_truth, 1, s.recipe()),
+                          Ctx())
+    assert res.psnr > 20.0 and res.ssim > 0.6, (res.psnr, res.ssim)

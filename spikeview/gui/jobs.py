@@ -207,7 +207,7 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     from spikeview import metrics
     from spikeview.guided.knobs import knob_status
     from spikeview.guided.plan import make_plan
-    from spikeview.pipeline import crop_roi, reconstruct_windows, sampler_params
+    from spikeview.pipeline import crop_roi, guided_scale, reconstruct_windows, sampler_params
 
     p = req.params
     recipe = req.recipe.with_values({"run.method": "guided"})
@@ -224,10 +224,14 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
         gt = metrics.align_ground_truth(gt, obs.y, obs.cfa, obs.alpha, obs.eta) if gt.shape[:2] == obs.y.shape else None
     t0 = time.perf_counter()
 
+    # frames come back in linear-frame units; they are scored at the sampler's exposure, where the
+    # ground truth is aligned to the exposed observation and both lie in [0, 1]
+    to_exposed = np.float32(1.0 / guided_scale(state))
+
     def score(img: np.ndarray) -> tuple[float | None, float | None]:
         if gt is None or gt.shape != img.shape:
             return None, None
-        return metrics.psnr_ssim(img, gt, data_range=1.0)
+        return metrics.psnr_ssim(np.clip(img * to_exposed, 0.0, 1.0), gt, data_range=1.0)
 
     def callback(fi: int, n: int, step: int, total: int, preview: np.ndarray) -> None:
         ctx.check()
