@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 import pytest
 
 from spikeview.cli.main import build_parser, main
 from spikeview.errors import ParameterError
 from spikeview.recipe import BY_KEY, PARAMS, Recipe
+from test_gui_model import Ctx  # the worker's job context, as the app's jobs see it
 
 
 @pytest.fixture(scope="module")
@@ -23,19 +22,6 @@ def capture(tmp_path_factory):
     path = d / "c.dat"
     write_plain(path, cap.read(0, cap.n_frames), cfa=cap.cfa)
     return path
-
-
-class Ctx:
-    def __init__(self) -> None:
-        self.cancelled = threading.Event()
-        self.state: dict = {}
-        self.reports: list = []
-
-    def report(self, payload) -> None:
-        self.reports.append(payload)
-
-    def check(self) -> None:
-        pass
 
 
 # ------------------------------------------------------------------------------ generated views
