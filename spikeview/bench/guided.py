@@ -19,7 +19,8 @@ Nothing from the simulator's calibration is used.
 compared with the clean linear ground truth **after a per-channel gain fitted to the ground truth by
 least squares** (``g_c = Σ x_c·t_c / Σ x_c²``), so the exposure and the gray-world guess of the
 scene's colour do not decide the score, while detail lost to clipping or noise does. PSNR and SSIM
-from ``skimage.metrics`` with ``data_range = 1`` (SSIM over the colour axis). Seconds: median per
+from :mod:`spikeview.metrics` (the app's; scikit-image's definitions and SSIM defaults) with
+``data_range = 1`` (SSIM averaged over the colour channels). Seconds: median per
 frame, ``torch.set_num_threads(2)``, on a machine shared with other jobs (load recorded).
 
 **Strong baseline**: TFP → bilinear demosaic → colour cast → one FFDNet pass at ``σ_scale ×`` the
@@ -62,14 +63,12 @@ def fit_gain(out: np.ndarray, gt: np.ndarray) -> np.ndarray:
 
 def score(out: np.ndarray, gt: np.ndarray) -> tuple[float, float]:
     """PSNR, SSIM of ``out`` (a bounded frame in [0, 1]) after the least-squares gain, against ``gt``."""
-    from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+    from spikeview.metrics import psnr, ssim
 
     g = fit_gain(out, gt)
     x = (out.astype(np.float64) * (g if out.ndim == 3 else g[0])).astype(np.float32)
     gt = gt.astype(np.float32)
-    kw = dict(channel_axis=-1) if out.ndim == 3 else {}
-    return (float(peak_signal_noise_ratio(gt, x, data_range=1.0)),
-            float(structural_similarity(gt, x, data_range=1.0, **kw)))
+    return psnr(x, gt, data_range=1.0), ssim(x, gt, data_range=1.0)
 
 
 def clipped_fraction(out: np.ndarray) -> float:
