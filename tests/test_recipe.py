@@ -157,7 +157,7 @@ def test_the_apps_controls_are_disabled_with_the_reason():
     assert view.knobs["guided.k"] and "Q is off" in view.knobs["guided.k"] and view.knobs["guided.levels"] is None
     s.set("quantise", "on")
     view = degradation_job(PreviewRequest(s.source, 30, dict(s.params), None, recipe=s.recipe()), Ctx())
-    assert view.knobs["guided.k"] is None and "quantise  on" in view.plan
+    assert view.knobs["guided.k"] is None and "quantise  on" in view.plan and view.quantise
 
 
 # ------------------------------------------------------------------------------- equivalence

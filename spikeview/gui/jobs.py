@@ -103,6 +103,7 @@ class DegradationView:
     shape: tuple[int, int]
     plan: str = ""
     knobs: dict[str, str | None] = field(default_factory=dict)
+    quantise: bool = True  # Q in the model (False: the "quantised" stage is C M X itself)
 
 
 def window_observation(source: Any, tick: int, cfg: Any, alpha: np.ndarray | None,
@@ -151,7 +152,7 @@ def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
     with torch.no_grad():
         st = data.stages(to_tensor(np.clip(x, 0.0, 1.0)))
     res = core.stage_images(x, st, req.params, bool(req.params.get("show_pyramid")))
-    return DegradationView(res, label, req.tick, obs.shape, str(plan), knob_status(cfg, plan))
+    return DegradationView(res, label, req.tick, obs.shape, str(plan), knob_status(cfg, plan), plan.quantise)
 
 
 # ---------------------------------------------------------------------------------- guided

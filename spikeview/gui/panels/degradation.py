@@ -145,6 +145,8 @@ class DegradationPanel(QtWidgets.QWidget):
         for k, pane in self.panes.items():
             pane.set_image(r.images.get(k))
         self.panes["x"].set_title(f"X = {view.x_label}")
+        self.panes["qcmx"].set_title(TITLES["qcmx"] if getattr(view, "quantise", True)
+                                     else "A X = C M X (Q off for this window)")
         show_bands = bool(self.session.get("show_pyramid")) and bool(r.bands)
         self.band_box.setVisible(show_bands)
         for i, pane in enumerate(self.bands):
