@@ -76,8 +76,14 @@ class ClassicalConfig(Config):
                 raise ParameterError(f"{name} must be a whole number >= 1, got {value!r}; fix the setting.")
         if not (np.isfinite(self.eta) and self.eta > 0):
             raise ParameterError(f"eta must be a finite positive number, got {self.eta!r}; use e.g. {DEFAULT_ETA}.")
-        if self.alpha is not None:
-            a = [float(v) for v in self.alpha]
-            if len(a) != 3 or not all(np.isfinite(v) and v > 0 for v in a):
-                raise ParameterError(f"alpha must be three finite positive gains [R, G, B], got {self.alpha!r}; or leave it unset to estimate it.")
-            self.alpha = a
+        self.alpha = check_gains("classical.alpha", self.alpha)
+
+
+def check_gains(name: str, alpha: list[float] | None) -> list[float] | None:
+    """Colour-cast gains as three finite positive floats ``[α_R, α_G, α_B]`` (``None`` stays unset)."""
+    if alpha is None:
+        return None
+    a = [float(v) for v in alpha]
+    if len(a) != 3 or not all(np.isfinite(v) and v > 0 for v in a):
+        raise ParameterError(f"{name} = {alpha!r} must be three finite positive gains [R, G, B], or unset to estimate them.")
+    return a

@@ -184,11 +184,9 @@ class GuidedConfig(Config):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int):
                 raise ParameterError(f"guided.{name} = {v!r} must be a whole number.")
-        if self.alpha is not None:
-            a = [float(v) for v in self.alpha]
-            if len(a) != 3 or not all(math.isfinite(v) and v > 0 for v in a):
-                raise ParameterError(f"guided.alpha = {self.alpha!r} must be three finite positive gains [R, G, B], or unset.")
-            self.alpha = a
+        from spikeview.classical_config import check_gains
+
+        self.alpha = check_gains("guided.alpha", self.alpha)
         if not 1 <= self.chains <= 16:
             raise ParameterError(f"guided.chains = {self.chains} is out of range: use 1 to 16 chains.")
         if self.alpha_max_windows < 1:
