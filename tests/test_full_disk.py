@@ -54,14 +54,16 @@ def one_sentence(err: str, *needles: str) -> None:
         assert n in err, err
 
 
-def fail_writes_under(monkeypatch, folder: Path, name: str, budget: int = 0) -> None:
-    """Make ``os.<name>`` on files under ``folder`` fail with ENOSPC once ``budget`` bytes are used."""
+def fail_writes_under(monkeypatch, folder: Path, name: str, budget: int = 0, part: str = "") -> None:
+    """Make ``os.<name>`` on files under ``folder`` (whose path holds ``part``) fail with ENOSPC once
+    ``budget`` bytes are used."""
     real = getattr(os, name)
     left = [budget]
 
     def under(fd: int) -> bool:
         try:
-            return os.readlink(f"/proc/self/fd/{fd}").startswith(str(folder))
+            path = os.readlink(f"/proc/self/fd/{fd}")
+            return path.startswith(str(folder)) and part in path
         except OSError:
             return False
 
@@ -92,22 +94,7 @@ def test_npy_on_a_full_disk(capture, capsys, monkeypatch, name, budget):
 def test_simulate_on_a_full_disk(tmp_path, capsys, monkeypatch, name, target):
     out = tmp_path / "out"
     out.mkdir()
-    real = os.write if name == "write" else os.posix_fallocate
-    left = [20_000]
-
-    def fake(fd, *args):
-        try:
-            path = os.readlink(f"/proc/self/fd/{fd}")
-        except OSError:
-            path = ""
-        if path.startswith(str(out)) and f"{target}.tmp" in path:
-            n = args[1] if name == "posix_fallocate" else len(memoryview(args[0]).cast("B"))
-            if n > left[0]:
-                raise OSError(errno.ENOSPC, "No space left on device")
-            left[0] -= n
-        return real(fd, *args)
-
-    monkeypatch.setattr(os, name, fake)
+    fail_writes_under(monkeypatch, out, name, 20_000, f"{target}.tmp")
     assert main(["simulate", "--demo", "--size", "32", "--ticks", "3000", "--gt-every", "10", "--no-noise",
                  "--out", str(out / "s.dat")]) == 1
     one_sentence(capsys.readouterr().err, "s.dat", "disk is full")
