@@ -34,7 +34,10 @@ WORKER_MODULES = (
     "spikeview.classical", "spikeview.classical.tfi", "spikeview.classical.reconstruct", "spikeview.classical.display",
     "spikeview.classical.demosaic", "spikeview.classical.colour_cast", "spikeview.gui._kernels", "torch",
     "spikeview.ops", "spikeview.guided.observation", "spikeview.guided.plan", "spikeview.guided.sampler",
-    "spikeview.guided.baseline", "spikeview.export",
+    "spikeview.guided.baseline", "spikeview.export", "spikeview.pipeline", "spikeview.metrics",
+    # the writers' extension modules: a worker importing them holds the interpreter lock through their
+    # initialisation, which froze the window for up to 100 ms at the start of the first export
+    "spikeview.export.mp4", "spikeview.export.exr", "spikeview.export.png", "av", "OpenImageIO",
 )
 
 
@@ -50,7 +53,10 @@ def preload() -> None:
     import importlib
 
     for name in WORKER_MODULES:
-        importlib.import_module(name)
+        try:
+            importlib.import_module(name)
+        except ImportError:  # an optional writer missing: its export says so when asked for
+            pass
 
 
 # ------------------------------------------------------------------------------------ sources

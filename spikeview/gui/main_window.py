@@ -109,7 +109,6 @@ class MainWindow(QtWidgets.QMainWindow):
 
         configure_runtime()
         core.preload()  # before any worker thread starts (see core.preload)
-        _preload_writers()
         self.setObjectName("spikeview_main")
         self.setWindowTitle("spikeview")
         self.setWindowIcon(app_icon())
@@ -653,27 +652,6 @@ class MainWindow(QtWidgets.QMainWindow):
         if st is not None and st.path is not None:
             st.source.close()
         super().closeEvent(ev)
-
-
-#: modules the export and guided workers import on first use, beyond core.WORKER_MODULES
-EXTRA_WORKER_MODULES = ("spikeview.export.mp4", "spikeview.export.exr", "spikeview.export.png", "spikeview.metrics",
-                        "av", "OpenImageIO")
-
-
-def _preload_writers() -> None:
-    """Import the writers' modules now, while the window is not shown yet.
-
-    A worker importing a large extension module (PyAV, OpenImageIO) holds the interpreter lock
-    through its initialisation, which froze the window for up to 100 ms at the start of the first
-    export (measured with benchmarks/bench_gui.py --stall).
-    """
-    import importlib
-
-    for name in EXTRA_WORKER_MODULES:
-        try:
-            importlib.import_module(name)
-        except ImportError:  # an optional writer missing: its export says so when asked for
-            pass
 
 
 def existing_outputs(out: str | os.PathLike[str]) -> list[Path]:
