@@ -3,7 +3,7 @@
 What it measures (raw bytes in per wall-clock second, and frames per second; 128,000 bytes per frame):
 
 * **end to end**: :class:`spikeview.live.usb.UsbCamera` on :class:`spikeview.live.mockusb.MockBackend`
-  (pyusb → 2 MiB bulk reads → :class:`~spikeview.io.raw.Raw1MDecoder` synchronisation → tag
+  (pyusb → 2 MiB bulk reads → :class:`~spikeview.io.raw1m.Raw1MDecoder` synchronisation → tag
   stripping → ring buffer), without and with recording to disk, and with a host-side ROI or
   decimation;
 * **stages alone**, to find the bottleneck: the mock + pyusb read loop (no decoding),
@@ -38,7 +38,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from spikeview.io.raw import RAW1M_FRAME_BYTES, Raw1MDecoder, encode_raw1m  # noqa: E402
+from spikeview.io.raw1m import RAW1M_FRAME_BYTES, Raw1MDecoder, encode_raw1m  # noqa: E402
 from spikeview.live.decode import raw1m_to_packed  # noqa: E402
 from spikeview.live.mockusb import MOCK_PID, MOCK_VID, MockBackend  # noqa: E402
 from spikeview.live.usb import CameraConfig, UsbCamera  # noqa: E402

@@ -27,7 +27,7 @@ from spikeview.io import (
     open_source,
     pack_frames,
 )
-from spikeview.io.raw import RAW1M_FRAME_BYTES, scan_raw1m
+from spikeview.io.raw1m import RAW1M_FRAME_BYTES, scan_raw1m
 
 # a shared 2-core box: no per-example deadline (timings vary), a modest number of examples
 FUZZ = settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])

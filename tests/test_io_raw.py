@@ -15,7 +15,7 @@ from spikeview.io import (
     encode_raw400,
     raw1m_tag_sequence,
 )
-from spikeview.io.raw import RAW1M_FRAME_BYTES, RAW1M_START_TAG, raw1m_tag, scan_raw1m
+from spikeview.io.raw1m import RAW1M_FRAME_BYTES, RAW1M_START_TAG, raw1m_tag, scan_raw1m
 
 FRAME = RAW1M_FRAME_BYTES
 

@@ -80,7 +80,7 @@ def make_inputs(folder: Path) -> list[Path]:
     import OpenImageIO as oiio
 
     from spikeview.io import write_array, write_plain
-    from spikeview.io.raw import write_raw1m
+    from spikeview.io.raw1m import write_raw1m
 
     rng = np.random.default_rng(0)
     yy, xx = np.mgrid[0:64, 0:64] / 64.0

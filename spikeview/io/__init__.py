@@ -8,18 +8,16 @@ from spikeview.io.arrays import NpySource, write_array
 from spikeview.io.geometry import GeometryGuess, rank_plain_geometries, rate_warnings
 from spikeview.io.open import UNSET, open_source, plain_geometry_candidates
 from spikeview.io.plain import PlainDatSource, PlainDatWriter, pack_frames, write_plain
-from spikeview.io.raw import (
+from spikeview.io.raw1m import (
     Raw1MDecoder,
     Raw1MSource,
-    Raw400Source,
     SyncStats,
     decode_raw1m_frames,
     encode_raw1m,
-    encode_raw400,
     raw1m_tag_sequence,
     write_raw1m,
-    write_raw400,
 )
+from spikeview.io.raw400 import Raw400Source, encode_raw400, write_raw400
 from spikeview.io.sidecar import Sidecar, StreamSettings, read_sidecar, sidecar_path, write_sidecar
 from spikeview.io.source import DEFAULT_TICK_RATE, FORMATS, ArraySource, SpikeSource, StreamInfo
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from spikeview.errors import InputFileError, ParameterError
-from spikeview.io.source import SpikeSource
+from spikeview.io.source import SpikeSource, StreamInfo
 
 
 def check_dims(width: object, height: object, where: str = "") -> tuple[int, int]:
@@ -220,3 +220,29 @@ class PackedFileSource(SpikeSource):
     def close(self) -> None:
         """Drop the file mapping (the OS unmaps it once no array still refers to it). Safe to call twice."""
         self._buf = None
+
+
+def check_frames(frames: np.ndarray, height: int, width: int, what: str) -> np.ndarray:
+    """``frames`` as a ``(T, height, width)`` 0/1 uint8 array for one of the raw encoders; :class:`ParameterError` otherwise."""
+    from spikeview.io.plain import check_spikes
+
+    arr = check_spikes(frames, "frames")
+    if arr.shape[1:] != (height, width):
+        raise ParameterError(f"{what} frames must be {width}x{height}, got {arr.shape[2]}x{arr.shape[1]}.")
+    return arr
+
+
+def write_raw_file(path: str | os.PathLike[str], data: bytes, fmt: str, width: int, height: int, frame_bytes: int, *,
+                   flip_vertical: bool, flip_horizontal: bool, cfa: str | None, tick_rate: float, sidecar: bool) -> Path:
+    """Write an encoded raw stream ``data`` atomically, with its sidecar unless ``sidecar`` is false."""
+    from spikeview._files import write_atomic
+    from spikeview.io.sidecar import write_sidecar
+
+    path = Path(path)
+    write_atomic(path, data)
+    if sidecar:
+        info = StreamInfo(width=width, height=height, n_frames=len(data) // frame_bytes,
+                          tick_rate=check_tick_rate(tick_rate), cfa=cfa, format=fmt,
+                          flip_vertical=flip_vertical, flip_horizontal=flip_horizontal, path=path)
+        write_sidecar(path, info)
+    return path

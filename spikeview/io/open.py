@@ -129,18 +129,18 @@ def open_source(path: str | os.PathLike[str], *, format: str | None = None, widt
 
         src = PlainDatSource(path, w, h, flip_vertical=fv, flip_horizontal=fh, cfa=cfa_v, tick_rate=tr)
     elif fmt in ("raw400", "raw1m"):
-        from spikeview.io import raw
+        from spikeview.io import raw1m, raw400
 
-        fixed = (raw.RAW400_WIDTH, raw.RAW400_HEIGHT) if fmt == "raw400" else (raw.RAW1M_WIDTH, raw.RAW1M_HEIGHT)
+        fixed = (raw400.RAW400_WIDTH, raw400.RAW400_HEIGHT) if fmt == "raw400" else (raw1m.RAW1M_WIDTH, raw1m.RAW1M_HEIGHT)
         given = (width, height)
         if any(g is not None and g != f for g, f in zip(given, fixed)):
             raise ParameterError(f"{fmt} streams are always {fixed[0]}x{fixed[1]}, but width/height "
                                  f"{width}x{height} were given; drop --width/--height or change --format.")
         if fmt == "raw400":
-            src = raw.Raw400Source(path, flip_vertical=fv, flip_horizontal=fh, cfa=cfa_v, tick_rate=tr)
+            src = raw400.Raw400Source(path, flip_vertical=fv, flip_horizontal=fh, cfa=cfa_v, tick_rate=tr)
         else:
-            src = raw.Raw1MSource(path, flip_vertical=fv, flip_horizontal=fh, cfa=cfa_v, tick_rate=tr,
-                                  tag_check=tag_check or "sequence")
+            src = raw1m.Raw1MSource(path, flip_vertical=fv, flip_horizontal=fh, cfa=cfa_v, tick_rate=tr,
+                                    tag_check=tag_check or "sequence")
     else:
         from spikeview.io.arrays import NpySource
 
@@ -193,17 +193,17 @@ def _detect(path: Path, *, width: int | None, height: int | None,
 
     ``only="plain"``: the format is known to be plain, only the geometry is detected.
     """
-    from spikeview.io import raw
+    from spikeview.io import raw1m, raw400
 
     _, buf = open_bytes(path, "spike")
     size = int(buf.size)
-    if only is None and width in (None, raw.RAW1M_WIDTH) and height in (None, raw.RAW1M_HEIGHT) \
-            and raw.looks_like_raw1m(buf):
-        return "raw1m", raw.RAW1M_WIDTH, raw.RAW1M_HEIGHT, (
+    if only is None and width in (None, raw1m.RAW1M_WIDTH) and height in (None, raw1m.RAW1M_HEIGHT) \
+            and raw1m.looks_like_raw1m(buf):
+        return "raw1m", raw1m.RAW1M_WIDTH, raw1m.RAW1M_HEIGHT, (
             "detected a raw 1000x1000 stream from its block tags; pass --format to be explicit.")
     del buf
     if only is None and width is not None and height is not None:
-        if (width, height) == (raw.RAW400_WIDTH, raw.RAW400_HEIGHT) and size % raw.RAW400_FRAME_BYTES == 0 \
+        if (width, height) == (raw400.RAW400_WIDTH, raw400.RAW400_HEIGHT) and size % raw400.RAW400_FRAME_BYTES == 0 \
                 and size % (width * height // 8) != 0:
             return "raw400", width, height, ("read as a raw 400x250 stream (its size is whole "
                                              "416-bit-row frames); pass --format to be explicit.")
@@ -247,11 +247,11 @@ def _detect(path: Path, *, width: int | None, height: int | None,
 
 def _size_candidates(size: int) -> list[tuple[str, int, int]]:
     """Known formats whose frame size divides ``size`` exactly, as ``(format, width, height)``."""
-    from spikeview.io import raw
+    from spikeview.io import raw400
 
     out = [("plain", w, h) for (w, h) in KNOWN_PLAIN_GEOMETRIES if size % (w * h // 8) == 0]
-    if size % raw.RAW400_FRAME_BYTES == 0:
-        out.append(("raw400", raw.RAW400_WIDTH, raw.RAW400_HEIGHT))
+    if size % raw400.RAW400_FRAME_BYTES == 0:
+        out.append(("raw400", raw400.RAW400_WIDTH, raw400.RAW400_HEIGHT))
     return out
 
 

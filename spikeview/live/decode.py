@@ -8,7 +8,7 @@ they are read, and a recording is a plain ``.dat`` file whose sidecar carries th
 recording never unpacks or flips anything.
 
 * :class:`Raw1MStream` decodes the tagged 1000×1000 stream with
-  :class:`~spikeview.io.raw.Raw1MDecoder` (resynchronises after corruption and counts what it
+  :class:`~spikeview.io.raw1m.Raw1MDecoder` (resynchronises after corruption and counts what it
   skipped). Without ROI/decimation the tag bits are stripped straight on the bytes
   (:func:`raw1m_to_packed`): no unpacking. Dropped frames are *estimated* from the stray bytes
   between valid frames: the raw stream carries no frame counter, so frames lost without a trace
@@ -32,7 +32,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from spikeview.errors import ParameterError
-from spikeview.io.raw import (
+from spikeview.io.raw1m import (
     RAW1M_BLOCK_BYTES,
     RAW1M_FRAME_BYTES,
     RAW1M_HEIGHT,
@@ -221,7 +221,7 @@ class Raw1MStream:
 
     Args:
         shaper: ROI/decimation/frame step for 1000×1000 frames.
-        tag_check: ``"sequence"`` or ``"lenient"`` (see :class:`~spikeview.io.raw.Raw1MSource`).
+        tag_check: ``"sequence"`` or ``"lenient"`` (see :class:`~spikeview.io.raw1m.Raw1MSource`).
     """
 
     height, width = RAW1M_HEIGHT, RAW1M_WIDTH

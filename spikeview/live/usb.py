@@ -42,7 +42,7 @@ import numpy as np
 from spikeview.cfa import cfa_to_str, parse_cfa
 from spikeview.config import Config
 from spikeview.errors import ParameterError
-from spikeview.io.raw import RAW1M_HEIGHT, RAW1M_WIDTH, TAG_CHECKS
+from spikeview.io.raw1m import RAW1M_HEIGHT, RAW1M_WIDTH, TAG_CHECKS
 from spikeview.io.source import DEFAULT_TICK_RATE
 from spikeview.live.decode import FrameShaper, PlainStream, Raw1MStream
 from spikeview.live.source import DEFAULT_RING_MB, LiveFailure, LiveSource, LiveStatus, StatusCallback
@@ -73,7 +73,7 @@ class CameraConfig(Config):
     Stream:
         format: ``"raw1m"`` (tagged 1000×1000) or ``"plain"`` (packed frames, no tags).
         width, height: frame size of a ``plain`` stream (``raw1m`` is always 1000×1000).
-        tag_check: ``"sequence"`` or ``"lenient"`` (raw1m; see :class:`~spikeview.io.raw.Raw1MSource`).
+        tag_check: ``"sequence"`` or ``"lenient"`` (raw1m; see :class:`~spikeview.io.raw1m.Raw1MSource`).
         flip_vertical, flip_horizontal: flips from the sensor's row order to display
             orientation (``None``: the format's default, no flip for raw1m, vertical flip for
             plain, as for files).

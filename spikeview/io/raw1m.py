@@ -1,11 +1,6 @@
-"""Raw camera streams: 400×250 (tagged rows of 416 bits) and 1000×1000 (tagged 64-byte half-rows).
+"""Raw 1000×1000 camera streams (tagged 64-byte half-rows).
 
-**400×250 camera** (:class:`Raw400Source`): a frame is 250 rows of 416 bits (52 bytes), LSB
-first; the last 16 bits of each row are not pixels. Decoded at width 416, columns 400–415
-dropped. Stored upside down like plain files (``flip_vertical=True`` by default).
-
-**1000×1000 camera** (:class:`Raw1MSource`, :class:`Raw1MDecoder`): a frame is 1000 rows of 1024
-bits = 2000 blocks of 64 bytes (a half-row each), 128,000 bytes. The last 16-bit little-endian
+A frame is 1000 rows of 1024 bits = 2000 blocks of 64 bytes (a half-row each), 128,000 bytes. The last 16-bit little-endian
 word of each block carries a tag in its upper 12 bits: channel = bits 14–15, line = bits 4–13; its
 lower 4 bits are the last 4 of the block's 500 pixels. So each half-row holds 500 pixels followed
 by 12 tag bits, and a decoded row is bits ``[0:500]`` and ``[512:1012]`` of the 1024-bit row.
@@ -31,15 +26,8 @@ import numpy as np
 
 from spikeview.cfa import parse_cfa
 from spikeview.errors import GeometryError, InputFileError, ParameterError
-from spikeview.io._base import PackedFileSource, check_tick_rate, open_bytes
+from spikeview.io._base import PackedFileSource, check_frames, check_tick_rate, open_bytes, write_raw_file
 from spikeview.io.source import DEFAULT_TICK_RATE, StreamInfo
-
-# ------------------------------------------------------------------------------ 400×250 layout
-RAW400_WIDTH = 400
-RAW400_HEIGHT = 250
-RAW400_ROW_BITS = 416
-RAW400_ROW_BYTES = RAW400_ROW_BITS // 8
-RAW400_FRAME_BYTES = RAW400_ROW_BYTES * RAW400_HEIGHT  # 13,000
 
 # ---------------------------------------------------------------------------- 1000×1000 layout
 RAW1M_WIDTH = 1000
@@ -89,67 +77,6 @@ def raw1m_tag_sequence() -> np.ndarray:
     return ((channel << 14) | (line << 4)).astype(np.uint16)
 
 
-# ------------------------------------------------------------------------- 400×250 reading/writing
-class Raw400Source(PackedFileSource):
-    """A raw 400×250 camera stream (rows of 416 bits; the last 16 bits of each row are dropped).
-
-    Args:
-        path: the raw file.
-        flip_vertical: stored rows are upside down (default ``True``, as for plain files).
-        flip_horizontal: stored columns are mirrored (default ``False``).
-        cfa: CFA after the flips, or ``None`` (these cameras are monochrome).
-        tick_rate: readouts per second (Hz).
-    """
-
-    def __init__(self, path: str | os.PathLike[str], *, flip_vertical: bool = True, flip_horizontal: bool = False,
-                 cfa: str | None = None, tick_rate: float = DEFAULT_TICK_RATE):
-        tick_rate = check_tick_rate(tick_rate)
-        cfa = parse_cfa(cfa)
-        path, buf = open_bytes(path, "raw 400x250")
-        n, rem = divmod(buf.size, RAW400_FRAME_BYTES)
-        if n == 0:
-            raise GeometryError(f"{path}: the file ({buf.size} bytes) is smaller than one raw 400x250 frame "
-                                f"({RAW400_FRAME_BYTES} bytes); check --format.")
-        self._buf = buf
-        self._row_bytes, self._n_rows = RAW400_ROW_BYTES, RAW400_HEIGHT
-        self._segments = np.array([[0, 0, RAW400_WIDTH]], dtype=np.int64)
-        warnings = []
-        if rem:
-            warnings.append(f"the last {rem} bytes do not fill a whole raw 400x250 frame "
-                            f"({RAW400_FRAME_BYTES} bytes) and are not read.")
-        self.info = StreamInfo(width=RAW400_WIDTH, height=RAW400_HEIGHT, n_frames=n, tick_rate=tick_rate, cfa=cfa,
-                               format="raw400", flip_vertical=bool(flip_vertical),
-                               flip_horizontal=bool(flip_horizontal), path=path, warnings=warnings)
-
-    def _frame_offsets(self, a: int, b: int) -> np.ndarray:
-        return np.arange(a, b, dtype=np.int64) * RAW400_FRAME_BYTES
-
-
-def _check_frames(frames: np.ndarray, height: int, width: int, what: str) -> np.ndarray:
-    from spikeview.io.plain import check_spikes
-
-    arr = check_spikes(frames, "frames")
-    if arr.shape[1:] != (height, width):
-        raise ParameterError(f"{what} frames must be {width}x{height}, got {arr.shape[2]}x{arr.shape[1]}.")
-    return arr
-
-
-def encode_raw400(frames: np.ndarray, *, flip_vertical: bool = True, flip_horizontal: bool = False) -> bytes:
-    """Encode ``(T, 250, 400)`` 0/1 frames (display orientation) as a raw 400×250 stream.
-
-    The flips are undone before packing (a :class:`Raw400Source` with the same flips reads the
-    frames back); the 16 non-pixel bits at the end of each row are written as zeros.
-    """
-    arr = _check_frames(frames, RAW400_HEIGHT, RAW400_WIDTH, "raw400")
-    if flip_vertical:
-        arr = arr[:, ::-1]
-    if flip_horizontal:
-        arr = arr[:, :, ::-1]
-    rows = np.zeros((arr.shape[0], RAW400_HEIGHT, RAW400_ROW_BITS), dtype=np.uint8)
-    rows[:, :, :RAW400_WIDTH] = arr
-    return np.packbits(rows.reshape(arr.shape[0], -1), axis=1, bitorder="little").tobytes()
-
-
 # ------------------------------------------------------------------------- 1000×1000 encoding
 def encode_raw1m(frames: np.ndarray, *, flip_vertical: bool = False, flip_horizontal: bool = False,
                  tag_sequence: np.ndarray | None = None) -> bytes:
@@ -162,7 +89,7 @@ def encode_raw1m(frames: np.ndarray, *, flip_vertical: bool = False, flip_horizo
     Returns:
         ``T × 128,000`` bytes.
     """
-    arr = _check_frames(frames, RAW1M_HEIGHT, RAW1M_WIDTH, "raw1m")
+    arr = check_frames(frames, RAW1M_HEIGHT, RAW1M_WIDTH, "raw1m")
     tags = raw1m_tag_sequence() if tag_sequence is None else np.asarray(tag_sequence, dtype=np.uint16)
     if tags.shape != (RAW1M_BLOCKS,):
         raise ParameterError(f"tag_sequence must hold {RAW1M_BLOCKS} tags, got shape {tags.shape}.")
@@ -562,34 +489,10 @@ class Raw1MDecoder:
         return self.stats
 
 
-def _write_raw(path: str | os.PathLike[str], data: bytes, fmt: str, width: int, height: int, frame_bytes: int, *,
-               flip_vertical: bool, flip_horizontal: bool, cfa: str | None, tick_rate: float, sidecar: bool) -> Path:
-    from spikeview._files import write_atomic
-    from spikeview.io.sidecar import write_sidecar
-
-    path = Path(path)
-    write_atomic(path, data)
-    if sidecar:
-        info = StreamInfo(width=width, height=height, n_frames=len(data) // frame_bytes,
-                          tick_rate=check_tick_rate(tick_rate), cfa=cfa, format=fmt,
-                          flip_vertical=flip_vertical, flip_horizontal=flip_horizontal, path=path)
-        write_sidecar(path, info)
-    return path
-
-
 def write_raw1m(path: str | os.PathLike[str], frames: np.ndarray, *, flip_vertical: bool = False,
                 flip_horizontal: bool = False, cfa: str | None = None, tick_rate: float = DEFAULT_TICK_RATE,
                 sidecar: bool = True) -> Path:
     """Write ``(T, 1000, 1000)`` frames as a raw 1000×1000 file (with its sidecar); mainly for tests and mocks."""
-    data = encode_raw1m(frames, flip_vertical=flip_vertical, flip_horizontal=flip_horizontal)
-    return _write_raw(path, data, "raw1m", RAW1M_WIDTH, RAW1M_HEIGHT, RAW1M_FRAME_BYTES, flip_vertical=flip_vertical,
-                      flip_horizontal=flip_horizontal, cfa=cfa, tick_rate=tick_rate, sidecar=sidecar)
-
-
-def write_raw400(path: str | os.PathLike[str], frames: np.ndarray, *, flip_vertical: bool = True,
-                 flip_horizontal: bool = False, cfa: str | None = None, tick_rate: float = DEFAULT_TICK_RATE,
-                 sidecar: bool = True) -> Path:
-    """Write ``(T, 250, 400)`` frames as a raw 400×250 file (with its sidecar); mainly for tests and mocks."""
-    data = encode_raw400(frames, flip_vertical=flip_vertical, flip_horizontal=flip_horizontal)
-    return _write_raw(path, data, "raw400", RAW400_WIDTH, RAW400_HEIGHT, RAW400_FRAME_BYTES, flip_vertical=flip_vertical,
-                      flip_horizontal=flip_horizontal, cfa=cfa, tick_rate=tick_rate, sidecar=sidecar)
+    return write_raw_file(path, encode_raw1m(frames, flip_vertical=flip_vertical, flip_horizontal=flip_horizontal),
+                          "raw1m", RAW1M_WIDTH, RAW1M_HEIGHT, RAW1M_FRAME_BYTES, flip_vertical=flip_vertical,
+                          flip_horizontal=flip_horizontal, cfa=cfa, tick_rate=tick_rate, sidecar=sidecar)
