@@ -6,6 +6,7 @@ import pytest
 from spikeview.errors import InputFileError, ParameterError
 from spikeview.sim.config import SimConfig
 from spikeview.sim.demo import demo_capture, demo_scene
+from spikeview.sim.images import linear_to_srgb, list_image_files, read_image, srgb_to_linear, to_linear_rgb
 from spikeview.sim.scenes import (
     ArrayScene,
     Fan,
@@ -14,12 +15,7 @@ from spikeview.sim.scenes import (
     ResizedScene,
     StaticScene,
     VideoScene,
-    linear_to_srgb,
-    list_image_files,
     open_scene,
-    read_image,
-    srgb_to_linear,
-    to_linear_rgb,
 )
 from spikeview.sim.simulator import simulate
 

@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from spikeview.transfer import srgb_decode
+
 #: scene name -> (group, tuning?, image recipe, pan (vx, vy) px/s, rotation deg/s, zoom per s)
 SCENES: dict[str, tuple[str, bool, str, tuple[float, float], float, float]] = {
     "astronaut": ("natural", True, "astronaut", (1200.0, 400.0), 0.0, 1.0),
@@ -67,11 +69,6 @@ class Case:
         return self.scene in TUNE_SCENES
 
 
-def _srgb_to_linear(img: np.ndarray) -> np.ndarray:
-    x = img.astype(np.float64) / 255.0
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
-
-
 def _photo(name: str) -> np.ndarray:
     from skimage import data
 
@@ -92,7 +89,7 @@ def scene_image(recipe: str) -> np.ndarray:
     brightest 2 % of its pixels (by luminance) raised to full scale in their own hue.
     """
     kind, _, name = recipe.rpartition(":")
-    x = _srgb_to_linear(_photo(name))
+    x = srgb_decode(_photo(name).astype(np.float64) / 255.0)
     if kind == "highkey":
         x = 1.0 - (1.0 - x) ** 3
     elif kind == "lowkey":

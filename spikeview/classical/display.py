@@ -19,6 +19,7 @@ import numba
 import numpy as np
 
 from spikeview.errors import ParameterError
+from spikeview.transfer import srgb_encode
 
 _LUT_SIZE = 65_536
 
@@ -46,7 +47,7 @@ def _check_levels(black: float, white: float) -> tuple[float, float]:
 def _curve(v: np.ndarray, gamma: Gamma) -> np.ndarray:
     """Transfer curve on ``v`` in [0, 1] (float64)."""
     if gamma == "srgb":
-        return np.where(v <= 0.0031308, 12.92 * v, 1.055 * np.power(v, 1 / 2.4) - 0.055)
+        return srgb_encode(v)
     return np.power(v, float(gamma))
 
 

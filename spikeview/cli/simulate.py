@@ -142,7 +142,8 @@ def _scene(args: argparse.Namespace, cfg):
 
 def _image_folder(folder: Path, fps: float | None):
     """An image sequence from the image files of ``folder`` (by suffix), saying which files were skipped."""
-    from spikeview.sim.scenes import ImageSequenceScene, list_image_files
+    from spikeview.sim.images import list_image_files
+    from spikeview.sim.scenes import ImageSequenceScene
 
     if fps is None:
         raise ParameterError(f"{folder}: an image sequence needs its frame rate; pass --fps (frames per second).")

@@ -10,21 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from spikeview.export.settings import ExportConfig
-
-
-def srgb_encode(linear: np.ndarray) -> np.ndarray:
-    """The IEC 61966-2-1 (sRGB) transfer curve.
-
-    Args:
-        linear: float array of any shape, values in ``[0, 1]`` (linear light).
-
-    Returns:
-        float32 array of the same shape, values in ``[0, 1]`` (sRGB-encoded).
-    """
-    x = np.asarray(linear, dtype=np.float32)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(np.maximum(x, 0.0031308), 1 / 2.4) - 0.055).astype(
-        np.float32
-    )
+from spikeview.transfer import srgb_encode
 
 
 def encode_display(frame: np.ndarray, config: ExportConfig) -> np.ndarray:

@@ -15,7 +15,8 @@ import numpy as np
 
 from spikeview.errors import ParameterError
 from spikeview.sim.config import SimConfig
-from spikeview.sim.scenes import Fan, MotionScene, to_linear_rgb
+from spikeview.sim.images import to_linear_rgb
+from spikeview.sim.scenes import Fan, MotionScene
 from spikeview.sim.simulator import SimulatedCapture, simulate
 
 #: content speed of the demo pan, in multiples of the output size per second

@@ -1,0 +1,23 @@
+"""The sRGB transfer curve (IEC 61966-2-1), both ways: its one home.
+
+The exporters (:mod:`spikeview.export.display`), the app's display (:mod:`spikeview.classical.display`),
+the simulator's image loading (:mod:`spikeview.sim.images`) and the benchmark's ground truth all call
+these two functions. They keep the dtype they are given (float32 in, float32 out; float64 in,
+float64 out), so each caller keeps its own precision; they do not clip.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def srgb_encode(linear: np.ndarray) -> np.ndarray:
+    """Linear light to sRGB-encoded values (both nominally ``[0, 1]``), same dtype and shape."""
+    x = np.asarray(linear)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(np.maximum(x, 0.0031308), 1 / 2.4) - 0.055)
+
+
+def srgb_decode(encoded: np.ndarray) -> np.ndarray:
+    """sRGB-encoded values to linear light (the inverse of :func:`srgb_encode`), same dtype and shape."""
+    x = np.asarray(encoded)
+    return np.where(x <= 0.04045, x / 12.92, ((np.maximum(x, 0.04045) + 0.055) / 1.055) ** 2.4)
