@@ -55,7 +55,6 @@ def _run(dat: Path, out: Path, extra: list[str], client=None) -> dict:
     if out.exists():
         shutil.rmtree(out)
     args = build_parser().parse_args(["reconstruct", str(dat), "--out", str(out), *extra])
-    args._given = set()
     reports: list = []
     t0 = time.perf_counter()
     run_zarr(args, client=client, reports=reports)

@@ -107,7 +107,6 @@ class Param:
         lo, hi: accepted range (``None`` = unbounded); ``lo_open`` excludes ``lo``.
         step: slider/spin step in the app.
         choices: accepted strings.
-        scale: the app shows ``value * scale`` (e.g. 255 for noise levels in /255).
     """
 
     path: str
@@ -121,7 +120,6 @@ class Param:
     lo_open: bool = False
     step: float | None = None
     choices: tuple[str, ...] = ()
-    scale: float = 1.0
 
     @property
     def table(self) -> str:
@@ -157,7 +155,7 @@ class Param:
                 return None
             raise ParameterError(f"{name} needs a value; see --help for its range.")
         return check_value(name, kind, value, self.lo, self.hi, self.choices, lo_open=self.lo_open,
-                           unit=self.unit if self.scale == 1.0 else "")
+                           unit=self.unit)
 
 
 def check_value(name: str, kind: Any, value: Any, lo: float | None = None, hi: float | None = None,

@@ -79,17 +79,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _given_dests(parser: argparse.ArgumentParser, command: str, argv: list[str]) -> set[str]:
-    """Destinations of the options the user typed (so presets can be overridden flag by flag)."""
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    given: set[str] = set()
-    for action in sub.choices[command]._actions:
-        for opt in action.option_strings:
-            if any(tok == opt or tok.startswith(opt + "=") for tok in argv):
-                given.add(action.dest)
-    return given
-
-
 def _print_error(message: str) -> None:
     print(f"spikeview: error: {message}", file=sys.stderr)
 
@@ -149,7 +138,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         argv = ["app", *argv]
     parser = build_parser()
     args = parser.parse_args(argv)
-    args._given = _given_dests(parser, args.command, argv)
     if args.command == "app":
         problem = display_problem()
         if problem is not None:

@@ -15,12 +15,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from spikeview.errors import ParameterError
-from spikeview.recipe import BY_PATH, PARAMS, Recipe, RunTable, StreamTable, apply_flags, given_flags
+from spikeview.recipe import BY_PATH, PARAMS, Recipe, StreamTable, apply_flags, given_flags
 
 _PATTERN = re.compile(r"[_.\-]?%0?\d*d")
-#: kept for the batch path: the ``[run]`` table
-RunConfig = RunTable
 #: geometry flags that fill the recipe's ``[stream]`` table
 STREAM_FLAGS = ("format", "width", "height", "cfa", "flip_vertical", "flip_horizontal", "tick_rate", "layout")
 
@@ -28,14 +25,6 @@ STREAM_FLAGS = ("format", "width", "height", "cfa", "flip_vertical", "flip_horiz
 def preset_path(out: Path) -> Path:
     """``clip.mp4`` → ``clip.mp4.preset.toml``; ``frames/f_%04d.exr`` → ``frames/f.exr.preset.toml``."""
     return out.with_name(_PATTERN.sub("", out.name) + ".preset.toml")
-
-
-def _load_preset(path: str | None) -> dict[str, Any]:
-    """The preset file as a dict (``{}`` without one); validated as a recipe."""
-    if path is None:
-        return {}
-    recipe = Recipe.load(path)
-    return recipe.to_dict()
 
 
 def recipe_from_args(args: argparse.Namespace, base: Recipe | None = None) -> Recipe:
@@ -51,15 +40,6 @@ def recipe_from_args(args: argparse.Namespace, base: Recipe | None = None) -> Re
     if getattr(args, "at", None) is not None or getattr(args, "range", None) is not None:
         recipe = recipe.with_values({"run.at": args.at, "run.range": args.range})
     return recipe
-
-
-def _centres(run_cfg: RunTable, n_frames: int, window: int) -> tuple[list[int], int]:
-    """Centre ticks of a ``[run]`` table (see :func:`spikeview.pipeline.window_centres`)."""
-    from spikeview.pipeline import window_centres
-
-    probe = Recipe(run=run_cfg)
-    probe = probe.with_values({"classical.window": window}) if run_cfg.method != "tfi" else probe
-    return window_centres(probe, n_frames)
 
 
 def open_stream(args: argparse.Namespace, recipe: Recipe):
@@ -152,4 +132,4 @@ def _write_preset(out: Path, recipe: Recipe, src: Any) -> Path:
     return recipe.save(path, header=f"# spikeview reconstruct preset for {src.info.path}")
 
 
-__all__ = ["PARAMS", "RunConfig", "preset_path", "recipe_from_args", "run"]
+__all__ = ["PARAMS", "preset_path", "recipe_from_args", "run"]

@@ -42,11 +42,6 @@ def method_of(data: dict[str, Any]) -> str:
     return str(data.get("run", {}).get("method", "tfp"))
 
 
-def window_length(data: dict[str, Any]) -> int:
-    """Ticks of one window (TFP window, TFI span, guided window)."""
-    return int(recipe_of(data).span())
-
-
 def chained(data: dict[str, Any]) -> bool:
     """Whether a window's result depends on its predecessor's (guided reuse or warm start)."""
     if method_of(data) != "guided":

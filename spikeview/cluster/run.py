@@ -21,8 +21,6 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
-
 from spikeview.cluster._compute import (
     DEFAULT_KEYFRAME,
     chained,
@@ -366,9 +364,3 @@ def run_batch(job: BatchJob, state: Any, *, cluster: str | None = None,
     report.seconds = time.perf_counter() - t0
     return report
 
-
-def assemble(job: BatchJob) -> np.ndarray:
-    """All frames of a finished store (tests, small runs)."""
-    from spikeview.cluster.store import open_store, read_frames
-
-    return read_frames(open_store(job.store))

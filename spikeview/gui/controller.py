@@ -99,7 +99,6 @@ class Controller(QtCore.QObject):
         self.guided_live = False
         self._guided_key: tuple[Any, ...] | None = None
         self._frames_dirty = False
-        self._rates_dirty = False
         self._alpha_hist: dict[int, np.ndarray] = {}
         self._shown_times: deque[float] = deque(maxlen=120)
         self._last_advance = time.perf_counter()
@@ -358,7 +357,6 @@ class Controller(QtCore.QObject):
             return False
         from spikeview.gui.presets import session_recipe
 
-        p = dict(s.params)
         try:
             recipe = session_recipe(s)
             ticks = jobs.export_ticks(recipe, s.n_frames)

@@ -13,7 +13,6 @@ levels ``(0, 255)``); ticks are stream readout indices.
 
 from __future__ import annotations
 
-import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -22,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from spikeview.cfa import SITE_NAMES, flip_cfa, parse_cfa
+from spikeview.cfa import flip_cfa, parse_cfa
 from spikeview.errors import ParameterError
 from spikeview.gui.model import OpenedStream
 from spikeview.io.source import ArraySource, SpikeSource, StreamInfo
@@ -437,8 +436,6 @@ def site_rates(sfr: np.ndarray, cfa: str | None, window: int, roi: tuple[int, in
     return RatesResult(tick=tick, edges=edges, hists=hists, means=means, alpha=alpha_note(ch)[0])
 
 
-SITE_ORDER = SITE_NAMES
-
 # ----------------------------------------------------------------------------- degradation
 
 
@@ -494,6 +491,3 @@ def stage_images(x_img: np.ndarray, stages: dict[str, Any], display: dict[str, A
         bands = [signed_display(-arr(b), RESIDUAL_RANGE / 2) for b in stages["bands"]]
     return DegradationResult(images=images, bands=bands, rmse=rmse, residual_scale=RESIDUAL_RANGE)
 
-
-def fmt_rate(v: float) -> str:
-    return "—" if not math.isfinite(v) else f"{v:.3f}"

@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 
-from spikeview.errors import Cancelled
 from spikeview.gui import core
 from spikeview.recipe import Recipe
 
@@ -321,15 +320,3 @@ def store_job(req: ExportRequest, ctx: Any) -> list[Path]:
     return [req.out]
 
 
-class _Ctx:
-    """A context for a nested job: same cancel flag and state, progress swallowed."""
-
-    def __init__(self, outer: Any):
-        self.cancelled, self.state = outer.cancelled, outer.state
-
-    def report(self, payload: Any) -> None:
-        pass
-
-    def check(self) -> None:
-        if self.cancelled.is_set():
-            raise Cancelled("cancelled")

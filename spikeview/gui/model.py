@@ -21,7 +21,6 @@ Conventions:
 from __future__ import annotations
 
 import contextlib
-import math
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -596,10 +595,6 @@ class Session:
 
     def _undo_changed(self) -> None:
         self.events.undo_changed.emit(self.undo_stack.can_undo, self.undo_stack.can_redo)
-
-    def params_in(self, *groups: str) -> dict[str, Any]:
-        """The parameters of the given groups (all when none given)."""
-        return {k: v for k, v in self.params.items() if not groups or SPECS[k].group in groups}
 
 
 def format_us(us: float) -> str:

@@ -44,11 +44,6 @@ def session_recipe(session: Session) -> Recipe:
     return recipe.with_values(values) if values else recipe
 
 
-def preset_dict(session: Session) -> dict[str, Any]:
-    """The session's recipe as preset tables (what :func:`save_preset` writes)."""
-    return session_recipe(session).to_dict()
-
-
 def save_preset(session: Session, path: str | os.PathLike[str]) -> Path:
     """Write the session's recipe to ``path`` as TOML (atomically)."""
     return session_recipe(session).save(
