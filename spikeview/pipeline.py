@@ -43,7 +43,8 @@ class SequenceState:
 
     Attributes:
         alpha: ``(3,)`` float64 gray-world gains, or ``None`` (monochrome stream, colour cast off).
-        white: the sequence's white point in linear-frame units ``Y·α/η``
+        white: the sequence's white point in the units of its frames: ``Y·α/η`` with gains α,
+            the plain rate ``Y`` without (monochrome)
             (:func:`spikeview.classical.colour_cast.estimate_white`: 99.9th percentile of the
             corrected rates); the guided sampler sees the exposure that puts it at
             :data:`spikeview.guided.observation.EXPOSURE_LEVEL`. ``None``: not estimated.
@@ -122,8 +123,14 @@ def recipe_for_state(recipe: Recipe, state: SequenceState) -> Recipe:
 
 
 def guided_scale(state: SequenceState) -> float:
-    """Factor from the sampler's exposed frames to linear-frame units (``white / EXPOSURE_LEVEL``; 1 without a white point)."""
-    if state.white is None:
+    """Factor from the sampler's exposed frames to linear-frame units (``white / EXPOSURE_LEVEL``).
+
+    1 without a white point, and without gains α (monochrome, or the colour cast off): the exposure
+    reaches the sampler through its colour cast C (:func:`sampler_params`), so without C the sampler
+    sees the plain rates ``Y`` and its frames are already in the units of the classical frames
+    (``Y``, the white point's units then too, :func:`~spikeview.classical.colour_cast.estimate_white`).
+    """
+    if state.white is None or state.alpha is None:
         return 1.0
     from spikeview.guided.observation import EXPOSURE_LEVEL
 
@@ -159,8 +166,9 @@ def exposure_mapping(recipe: Recipe, state: SequenceState, out: str | Path) -> t
 def sampler_params(recipe: Recipe, state: SequenceState) -> Any:
     """The :class:`~spikeview.guided.GuidedConfig` the sampler runs on this sequence: η set so that the
     sequence's white point sits at :data:`spikeview.guided.observation.EXPOSURE_LEVEL` (the prior and
-    the data term see the exposed image, never clipped); ``recipe.guided`` without a white point."""
-    if state.white is None:
+    the data term see the exposed image, never clipped); ``recipe.guided`` without a white point or
+    without gains α (no C to carry the exposure: see :func:`guided_scale`)."""
+    if state.white is None or state.alpha is None:
         return recipe.guided
     from spikeview.guided.observation import exposed_eta
 

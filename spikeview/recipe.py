@@ -65,18 +65,29 @@ class RunTable(Config):
         check("run.method", self.method)
 
 
+def _stream(help: str, **kw: Any) -> Any:
+    """A ``[stream]`` field (unset by default) with the help and choices its command-line flag shows."""
+    return dataclasses.field(default=None, metadata={"help": help, **kw})
+
+
 @dataclass
 class StreamTable(Config):
-    """How the capture is read (``None`` = from the sidecar, the suffix or detection)."""
+    """How the capture is read (``None`` = from the sidecar, the suffix or detection).
 
-    format: str | None = None
-    width: int | None = None
-    height: int | None = None
-    cfa: str | None = None
-    flip_vertical: bool | None = None
-    flip_horizontal: bool | None = None
-    tick_rate: float | None = None
-    layout: str | None = None
+    Each field's metadata holds its flag's help (and ``choices``/``metavar``): the CLI's geometry
+    flags are generated from this table (:func:`spikeview.cli._common.add_geometry_flags`).
+    """
+
+    format: str | None = _stream("file format (default: sidecar, suffix or detection)",
+                                 choices=("plain", "raw400", "raw1m", "npz"))
+    width: int | None = _stream("frame width in pixels")
+    height: int | None = _stream("frame height in pixels")
+    cfa: str | None = _stream("colour filter: top-left 2x2 after the flips, or 'none' for monochrome",
+                              metavar="{RGGB,BGGR,GRBG,GBRG,none}")
+    flip_vertical: bool | None = _stream("rows are stored upside down (the ecosystem default for .dat files)")
+    flip_horizontal: bool | None = _stream("columns are stored mirrored")
+    tick_rate: float | None = _stream("readouts per second (default 20000)")
+    layout: str | None = _stream("axis order of .npy/.npz arrays", choices=("thw", "hwt"))
 
     @classmethod
     def from_info(cls, info: Any, layout: str | None = None) -> StreamTable:

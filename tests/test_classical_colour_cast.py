@@ -201,15 +201,39 @@ def test_estimate_white_clips_at_most_the_percentile():
     gains = np.array([[alpha[1], alpha[0]], [alpha[2], alpha[1]]])  # GRBG
     vals = np.concatenate([(window_counts(src, s, s + 10) / 10 * np.tile(gains, (16, 16)) / 2.0).ravel()
                            for s in sample_starts(400, 10, 64)])
-    assert (vals > white + 1e-9).mean() <= 0.01  # at most 1 % above the 99th percentile
-    assert (vals >= white - 1e-9).mean() > 0.01  # and it is that percentile, not a loose bound
+    assert (vals >= white - 1e-9).mean() <= 0.01  # at most 1 % AT or above it (shown at full scale)
+    lower = vals[vals < white - 1e-9].max()
+    assert (vals >= lower - 1e-9).mean() > 0.01  # and it is the lowest such value, not a loose bound
+
+
+def test_estimate_white_of_quantised_monochrome_puts_at_most_the_tail_at_full_scale():
+    """TFP values are multiples of 1/Δτ: the plain 99.9th percentile fell on a level holding 3 % of a
+    Spike-Zoo clip's photosites, all shown at full scale; the white point is the next level up."""
+    from spikeview.classical.colour_cast import estimate_white
+    from test_guided_helpers import spikes_from_rates
+
+    rng = np.random.default_rng(5)
+    # 2 % of the photosites fire at 0.5 per tick, one (0.05 %) at 0.6, the rest at 0.1–0.3 (a 10-tick
+    # window: levels 0.1 apart; integrate-and-fire counts exactly 5 and 6 spikes at 0.5 and 0.6)
+    rates = rng.uniform(0.1, 0.3, (40, 50))
+    idx = rng.choice(rates.size, 41, replace=False)
+    rates.flat[idx[:40]] = 0.5
+    rates.flat[idx[40]] = 0.6
+    spikes = spikes_from_rates(rates, 400, seed=2)
+    src = ArraySource(spikes, cfa=None)
+    white = estimate_white(src, None, window=10, eta=2.0)
+    vals = np.concatenate([spikes[s:s + 10].mean(axis=0).ravel() for s in range(0, 400, 10)])
+    assert (vals >= white - 1e-9).mean() <= 0.001
+    assert white == pytest.approx(0.6)  # Y units (no η for monochrome frames), one level above 0.5
 
 
 def test_estimate_white_of_a_dark_stream_is_the_gray_world_mean_and_bad_percentile_is_refused():
     from spikeview.classical.colour_cast import estimate_white
 
     src = ArraySource(np.zeros((30, 8, 8), dtype=np.uint8), cfa=None)
-    assert estimate_white(src, None, window=10, eta=2.0) == 0.5
+    assert estimate_white(src, None, window=10, eta=2.0) == 1.0  # monochrome frames are Y: no η
+    bayer = ArraySource(np.zeros((30, 8, 8), dtype=np.uint8), cfa="RGGB")
+    assert estimate_white(bayer, np.ones(3), window=10, eta=2.0) == 0.5  # Y·α/η: the gray-world mean 1/η
     with pytest.raises(ParameterError, match="percentile"):
         estimate_white(src, None, percentile=0.0)
 

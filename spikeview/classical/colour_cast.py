@@ -319,23 +319,28 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
     Gray-world (:func:`estimate_alpha`) sets the channel **ratios**; this sets the **exposure**.
     The corrected TFP values ``Y_c · α_c / η`` of every photosite of ``max_windows`` windows of
     ``window`` ticks spread over the stream (:func:`sample_starts`; the same windows as the α
-    estimate) are pooled and their ``percentile`` is returned. Mapping that value to full scale
-    clips at most ``100 − percentile`` % of the TFP values of such windows (0.1 % by default), and it
+    estimate) are pooled, and the lowest of their values with at most ``100 − percentile`` % of them
+    **at or above** it is returned (the ``percentile``-th percentile, or the next quantisation level
+    above it when the level it falls on holds more photosites). Mapping that value to full scale
+    puts at most ``100 − percentile`` % of the TFP values of such windows at full scale (0.1 % by
+    default; more only when more than that are saturated at the largest value), and it
     is chosen **once per sequence**, so frames do not flicker. Use the reconstruction's own window:
     shorter windows are noisier and put the percentile higher.
 
     Args:
         source: the sequence (flips applied; ``source.cfa`` names the CFA).
-        alpha: the sequence's gray-world gains ``(3,)`` (``None`` or ``(1,)`` for monochrome: no
-            per-channel gain).
+        alpha: the sequence's gray-world gains ``(3,)``; ``None`` when no colour cast applies
+            (monochrome streams always: their frames are ``Y``).
         window: ticks per sampled window (at most the stream length).
         max_windows: windows sampled from a long stream.
         eta: range parameter η of the linear frame (``Y · α / η``).
         percentile: in ``(0, 100]``.
 
     Returns:
-        The white point in the units of the linear frame ``Y · α / η`` (> 0; a stream without any
-        spike gives ``1/η``, the gray-world mean, instead of 0).
+        The white point in the units of the linear frame (> 0): ``Y · α / η`` for a Bayer stream with
+        gains ``alpha``; the plain rate ``Y`` (spikes per tick) for monochrome streams and without
+        gains, whose frames carry neither α nor η (``alpha`` and ``eta`` are then ignored). A stream
+        without any spike gives the gray-world mean ``1/η`` (``1`` without gains) instead of 0.
     """
     if not 0.0 < float(percentile) <= 100.0:
         raise ParameterError(f"percentile = {percentile!r} is out of range: use a value in (0, 100], e.g. {WHITE_PERCENTILE}.")
@@ -347,8 +352,10 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
         gains = np.ones((2, 2))
         for (py, px), ch in zip(((0, 0), (0, 1), (1, 0), (1, 1)), cfa):
             gains[py, px] = g[CHANNEL_INDEX[ch]]
-    elif alpha is not None:
-        gains = np.full((2, 2), float(_check_alpha(alpha, 1)[0]))
+    else:
+        # no colour cast applies (monochrome, or a Bayer stream with the cast off): the frames are the
+        # plain rates Y (reconstruct_frame applies neither α nor η to them), and so is the white point
+        eta = 1.0
     n_ticks = min(int(window), source.n_frames)
     # a histogram per distinct gain: counts take only n_ticks + 1 values per photosite class
     hist: dict[float, np.ndarray] = {}
@@ -363,10 +370,16 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
                 hist[g] = hist.get(g, 0) + h
     values = np.concatenate([np.arange(n_ticks + 1) / n_ticks * g / eta for g in hist])
     weights = np.concatenate([hist[g] for g in hist]).astype(np.float64)
-    order = np.argsort(values, kind="stable")
-    values, cum = values[order], np.cumsum(weights[order])
-    if cum[-1] <= 0:
+    values, inverse = np.unique(values, return_inverse=True)
+    weights = np.bincount(inverse.ravel(), weights=weights, minlength=values.size)
+    values, weights = values[weights > 0], weights[weights > 0]  # only values that occur
+    total = float(weights.sum())
+    if total <= 0:
         return 1.0 / eta
-    idx = int(np.searchsorted(cum, float(percentile) / 100.0 * cum[-1], side="left"))
-    white = float(values[min(idx, values.size - 1)])
+    # the lowest value with at most (100 - percentile) % of the values AT OR ABOVE it: TFP values are
+    # quantised (multiples of 1/Δτ), so the plain percentile can sit on a level that holds several
+    # percent of the photosites, all of which would then show at full scale (3 % of a Spike-Zoo clip)
+    tail = total - np.concatenate(([0.0], np.cumsum(weights)[:-1]))  # weight of values >= values[i]
+    ok = np.flatnonzero(tail <= (100.0 - float(percentile)) / 100.0 * total * (1 + 1e-12))
+    white = float(values[ok[0]]) if ok.size else float(values[-1])
     return white if white > 0 else 1.0 / eta

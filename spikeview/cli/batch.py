@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+from spikeview.cli._common import progress, recipe_from_args, require_extra
 from spikeview.errors import ParameterError
 
 
@@ -35,25 +36,14 @@ def wants_zarr(args: argparse.Namespace) -> bool:
     return False
 
 
-def _require_extra() -> None:
-    from spikeview.cluster.reconstruct import require_extra
-
-    require_extra()
-
-
-def _recipe(args: argparse.Namespace, base):
-    """``base`` ← the geometry flags ← the recipe flags given ← ``--at``/``--range`` (``recipe_from_args``)."""
-    from spikeview.cli.reconstruct import recipe_from_args
-
-    return recipe_from_args(args, base)
+#: kept for callers of the old private name (the export command); :func:`spikeview.cli._common.require_extra`
+_require_extra = require_extra
 
 
 class _Progress:
     """tqdm on a terminal (windows, windows/s, time left); otherwise a plain line every 10 % or 30 s."""
 
     def __init__(self, total: int, done: int, desc: str):
-        from spikeview.cli.commands import progress
-
         self.total, self.done, self.t0, self.last = total, done, time.perf_counter(), 0.0
         self.start_done = done
         self.tty = sys.stderr.isatty()
@@ -84,7 +74,7 @@ def run_zarr(args: argparse.Namespace, *, cancel=None, client=None, reports: lis
     ``cancel`` is polled after every finished chunk; ``client`` is a Dask client to use instead of
     ``--cluster``; the run's :class:`~spikeview.cluster.run.BatchReport` is appended to ``reports``.
     """
-    _require_extra()
+    require_extra()
     from spikeview.cluster.reconstruct import reconstruct_to_store, store_recipe
     from spikeview.recipe import Recipe
 
@@ -94,7 +84,7 @@ def run_zarr(args: argparse.Namespace, *, cancel=None, client=None, reports: lis
         base = Recipe.load(args.preset)
     elif args.resume:
         base = store_recipe(out)  # resume with the store's settings; flags given must agree with them
-    recipe = _recipe(args, base if base is not None else Recipe())
+    recipe = recipe_from_args(args, base if base is not None else Recipe())
     extra = {"tag_check": args.tag_check} if getattr(args, "tag_check", None) else {}
     bar: list[_Progress] = []
 

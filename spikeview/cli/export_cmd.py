@@ -10,7 +10,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from spikeview.cli._common import add_overwrite_flag, preset_path, progress, require_extra
 from spikeview.errors import ParameterError
+
+EPILOG = "example:\n  spikeview export clip.zarr --out clip.mp4 --fps 30\n"
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
@@ -19,19 +22,13 @@ def add_args(p: argparse.ArgumentParser) -> None:
                    help="output: .mp4, .npy, or an .exr/.png pattern with a frame number such as frame_%%04d.exr")
     p.add_argument("--fps", type=float, help="output frame rate of .mp4 files (default: the store's recipe)")
     p.add_argument("--compression", choices=["zip", "piz", "none"], help="EXR compression (default: the store's recipe)")
-    from spikeview.cli.commands import add_overwrite_flag
-
     add_overwrite_flag(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from spikeview.cli.batch import _require_extra
-
-    _require_extra()
+    require_extra()
     import tomllib
 
-    from spikeview.cli.commands import progress
-    from spikeview.cli.reconstruct import preset_path
     from spikeview.cluster.store import done_mask, open_store, store_attrs
     from spikeview.export import ExportMetadata, describe_slow_motion, open_exporter, slow_motion_factor
     from spikeview.recipe import Recipe

@@ -2,10 +2,30 @@
 
 from __future__ import annotations
 
+import argparse
+
 import numpy as np
 
 from spikeview.cfa import cfa_to_str, site_masks
 from spikeview.io.source import SpikeSource
+
+#: the command reads a spike file: the geometry flags are added (:func:`spikeview.cli._common.add_geometry_flags`)
+GEOMETRY = True
+EPILOG = "example:\n  spikeview info capture.dat --width 1000 --height 1000 --cfa BGGR\n"
+
+
+def add_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", metavar="FILE", help="spike file (.dat, raw camera stream, .npy/.npz)")
+    p.add_argument("--sample-windows", type=int, default=64,
+                   help="number of windows spread over the file used for firing-rate statistics (default 64)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from spikeview.cli._common import open_source_from_args
+
+    with open_source_from_args(args, show_warnings=False) as src:  # `info` lists the warnings itself
+        print(describe(src, sample_windows=args.sample_windows))
+    return 0
 
 
 def firing_rates(src: SpikeSource, sample_windows: int = 64, window: int = 64) -> dict[str, float]:

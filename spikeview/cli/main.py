@@ -7,6 +7,7 @@ imported inside the sub-command that needs them, so ``spikeview --help`` stays i
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
 from typing import Callable, Sequence
@@ -24,38 +25,6 @@ EPILOG = """examples:
 """
 
 
-def _add_geometry_flags(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("stream geometry (override the sidecar; needed for files without one)")
-    g.add_argument("--format", choices=["plain", "raw400", "raw1m", "npz"], help="file format (default: sidecar, suffix or detection)")
-    g.add_argument("--width", type=int, help="frame width in pixels")
-    g.add_argument("--height", type=int, help="frame height in pixels")
-    g.add_argument("--cfa", metavar="{RGGB,BGGR,GRBG,GBRG,none}",
-                   help="colour filter: top-left 2x2 after the flips, or 'none' for monochrome")
-    g.add_argument("--flip-vertical", action=argparse.BooleanOptionalAction, default=None,
-                   help="rows are stored upside down (the ecosystem default for .dat files)")
-    g.add_argument("--flip-horizontal", action=argparse.BooleanOptionalAction, default=None,
-                   help="columns are stored mirrored")
-    g.add_argument("--tick-rate", type=float, help="readouts per second (default 20000)")
-    g.add_argument("--layout", choices=["thw", "hwt"], help="axis order of .npy/.npz arrays")
-    g.add_argument("--tag-check", choices=["sequence", "lenient"],
-                   help="raw 1000x1000 streams: match the full tag sequence (default) or only the frame-start tag and valid line numbers")
-
-
-def _open_from_args(args: argparse.Namespace):
-    from spikeview.io import open_source
-
-    kwargs = dict(format=args.format, width=args.width, height=args.height,
-                  flip_vertical=args.flip_vertical, flip_horizontal=args.flip_horizontal,
-                  tick_rate=args.tick_rate, layout=args.layout, tag_check=args.tag_check)
-    if args.cfa is not None:
-        kwargs["cfa"] = args.cfa
-    src = open_source(args.input, **kwargs)
-    if not getattr(args, "_shows_warnings", False):  # `info` lists them itself
-        for note in src.info.warnings:  # a truncated file, a doubtful width or CFA: said before the work
-            print(f"spikeview: warning: {src.info.path.name if src.info.path else args.input}: {note}", file=sys.stderr)
-    return src
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="spikeview",
@@ -66,16 +35,17 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"spikeview {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
-    from spikeview.cli import commands
+    from spikeview.cli._common import add_geometry_flags
+    from spikeview.cli.commands import COMMANDS
 
-    for name, (helptext, add_args, run) in commands.COMMANDS.items():
-        p = sub.add_parser(name, help=helptext, description=helptext,
-                           formatter_class=argparse.RawDescriptionHelpFormatter,
-                           epilog=commands.EPILOGS.get(name))
-        add_args(p)
-        if getattr(add_args, "geometry", False):
-            _add_geometry_flags(p)
-        p.set_defaults(func=run)
+    for name, command in COMMANDS.items():
+        module = importlib.import_module(command.module)
+        p = sub.add_parser(name, help=command.help, description=command.help,
+                           formatter_class=argparse.RawDescriptionHelpFormatter, epilog=getattr(module, "EPILOG", None))
+        module.add_args(p)
+        if getattr(module, "GEOMETRY", False):
+            add_geometry_flags(p)
+        p.set_defaults(func=module.run)
     return parser
 
 
@@ -131,10 +101,10 @@ def display_problem(environ: dict[str, str] | None = None, platform: str | None 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the process exit status (0 ok, 1 failed, 2 bad usage, 130 interrupted)."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    from spikeview.cli import commands
+    from spikeview.cli.commands import COMMANDS
 
     # `spikeview` alone or `spikeview FILE` opens the app.
-    if not argv or (argv[0] not in commands.COMMANDS and not argv[0].startswith("-")):
+    if not argv or (argv[0] not in COMMANDS and not argv[0].startswith("-")):
         argv = ["app", *argv]
     parser = build_parser()
     args = parser.parse_args(argv)

@@ -10,45 +10,41 @@ calls, so the same recipe gives the same pixels in both.
 from __future__ import annotations
 
 import argparse
-import re
 import sys
 from pathlib import Path
 from typing import Any
 
-from spikeview.recipe import BY_PATH, PARAMS, Recipe, StreamTable, apply_flags, given_flags
+from spikeview.cli import batch
+from spikeview.cli._common import add_overwrite_flag, open_source_from_args, preset_path, progress, recipe_from_args
+from spikeview.recipe import BY_PATH, PARAMS, Recipe, StreamTable, add_flags, given_flags
 
-_PATTERN = re.compile(r"[_.\-]?%0?\d*d")
-#: geometry flags that fill the recipe's ``[stream]`` table
-STREAM_FLAGS = ("format", "width", "height", "cfa", "flip_vertical", "flip_horizontal", "tick_rate", "layout")
-
-
-def preset_path(out: Path) -> Path:
-    """``clip.mp4`` → ``clip.mp4.preset.toml``; ``frames/f_%04d.exr`` → ``frames/f.exr.preset.toml``."""
-    return out.with_name(_PATTERN.sub("", out.name) + ".preset.toml")
-
-
-def recipe_from_args(args: argparse.Namespace, base: Recipe | None = None) -> Recipe:
-    """Defaults (or ``base``) ← ``--preset`` ← the flags given (errors name the flag or the file)."""
-    if base is not None:
-        recipe = base
-    else:
-        recipe = Recipe.load(args.preset) if getattr(args, "preset", None) else Recipe()
-    stream = {k: getattr(args, k) for k in STREAM_FLAGS if getattr(args, k, None) is not None}
-    if stream:
-        recipe = recipe.with_values({f"stream.{k}": v for k, v in stream.items()})
-    recipe = apply_flags(recipe, args)
-    if getattr(args, "at", None) is not None or getattr(args, "range", None) is not None:
-        recipe = recipe.with_values({"run.at": args.at, "run.range": args.range})
-    return recipe
+#: the command reads a spike file: the geometry flags are added (:func:`spikeview.cli._common.add_geometry_flags`)
+GEOMETRY = True
+EPILOG = (
+    "examples:\n"
+    "  spikeview reconstruct demo.dat --method tfp --at 1000 --out frame.png\n"
+    "  spikeview reconstruct demo.dat --method tfi --range 0:2000:20 --out frames/f_%04d.exr\n"
+    "  spikeview reconstruct demo.dat --range 0:4000:10 --out clip.mp4 --fps 30\n"
+    "  spikeview reconstruct demo.dat --method guided --at 1000 --out guided.exr\n"
+    "  spikeview reconstruct demo.dat --method guided --guidance dps --s 0.5 --steps 20 --range 0:400:40 --out g_%04d.exr\n"
+    "  spikeview reconstruct demo.dat --preset guided.exr.preset.toml --out again.exr\n"
+    "  spikeview reconstruct demo.dat --range 0:40000:20 --out clip.zarr --cluster local:2   (then --resume)\n"
+)
 
 
-def open_stream(args: argparse.Namespace, recipe: Recipe):
-    """The source, read with the recipe's ``[stream]`` (flags already folded in)."""
-    from spikeview.cli.main import _open_from_args
-
-    for key, value in recipe.stream.open_kwargs().items():
-        setattr(args, key, value)
-    return _open_from_args(args)
+def add_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("input", metavar="INPUT", help="spike file (.dat, raw camera stream, .npy/.npz)")
+    when = p.add_mutually_exclusive_group()
+    when.add_argument("--at", type=int, metavar="T", help="reconstruct the one window centred on tick T")
+    when.add_argument("--range", metavar="A:B[:STEP]",
+                      help="windows centred on A, A+STEP, ... below B (STEP defaults to the window length)")
+    p.add_argument("--out", required=True, metavar="OUT",
+                   help="output: .npy, .mp4, or an .exr/.png pattern with a frame number such as frame_%%04d.exr")
+    p.add_argument("--preset", metavar="FILE",
+                   help="a recipe TOML (written beside earlier outputs, or saved by the app) to re-run; flags given override it")
+    add_overwrite_flag(p)
+    add_flags(p, ("run", "classical", "guided", "export"))
+    batch.add_args(p)
 
 
 def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre: int, state: Any) -> list[str]:
@@ -73,17 +69,14 @@ def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre
 
 
 def run(args: argparse.Namespace) -> int:
-    from spikeview.cli.batch import run_zarr, wants_zarr
-
-    if wants_zarr(args):  # a .zarr output: the chunked, resumable batch path
-        return run_zarr(args)
-    from spikeview.cli.commands import progress
+    if batch.wants_zarr(args):  # a .zarr output: the chunked, resumable batch path
+        return batch.run_zarr(args)
     from spikeview.export import describe_slow_motion, slow_motion_factor
     from spikeview.pipeline import prepare_sequence, recipe_for_state, window_centres, write_sequence
 
     recipe = recipe_from_args(args)
     out = Path(args.out)
-    src = open_stream(args, recipe)
+    src = open_source_from_args(args, recipe)
     with src:
         recipe = recipe.with_values({f"stream.{k}": v for k, v in StreamTable.from_info(src.info, getattr(args, "layout", None)).to_dict().items()})
         centres, step = window_centres(recipe, src.n_frames)

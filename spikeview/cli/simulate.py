@@ -8,6 +8,7 @@ import re
 import sys
 from pathlib import Path
 
+from spikeview.cli._common import add_overwrite_flag, progress
 from spikeview.errors import InputFileError, ParameterError
 
 NOISE_TERMS = ("dark_current", "prnu", "threshold_fpn", "shot_noise", "threshold_jitter", "reset_slowdown")
@@ -20,8 +21,6 @@ def add_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="OUT.dat",
                    help="spike file to write; OUT.dat.toml (sidecar) and OUT.gt.npz (ground truth) go beside it")
     p.add_argument("--config", metavar="FILE", help="a TOML simulation config (e.g. the [simulation] table of a sidecar)")
-    from spikeview.cli.commands import add_overwrite_flag
-
     add_overwrite_flag(p)
     g = p.add_argument_group("sensor")
     g.add_argument("--ticks", type=int, help="number of readouts to simulate (default 2000 = 0.1 s at 20 kHz)")
@@ -166,7 +165,6 @@ def _image_folder(folder: Path, fps: float | None):
 
 
 def run(args: argparse.Namespace) -> int:
-    from spikeview.cli.commands import progress
     from spikeview.sim import simulate_to_file
 
     cfg = _config(args)

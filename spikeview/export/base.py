@@ -39,6 +39,8 @@ from spikeview.export.settings import ExportConfig, ExportMetadata, tomlable
 
 #: a printf-style frame-number field: %d or %0Nd
 _FIELD = re.compile(r"%0?\d*d")
+#: the same with the separator before it (``_%04d``, ``.%d``): what :func:`strip_frame_field` removes
+_FIELD_AND_SEPARATOR = re.compile(r"[_.\-]?%0?\d*d")
 
 CancelCheck = Callable[[], bool]
 ProgressCallback = Callable[[int, int], None]
@@ -61,6 +63,29 @@ def has_frame_field(path: str | os.PathLike[str]) -> bool:
             "(write a literal percent sign as %%)."
         )
     return True
+
+
+def strip_frame_field(name: str) -> str:
+    """``name`` without its frame-number field and the separator before it: ``f_%04d.exr`` → ``f.exr``."""
+    return _FIELD_AND_SEPARATOR.sub("", name)
+
+
+def existing_frame_files(out: str | os.PathLike[str]) -> list[Path]:
+    """Files an export to ``out`` could replace: ``out`` itself, or for a ``name_%04d.png`` pattern every
+    file in its folder that fits the pattern (whatever the frame numbers)."""
+    out = Path(out)
+    if "%" not in out.name:
+        return [out] if out.exists() else []
+    parts = re.split(r"%0?(\d*)d", out.name.replace("%%", "\0"), maxsplit=1)
+    if len(parts) != 3:
+        return []
+    head, width, tail = (p.replace("\0", "%") for p in parts)
+    digits = rf"\d{{{width},}}" if width else r"\d+"
+    rx = re.compile(re.escape(head) + digits + re.escape(tail) + "$")
+    try:
+        return sorted(p for p in out.parent.iterdir() if rx.match(p.name))
+    except OSError:
+        return []
 
 
 def check_output_folder(path: Path) -> None:

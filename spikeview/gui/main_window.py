@@ -525,7 +525,9 @@ class MainWindow(QtWidgets.QMainWindow):
         if not out:
             self.show_error("Choose an output file in the Export panel first.")
             return
-        existing = existing_outputs(out)
+        from spikeview.export.base import existing_frame_files
+
+        existing = existing_frame_files(out)
         if existing and not self.ask_overwrite(Path(out), existing):
             self.statusBar().showMessage("Export not started: the existing files are kept.", 8000)
             return
@@ -652,26 +654,6 @@ class MainWindow(QtWidgets.QMainWindow):
         if st is not None and st.path is not None:
             st.source.close()
         super().closeEvent(ev)
-
-
-def existing_outputs(out: str | os.PathLike[str]) -> list[Path]:
-    """Files an export to ``out`` could replace: ``out`` itself, or for a ``name_%04d.png`` pattern every
-    file in its folder that fits the pattern (whatever the frame numbers)."""
-    import re
-
-    out = Path(out)
-    if "%" not in out.name:
-        return [out] if out.exists() else []
-    parts = re.split(r"%0?(\d*)d", out.name.replace("%%", "\0"), maxsplit=1)
-    if len(parts) != 3:
-        return []
-    head, width, tail = (p.replace("\0", "%") for p in parts)
-    digits = rf"\d{{{width},}}" if width else r"\d+"
-    rx = re.compile(re.escape(head) + digits + re.escape(tail) + "$")
-    try:
-        return sorted(p for p in out.parent.iterdir() if rx.match(p.name))
-    except OSError:
-        return []
 
 
 def _only(d: dict[str, Any], *keys: str) -> dict[str, Any]:

@@ -21,7 +21,8 @@ quantise (Q)  DPS: on; HQS: on at low rates (mean spikes per photosite per windo
 demosaic      ``auto``: Malvar-2004 for an estimate the prior denoises (diffusion start,  ``demosaic``
               one-pass input) unless counts are sparse (< ``SPARSE_COUNT`` = 0.3 spikes per
               photosite per window: bilinear); the TFP fallback: bilinear where the noise
-              σ exceeds ``DEMOSAIC_CLEAN_SIGMA`` (8/255), Malvar-2004 where it is clean
+              σ exceeds ``DEMOSAIC_CLEAN_SIGMA`` (8/255), Malvar-2004 where it is clean;
+              ``none`` without M (monochrome: no mosaic, no demosaic, no cast)
 reuse         the previous window's result is reused when the counts of this window and   ``reuse``
               the previous one agree within their noise (χ² test at level
               ``reuse_alpha``); ``changed`` marks the 16×16 blocks that did change
@@ -62,6 +63,7 @@ class Plan:
             when there is no previous window.
         sigma: per-channel data-derived noise level of the corrected TFP estimate (fraction of 1).
         reasons: one sentence per choice, keyed by the attribute name.
+        demosaic: the demosaic of the start estimate / TFP fallback; ``"none"`` without M.
     """
 
     mosaic: bool
@@ -286,6 +288,10 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
         r["reuse"] = f"{int(changed.sum())} of {changed.size} blocks changed beyond their noise"
     # --- demosaic (of the start estimate / the one-pass input / the TFP fallback)
     denoised = diffusion or fallback == "baseline"
-    demosaic, r["demosaic"] = choose_demosaic(smax, p.demosaic, denoised=denoised, mean_count=float(obs.y.mean()) * obs.window,
-                                              shape=obs.shape)
+    if not mosaic:  # a gray frame: no mosaic, so nothing to demosaic (whatever demosaic is set to)
+        demosaic, r["demosaic"] = "none", ("monochrome stream: no mosaic, no demosaic, no cast" if obs.cfa is None
+                                           else "M is off: the gray frame is not demosaicked")
+    else:
+        demosaic, r["demosaic"] = choose_demosaic(smax, p.demosaic, denoised=denoised, mean_count=float(obs.y.mean()) * obs.window,
+                                                  shape=obs.shape)
     return Plan(mosaic, cast, levels, diffusion, fallback, reuse, changed, sigma, r, quantise, demosaic)

@@ -222,16 +222,6 @@ class PackedFileSource(SpikeSource):
         self._buf = None
 
 
-def check_frames(frames: np.ndarray, height: int, width: int, what: str) -> np.ndarray:
-    """``frames`` as a ``(T, height, width)`` 0/1 uint8 array for one of the raw encoders; :class:`ParameterError` otherwise."""
-    from spikeview.io.plain import check_spikes
-
-    arr = check_spikes(frames, "frames")
-    if arr.shape[1:] != (height, width):
-        raise ParameterError(f"{what} frames must be {width}x{height}, got {arr.shape[2]}x{arr.shape[1]}.")
-    return arr
-
-
 def write_raw_file(path: str | os.PathLike[str], data: bytes, fmt: str, width: int, height: int, frame_bytes: int, *,
                    flip_vertical: bool, flip_horizontal: bool, cfa: str | None, tick_rate: float, sidecar: bool) -> Path:
     """Write an encoded raw stream ``data`` atomically, with its sidecar unless ``sidecar`` is false."""

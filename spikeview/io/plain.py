@@ -110,6 +110,14 @@ def check_spikes(spikes: np.ndarray, name: str = "spikes") -> np.ndarray:
     return arr
 
 
+def check_frames(frames: np.ndarray, height: int, width: int, what: str) -> np.ndarray:
+    """``frames`` as a ``(T, height, width)`` 0/1 uint8 array for one of the raw encoders; :class:`ParameterError` otherwise."""
+    arr = check_spikes(frames, "frames")
+    if arr.shape[1:] != (height, width):
+        raise ParameterError(f"{what} frames must be {width}x{height}, got {arr.shape[2]}x{arr.shape[1]}.")
+    return arr
+
+
 def pack_frames(spikes: np.ndarray, *, flip_vertical: bool = True, flip_horizontal: bool = False) -> np.ndarray:
     """Pack ``(T, H, W)`` 0/1 frames (display orientation) into plain-format bytes.
 

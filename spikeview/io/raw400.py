@@ -14,7 +14,8 @@ import numpy as np
 
 from spikeview.cfa import parse_cfa
 from spikeview.errors import GeometryError
-from spikeview.io._base import PackedFileSource, check_frames, check_tick_rate, open_bytes, write_raw_file
+from spikeview.io._base import PackedFileSource, check_tick_rate, open_bytes, write_raw_file
+from spikeview.io.plain import check_frames
 from spikeview.io.source import DEFAULT_TICK_RATE, StreamInfo
 
 # ------------------------------------------------------------------------------ 400×250 layout

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
 from spikeview.errors import SpikeviewError
+from spikeview.export.base import strip_frame_field
 from spikeview.gui import jobs
 from spikeview.gui.model import Session
 from spikeview.gui.widgets import ParamCombo, ParamSpin, form, subscribe
@@ -37,9 +37,9 @@ def matching_name(path: str, fmt: str, n_frames: int) -> str:
     if p.suffix.lower() not in (".png", ".exr", ".mp4"):
         return path
     stem = p.stem
-    field = re.search(r"[_.\-]?%0?\d*d", stem)
+    field = strip_frame_field(stem) != stem
     if fmt == "mp4" and field:
-        stem = stem[: field.start()] + stem[field.end():]
+        stem = strip_frame_field(stem)
     elif fmt != "mp4" and n_frames > 1 and not field:
         stem += "_%04d"
     return str(p.with_name(f"{stem}.{fmt}"))
@@ -185,7 +185,7 @@ class ExportPanel(QtWidgets.QWidget):
             if self._auto_name:
                 self.path.setText(str(self.folder / f"{self.stem()}.zarr"))
             elif current.suffix.lower() != ".zarr":
-                stem = re.sub(r"[_.\-]?%0?\d*d", "", current.stem)
+                stem = strip_frame_field(current.stem)
                 self.path.setText(str(current.with_name(f"{stem}.zarr")))
         elif self._auto_name:
             self.path.setText(str(self.folder / suggested_name(self.stem(), fmt, n)))

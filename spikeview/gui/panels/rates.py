@@ -72,6 +72,13 @@ class RatesPanel(QtWidgets.QWidget):
             ln.setVisible(False)
         self.summary.setText("")
         self.hint.setText("")
+        # monochrome: one channel and no colour cast, so no α R/G/B curves or legend
+        src = self.session.source
+        colour = src is None or getattr(src, "cfa", None) is not None
+        for curve in self.alpha_curves:
+            curve.setVisible(colour)
+        self.alpha_plot.plotItem.legend.setVisible(colour)
+        self.alpha_plot.setLabel("left", "gray-world α" if colour else "gray-world α (none: monochrome)")
 
     def _on_tick(self, tick: int) -> None:
         if not self.session.playing:

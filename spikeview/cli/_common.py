@@ -1,0 +1,103 @@
+"""What the sub-commands share: progress, the overwrite flag, the geometry flags, opening a source,
+reading a recipe from the flags, and the optional-extra check.
+
+Light on purpose (argparse only at import): every command module imports from here, never from
+another command, so the CLI has no import circles (:mod:`spikeview.cli.commands` is the registry).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import typing
+from pathlib import Path
+from typing import Any
+
+#: what a command whose ``GEOMETRY`` is true accepts besides the ``[stream]`` table's flags
+TAG_CHECK_HELP = ("raw 1000x1000 streams: match the full tag sequence (default) or only the frame-start tag and "
+                  "valid line numbers")
+
+
+def progress(total: int, desc: str, unit: str = "frame"):
+    """A tqdm progress bar on stderr (hidden for a single item and when stderr is not a terminal)."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, dynamic_ncols=True,
+                disable=total <= 1 or not sys.stderr.isatty())
+
+
+def add_overwrite_flag(p: argparse.ArgumentParser) -> None:
+    """``--overwrite``: replace existing outputs (inputs are never replaced)."""
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace output files that already exist (an input file is never replaced)")
+
+
+def add_geometry_flags(p: argparse.ArgumentParser) -> None:
+    """One flag per field of the recipe's ``[stream]`` table (:class:`~spikeview.recipe.StreamTable`),
+    plus ``--tag-check`` for raw 1000×1000 streams."""
+    from spikeview.recipe import StreamTable
+
+    g = p.add_argument_group("stream geometry (override the sidecar; needed for files without one)")
+    hints = typing.get_type_hints(StreamTable)
+    for f in dataclasses.fields(StreamTable):
+        flag, meta = "--" + f.name.replace("_", "-"), f.metadata
+        kind = next(a for a in typing.get_args(hints[f.name]) if a is not type(None))
+        if kind is bool:
+            g.add_argument(flag, action=argparse.BooleanOptionalAction, default=None, help=meta["help"])
+        elif "choices" in meta:
+            g.add_argument(flag, choices=list(meta["choices"]), help=meta["help"])
+        else:
+            g.add_argument(flag, type=kind, metavar=meta.get("metavar"), help=meta["help"])
+    g.add_argument("--tag-check", choices=["sequence", "lenient"], help=TAG_CHECK_HELP)
+
+
+def open_source_from_args(args: argparse.Namespace, recipe: Any = None, *, show_warnings: bool = True):
+    """The source ``args.input`` names, read with the geometry flags (or ``recipe``'s ``[stream]``, flags
+    already folded in); the stream's warnings (a truncated file, a doubtful width or CFA) are said on
+    stderr before the work unless ``show_warnings`` is false (``info`` lists them itself)."""
+    from spikeview.io import open_source
+    from spikeview.recipe import StreamTable
+
+    names = [f.name for f in dataclasses.fields(StreamTable)]
+    given = ({k: getattr(args, k, None) for k in names} if recipe is None else recipe.stream.open_kwargs())
+    kwargs = {k: v for k, v in given.items() if v is not None or k != "cfa"}
+    kwargs["tag_check"] = getattr(args, "tag_check", None)
+    src = open_source(args.input, **kwargs)
+    if show_warnings:
+        for note in src.info.warnings:
+            print(f"spikeview: warning: {src.info.path.name if src.info.path else args.input}: {note}", file=sys.stderr)
+    return src
+
+
+def recipe_from_args(args: argparse.Namespace, base: Any = None):
+    """Defaults (or ``base``) ← ``--preset`` ← the geometry flags ← the recipe flags given ← ``--at``/``--range``
+    (errors name the flag or the file)."""
+    from spikeview.recipe import Recipe, StreamTable, apply_flags
+
+    if base is not None:
+        recipe = base
+    else:
+        recipe = Recipe.load(args.preset) if getattr(args, "preset", None) else Recipe()
+    names = [f.name for f in dataclasses.fields(StreamTable)]
+    stream = {k: getattr(args, k) for k in names if getattr(args, k, None) is not None}
+    if stream:
+        recipe = recipe.with_values({f"stream.{k}": v for k, v in stream.items()})
+    recipe = apply_flags(recipe, args)
+    if getattr(args, "at", None) is not None or getattr(args, "range", None) is not None:
+        recipe = recipe.with_values({"run.at": args.at, "run.range": args.range})
+    return recipe
+
+
+def preset_path(out: Path) -> Path:
+    """``clip.mp4`` → ``clip.mp4.preset.toml``; ``frames/f_%04d.exr`` → ``frames/f.exr.preset.toml``."""
+    from spikeview.export.base import strip_frame_field
+
+    return out.with_name(strip_frame_field(out.name) + ".preset.toml")
+
+
+def require_extra() -> None:
+    """Stop with one sentence naming ``pip install spikeview[cluster]`` when dask/zarr are missing."""
+    from spikeview.cluster.reconstruct import require_extra as require
+
+    require()

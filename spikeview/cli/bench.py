@@ -1,0 +1,30 @@
+"""``spikeview bench``: error against run time of every method (:mod:`spikeview.bench`)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from spikeview.errors import ParameterError
+
+
+def add_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quick", action="store_true", help="64x64, 2 scenes, fewer steps: a smoke run (minutes, not written unless --out)")
+    p.add_argument("--size", type=int, help="frame size of the synthetic set (default 256)")
+    p.add_argument("--frames", type=int, default=2, help="windows per scene (default 2)")
+    p.add_argument("--out", metavar="DIR", help="folder for guided.md, guided.json and guided_pareto.png (default benchmarks/results)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from spikeview.bench.guided import main as bench_main
+
+    argv = ["--frames", str(args.frames)]
+    if args.quick:
+        argv.append("--quick")
+    if args.size:
+        argv += ["--size", str(args.size)]
+    if args.out:
+        if not Path(args.out).is_dir():
+            raise ParameterError(f"--out {args.out}: folder not found; create it first.")
+        argv += ["--out", args.out]
+    return bench_main(argv)
