@@ -139,9 +139,13 @@ def load_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
     path = Path(path)
     if not path.exists():
         raise InputFileError(f"{path}: settings file not found; check the path.")
+    if path.is_dir():
+        raise InputFileError(f"{path}: is a folder, not a settings file; give the path of a .toml file.")
     try:
         with open(path, "rb") as f:
             return tomllib.load(f)
+    except OSError as e:
+        raise InputFileError(f"{path}: cannot be read ({e.strerror or e}); check the path and its permissions.") from None
     except tomllib.TOMLDecodeError as e:
         raise InputFileError(f"{path}: not valid TOML ({e}); fix or delete the file.") from None
     except UnicodeDecodeError:

@@ -258,7 +258,7 @@ PARAMS: tuple[Param, ...] = (
        "Start each window of a sequence from the previous result re-noised to t_s (faster, may smear motion)."),
     # --- export
     _p("export.fps", "--fps", "export_fps", "Output fps", "MP4 playback rate in frames per second.",
-       unit="fps", lo=0.0, lo_open=True, hi=1000.0, step=1.0),
+       unit="fps", lo=0.01, hi=1000.0, step=1.0),
     _p("export.compression", "--compression", "", "EXR compression", "EXR compression (all lossless).",
        choices=EXR_COMPRESSIONS),
     _p("export.crf", "--crf", "", "MP4 quality", "libx264 constant rate factor, 0 (best) to 51; 18 is visually lossless.",

@@ -29,16 +29,20 @@ def run(args: argparse.Namespace) -> int:
     require_extra()
     import tomllib
 
-    from spikeview.cluster.store import done_mask, open_store, store_attrs
+    from spikeview.cluster.store import check_store
     from spikeview.export import ExportMetadata, describe_slow_motion, open_exporter, slow_motion_factor
     from spikeview.recipe import Recipe
 
     store = Path(args.store)
     if store.suffix.lower() != ".zarr":
         raise ParameterError(f"{store}: spikeview export reads a .zarr store; other files are exported by spikeview reconstruct.")
-    group = open_store(store)
-    attrs = store_attrs(group)
-    done = done_mask(group)
+    check = check_store(store)  # layout, arrays, every attribute and their consistency, before anything is read
+    group, attrs, done = check.group, check.attrs, check.done
+    if check.markers_lost or check.unreadable:
+        which = "are missing or cannot be read" if check.markers_lost else (
+            f"of chunk(s) {', '.join(map(str, check.unreadable))} cannot be read")
+        raise ParameterError(f"{store.name}: its completion markers {which}; finish it with {check.rerun()} "
+                             "(it recomputes those chunks).")
     if not done.all():
         raise ParameterError(f"{store.name} is incomplete ({int(done.sum())} of {done.size} chunks done); "
                              f"finish it with spikeview reconstruct {attrs.get('input', 'INPUT')} --out {store} --resume.")
@@ -70,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     with open_exporter(out, n, shape, ecfg, meta, overwrite=args.overwrite, inputs=[store],
                        extra_outputs=[preset_path(out)]) as ex, progress(n, f"{store.name} → {out.name}") as bar:
         for lo in range(0, n, chunk):
-            block = frames[lo:lo + chunk]
+            block = check.read_chunk(lo // chunk)  # a damaged chunk: one sentence naming it and its windows
             for i, f in enumerate(block):
                 ex.write(expose(f if c == 3 else f[..., 0]), window=tuple(int(v) for v in windows[lo + i]),
                          centre_tick=int(centres[lo + i]))

@@ -18,6 +18,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from spikeview.errors import ParameterError
 
 
@@ -34,13 +36,13 @@ def require_extra() -> None:
 
 def store_recipe(out: str | os.PathLike[str]):
     """The :class:`~spikeview.recipe.Recipe` a store was written with, as given (``None`` if ``out`` does not exist)."""
-    from spikeview.cluster.store import open_store, store_attrs
+    from spikeview.cluster.store import check_store
     from spikeview.recipe import Recipe
 
     p = Path(out)
     if not p.exists():
         return None
-    return Recipe.from_dict(store_attrs(open_store(p))["settings"], where=f"{p.name} (its recipe)")
+    return Recipe.from_dict(check_store(p).attrs["settings"], where=f"{p.name} (its recipe)")
 
 
 def reconstruct_to_store(input_path: str | os.PathLike[str], recipe: Any, out: str | os.PathLike[str], *,
@@ -77,7 +79,7 @@ def reconstruct_to_store(input_path: str | os.PathLike[str], recipe: Any, out: s
     require_extra()
     from spikeview.cluster._compute import DEFAULT_CHUNK
     from spikeview.cluster.run import connect, parse_cluster
-    from spikeview.cluster.store import open_store, store_attrs
+    from spikeview.cluster.store import check_store
 
     say = notes if notes is not None else (lambda text: None)
     out = Path(out).absolute()
@@ -87,12 +89,18 @@ def reconstruct_to_store(input_path: str | os.PathLike[str], recipe: Any, out: s
         raise ParameterError(f"--chunk {chunk}: use a whole number of windows >= 1, e.g. --chunk {DEFAULT_CHUNK}.")
     if cluster is not None:
         parse_cluster(cluster)  # bad text fails before any work
+    if resume and not out.exists():
+        raise ParameterError(f"{out.name} does not exist, so there is nothing to resume; leave --resume out to start it.")
     attrs = None
     if out.exists() and not (overwrite and not resume):
         if not resume:
             raise ParameterError(f"{out.name} already exists; add --resume to finish it, --overwrite to start it "
                                  "again, or choose another --out.")
-        attrs = store_attrs(open_store(out))
+        attrs = check_store(out).attrs  # every attribute checked before it is trusted
+    elif out.parent.is_dir() and not os.access(out.parent, os.W_OK | os.X_OK):
+        from spikeview.errors import OutputFileError
+
+        raise OutputFileError(f"{out}: the folder {out.parent} is read-only; choose a folder you can write to with --out.")
     chunk = chunk or (int(attrs["chunk"]) if attrs else DEFAULT_CHUNK)
     where = f"on {cluster}" if cluster else ("on the given Dask client" if client is not None else "in-process")
     close = None
@@ -106,12 +114,74 @@ def reconstruct_to_store(input_path: str | os.PathLike[str], recipe: Any, out: s
             close()
 
 
+def _available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux ``MemAvailable``; ``None`` elsewhere)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def _check_chunk_memory(chunk: int, frame_shape: tuple[int, int, int]) -> None:
+    """Refuse a chunk whose frames alone (held twice while a chunk is stacked) exceed the memory available."""
+    from spikeview._files import human_bytes
+    from spikeview.cluster._compute import DEFAULT_CHUNK
+
+    need = 2 * chunk * int(np.prod(frame_shape)) * 4
+    avail = _available_memory()
+    if avail is not None and need > avail:
+        h, w, _ = frame_shape
+        raise ParameterError(f"--chunk {chunk}: a chunk of {chunk} windows of {w}x{h} needs about {human_bytes(need)}, "
+                             f"more than the {human_bytes(avail)} of memory available; use a smaller --chunk "
+                             f"(e.g. --chunk {DEFAULT_CHUNK}).")
+
+
+def _discard_unstarted(out: Path) -> bool:
+    """Remove a store this call created when no chunk of it is done (and its preset); ``True`` if removed."""
+    import shutil
+
+    from spikeview.cluster.store import check_store
+
+    try:
+        if check_store(out).done.any():
+            return False  # resumable: keep it
+    except Exception:  # noqa: BLE001 - a store that failed while being created is not worth keeping
+        pass
+    shutil.rmtree(out, ignore_errors=True)
+    out.with_name(out.name + ".preset.toml").unlink(missing_ok=True)
+    return True
+
+
 def _run(input_path, recipe, out: Path, chunk: int, attrs, client, progress, cancel, say, kwargs, layout, where):
+    """Create (or check) the store and run its chunks; a run that fails leaves a resumable store or nothing."""
+    from spikeview._files import os_error_sentence
+    from spikeview.errors import OutputFileError, SpikeviewError
+
+    created = [False]
+    try:
+        return _run_store(input_path, recipe, out, chunk, attrs, client, progress, cancel, say, kwargs, layout, where,
+                          created)
+    except BaseException as e:
+        removed = created[0] and _discard_unstarted(out)  # nothing done yet: leave nothing behind
+        if isinstance(e, OSError) and not isinstance(e, SpikeviewError):
+            kept = not removed and out.exists() and (created[0] or attrs is not None)
+            raise OutputFileError(f"cannot write {out.name}: {os_error_sentence(e)}"
+                                  + ("; the finished chunks are kept, --resume continues" if kept else "") + ".") from None
+        raise
+
+
+def _run_store(input_path, recipe, out: Path, chunk: int, attrs, client, progress, cancel, say, kwargs, layout, where,
+               created: list[bool]):
     from spikeview._files import write_atomic
     from spikeview.classical.windows import window_range
     from spikeview.cluster._compute import DEFAULT_KEYFRAME, chained, state_from_attrs, state_to_attrs
     from spikeview.cluster.run import BatchJob, run_batch
-    from spikeview.cluster.store import check_compatible, create_store, done_mask, input_fingerprint, open_store
+    from spikeview.cluster.store import check_compatible, check_store, create_store, input_fingerprint, repair_markers
+    from spikeview.errors import InputFileError
     from spikeview.io import open_source
     from spikeview.pipeline import prepare_sequence, recipe_for_state, window_centres
     from spikeview.recipe import StreamTable
@@ -121,18 +191,22 @@ def _run(input_path, recipe, out: Path, chunk: int, attrs, client, progress, can
         recipe = recipe.with_values({f"stream.{k}": v for k, v in stream.items()})
         settings = recipe.to_dict()
         centres, step = window_centres(recipe, src.n_frames)
+        chunk = min(chunk, len(centres))  # a chunk never holds more windows than the run (--chunk 1000000000)
         window = recipe.span()
         method = recipe.run.method
         fingerprint = input_fingerprint(src.info.path)
+        frame_shape = (src.height, src.width, 3 if src.cfa is not None else 1)
         if attrs is not None:
             check_compatible(out, attrs, fingerprint=fingerprint, settings=settings, chunk=chunk)
             state = state_from_attrs(attrs)
+            _check_chunk_memory(chunk, frame_shape)
         else:
+            _check_chunk_memory(chunk, frame_shape)
             state = prepare_sequence(src, recipe)
             full = recipe_for_state(recipe, state)  # the α estimate recorded: the preset reproduces the frames
             recipe_toml = f"# spikeview reconstruct preset for {src.info.path}\n" + full.to_toml()
             windows = [window_range(c, window, src.n_frames) for c in centres]
-            frame_shape = (src.height, src.width, 3 if src.cfa is not None else 1)
+            created[0] = True
             create_store(out, centres=centres, windows=windows, frame_shape=frame_shape, chunk=chunk, attrs={
                 "input": str(Path(src.info.path).absolute()), "fingerprint": fingerprint, "settings": settings,
                 "recipe": recipe_toml, **state_to_attrs(state), "method": method, "window": window, "step": step,
@@ -143,7 +217,23 @@ def _run(input_path, recipe, out: Path, chunk: int, attrs, client, progress, can
                        centres=tuple(int(c) for c in centres), chunk=chunk, store=str(out),
                        keyframe=int(attrs["keyframe"]) if attrs else DEFAULT_KEYFRAME)
 
-    done = done_mask(open_store(out))
+    check = check_store(out)
+    if attrs is not None:
+        # a chunk marked done whose frames cannot be decoded, or whose marker is unreadable, is recomputed
+        redo = []
+        for i in np.flatnonzero(check.done):
+            try:
+                check.read_chunk(int(i))
+            except InputFileError:
+                redo.append(int(i))
+        again = sorted(set(redo) | set(check.unreadable)) if not check.markers_lost else []
+        if redo or check.unreadable or check.markers_lost:
+            repair_markers(check, redo)
+            say(f"note: {out.name}: " + ("its completion markers are missing or unreadable; every chunk is recomputed"
+                                         if check.markers_lost else
+                                         f"recomputing chunk(s) {', '.join(map(str, again))}: their frames or completion "
+                                         "markers cannot be read") + ".")
+    done = check.done
     total = len(centres)
     n_done = sum(job.bounds(i)[1] - job.bounds(i)[0] for i in range(job.n_chunks) if done[i])
     say(f"{total} windows in {job.n_chunks} chunks of {chunk} ({method}, {where})"

@@ -153,3 +153,224 @@ def check_compatible(path: str | os.PathLike[str], attrs: dict[str, Any], *, fin
 def read_frames(group, lo: int = 0, hi: int | None = None) -> np.ndarray:
     """Frames ``[lo, hi)`` as float32 ``(n, H, W, C)``."""
     return np.asarray(group["frames"][lo:hi], dtype=np.float32)
+
+
+# ------------------------------------------------------------------------------- validation
+#: attributes every store records, with a check and what the value must be (for the message)
+_METHODS = ("tfp", "tfi", "guided")
+
+
+def _is_int(v: Any, lo: int = 0) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, bool) and int(v) >= lo
+
+
+def _is_pos(v: Any) -> bool:
+    return isinstance(v, (int, float, np.number)) and not isinstance(v, bool) and bool(np.isfinite(v)) and v > 0
+
+
+_ATTR_RULES: dict[str, tuple[Any, str]] = {
+    "input": (lambda v: isinstance(v, str) and bool(v), "the input's path (text)"),
+    "fingerprint": (lambda v: isinstance(v, dict) and isinstance(v.get("name"), str) and _is_int(v.get("size"))
+                    and isinstance(v.get("blake2b"), str) and len(v["blake2b"]) == 32,
+                    "a table of the input's name, size and blake2b hash"),
+    "settings": (lambda v: isinstance(v, dict), "the recipe tables"),
+    "recipe": (lambda v: isinstance(v, str), "the preset TOML (text)"),
+    "alpha": (lambda v: v is None or (isinstance(v, list) and len(v) == 3 and all(_is_pos(a) for a in v)),
+              "three positive gains (or null for a monochrome stream)"),
+    "white_point": (_is_pos, "a positive number"),
+    "method": (lambda v: v in _METHODS, "one of tfp, tfi, guided"),
+    "window": (lambda v: _is_int(v, 1), "a whole number of ticks >= 1"),
+    "step": (lambda v: _is_int(v, 1), "a whole number of ticks >= 1"),
+    "tick_rate": (_is_pos, "a positive number of ticks per second"),
+    "chunk": (lambda v: _is_int(v, 1), "a whole number of windows >= 1"),
+    "keyframe": (lambda v: _is_int(v, 1), "a whole number of windows >= 1"),
+    "n_windows": (lambda v: _is_int(v, 1), "a whole number of windows >= 1"),
+    "frame_shape": (lambda v: isinstance(v, list) and len(v) == 3 and all(_is_int(x, 1) for x in v) and v[2] in (1, 3),
+                    "[height, width, channels] with 1 or 3 channels"),
+}
+
+
+class StoreCheck:
+    """A store that :func:`check_store` accepted: its group, attributes and completion markers.
+
+    Attributes:
+        path: the store.
+        group: the Zarr group (opened read-only).
+        attrs: the ``spikeview`` attribute (every field checked).
+        done: ``(n_chunks,)`` bool, chunks marked complete by a readable marker.
+        unreadable: chunks whose marker is missing or unreadable (not in ``done``).
+        markers_lost: the ``done`` array itself (or ``seconds``) is missing or cannot be opened.
+    """
+
+    def __init__(self, path: Path, group: Any, attrs: dict[str, Any], done: np.ndarray, unreadable: list[int],
+                 markers_lost: bool):
+        self.path, self.group, self.attrs = path, group, attrs
+        self.done, self.unreadable, self.markers_lost = done, unreadable, markers_lost
+
+    @property
+    def n_chunks(self) -> int:
+        return int(self.done.size)
+
+    def bounds(self, index: int) -> tuple[int, int]:
+        """Window indices ``[lo, hi)`` of work chunk ``index``."""
+        chunk, n = int(self.attrs["chunk"]), int(self.attrs["n_windows"])
+        return index * chunk, min((index + 1) * chunk, n)
+
+    def rerun(self) -> str:
+        """The command that finishes the store (``--resume``)."""
+        return f"spikeview reconstruct {self.attrs['input']} --out {self.path} --resume"
+
+    def read_chunk(self, index: int) -> np.ndarray:
+        """The frames of work chunk ``index`` (float32 ``(n, H, W, C)``), all finite.
+
+        Raises:
+            InputFileError: the chunk cannot be decoded or holds no frames (names the chunk, its windows and the fix).
+        """
+        lo, hi = self.bounds(index)
+        where = f"{self.path}: chunk {index} (windows {lo}-{hi - 1})"
+        try:
+            block = np.asarray(self.group["frames"][lo:hi], dtype=np.float32)
+        except Exception as e:  # noqa: BLE001 - zarr/numcodecs raise many kinds for a damaged chunk file
+            raise InputFileError(f"{where} cannot be read ({type(e).__name__}: {_short(e)}); recompute it with "
+                                 f"{self.rerun()}.") from None
+        if not np.isfinite(block).all():
+            raise InputFileError(f"{where} holds no frames or non-finite values although it is marked done; recompute "
+                                 f"it with {self.rerun()}.")
+        return block
+
+
+def _short(e: BaseException) -> str:
+    text = " ".join(str(e).split())
+    return (text[:120] + "…") if len(text) > 120 else (text or "no message")
+
+
+def check_store(path: str | os.PathLike[str]) -> StoreCheck:
+    """Validate a store before ``spikeview export`` or ``--resume`` reads it: the layout, every array's
+    shape, dtype and chunking, every attribute's presence, type and range, and their consistency
+    (window count, channels, chunk size, the recipe), then read the completion markers.
+
+    Missing or unreadable markers are not an error here (``unreadable``, ``markers_lost``): export
+    refuses such a store, ``--resume`` recomputes those chunks. Frames are not decoded
+    (:meth:`StoreCheck.read_chunk` does that, chunk by chunk).
+
+    Raises:
+        InputFileError: one sentence naming the store, what is wrong and what to do.
+    """
+    import tomllib
+
+    from spikeview.recipe import Recipe
+
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise InputFileError(f"{p}: a file, not a Zarr store (a folder); pass a store written by spikeview reconstruct.")
+    group = open_store(p)
+    try:
+        attrs = dict(group.attrs["spikeview"])
+    except Exception as e:  # noqa: BLE001
+        raise InputFileError(f"{p}: its attributes cannot be read ({type(e).__name__}); write the store again.") from None
+    source = attrs.get("input") if isinstance(attrs.get("input"), str) and attrs.get("input") else "INPUT"
+    again = f"write it again with spikeview reconstruct {source} --range A:B --out {p} --overwrite"
+
+    def bad(what: str) -> InputFileError:
+        return InputFileError(f"{p}: {what}; {again}.")
+
+    for name, (ok, expected) in _ATTR_RULES.items():
+        if name not in attrs:
+            raise bad(f"the attribute {name} is missing (it should be {expected})")
+        try:
+            good = bool(ok(attrs[name]))
+        except Exception:  # noqa: BLE001 - a value of a type the rule did not expect
+            good = False
+        if not good:
+            shown = repr(attrs[name])
+            raise bad(f"the attribute {name} is {shown[:60]}, not {expected}")
+    try:
+        settings = Recipe.from_dict(attrs["settings"], where="settings")
+        recipe = Recipe.from_dict(tomllib.loads(attrs["recipe"]), where="recipe")
+    except (tomllib.TOMLDecodeError, ValueError, TypeError, KeyError) as e:
+        raise bad(f"its recorded recipe is damaged ({_short(e).rstrip('.')})") from None
+    n, chunk = int(attrs["n_windows"]), int(attrs["chunk"])
+    fshape = tuple(int(v) for v in attrs["frame_shape"])
+    mono = settings.stream.cfa in (None, "none")
+    checks = [
+        (settings.run.method == attrs["method"] == recipe.run.method,
+         f"the attribute method ({attrs['method']}) disagrees with its recipe ({settings.run.method})"),
+        (settings.span() == int(attrs["window"]),
+         f"the attribute window ({attrs['window']}) disagrees with its recipe ({settings.span()} ticks)"),
+        ((fshape[2] == 1) == mono, f"frames of {fshape[2]} channel(s) disagree with its recipe's cfa "
+                                   f"({settings.stream.cfa or 'none'})"),
+        (attrs["alpha"] is None or fshape[2] == 3, "a monochrome store records a colour cast alpha"),
+    ]
+    for ok, what in checks:
+        if not ok:
+            raise bad(what)
+
+    def array(name: str, shape: tuple[int, ...], dtype: str, chunks: tuple[int, ...] | None = None):
+        try:
+            a = group[name]
+            a_shape, a_dtype, a_chunks = tuple(a.shape), np.dtype(a.dtype), tuple(a.chunks)
+        except KeyError:
+            raise bad(f"the array {name} is missing") from None
+        except Exception as e:  # noqa: BLE001 - garbage metadata raises many kinds
+            raise bad(f"the array {name} cannot be opened (damaged metadata: {type(e).__name__})") from None
+        if len(a_shape) != len(shape):
+            raise bad(f"the array {name} has {len(a_shape)} dimensions, not {len(shape)}")
+        if a_shape != shape:
+            raise bad(f"the array {name} has shape {a_shape}, not {shape} ({n} windows recorded)")
+        if a_dtype != np.dtype(dtype):
+            raise bad(f"the array {name} holds {a_dtype}, not {dtype}")
+        if chunks is not None and a_chunks != chunks:
+            raise bad(f"the array {name} is chunked {a_chunks}, not {chunks} (chunks of {chunk} windows recorded)")
+        return a
+
+    array("frames", (n, *fshape), "float32", (chunk, *fshape))
+    ticks = array("centre_tick", (n,), "int64")
+    wins = array("window", (n, 2), "int64")
+    try:
+        centres, spans = np.asarray(ticks[:]), np.asarray(wins[:])
+    except Exception as e:  # noqa: BLE001
+        raise bad(f"the window ticks cannot be read ({type(e).__name__})") from None
+    step = int(attrs["step"])
+    if not ((spans[:, 0] <= centres) & (centres < spans[:, 1])).all() or (n > 1 and not (np.diff(centres) == step).all()):
+        raise bad(f"its window ticks disagree with the recorded step ({step} ticks) or windows")
+    n_chunks = -(-n // chunk)
+    lost, unreadable = False, []
+    done = np.zeros(n_chunks, dtype=bool)
+    try:
+        array("done", (n_chunks,), "uint8", (1,))
+        array("seconds", (n_chunks,), "float64")
+    except InputFileError:
+        lost = True
+    if not lost:
+        marks = group["done"]
+        for i in range(n_chunks):
+            try:
+                v = int(np.asarray(marks[i]))
+            except Exception:  # noqa: BLE001 - a damaged marker file
+                v = -1
+            if v == 1:
+                done[i] = True
+            elif v != 0:
+                unreadable.append(i)
+    return StoreCheck(p, group, attrs, done, unreadable, lost)
+
+
+def repair_markers(check: StoreCheck, redo: list[int]) -> None:
+    """Make ``--resume`` recompute ``redo`` (and every chunk with an unreadable marker): rewrite the
+    ``done``/``seconds`` arrays when they are lost, else clear those markers."""
+    import zarr
+
+    n = check.n_chunks
+    if check.markers_lost:
+        import shutil
+
+        for name in ("done", "seconds"):
+            shutil.rmtree(check.path / name, ignore_errors=True)  # garbage metadata: zarr cannot delete it itself
+    g = zarr.open_group(str(check.path), mode="r+")
+    if check.markers_lost:
+        g.create_array("done", shape=(n,), chunks=(1,), dtype="uint8", fill_value=0)[:] = check.done.astype(np.uint8)
+        g.create_array("seconds", shape=(n,), chunks=(1,), dtype="float64", fill_value=np.nan)
+        return
+    for i in sorted(set(redo) | set(check.unreadable)):
+        g["done"][i] = 0
+        check.done[i] = False

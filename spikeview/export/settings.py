@@ -79,8 +79,8 @@ class ExportConfig(Config):
         def bad(name: str, value: Any, fix: str) -> ParameterError:
             return ParameterError(f"export setting '{name}' = {value!r} is not valid; {fix}.")
 
-        if not (math.isfinite(self.fps) and self.fps > 0):
-            raise bad("fps", self.fps, "use a positive frame rate such as 30")
+        if not (math.isfinite(self.fps) and 0.01 <= self.fps <= 1000):  # the recipe's range of --fps
+            raise bad("fps", self.fps, "use a frame rate from 0.01 to 1000 such as 30")
         if not 0 <= self.crf <= 51:
             raise bad("crf", self.crf, "use 0 (best) to 51 (worst); 18 is visually lossless")
         if self.preset not in X264_PRESETS:
