@@ -20,6 +20,7 @@ from spikeview.cli.main import main  # noqa: E402
 from spikeview.io.plain import write_plain  # noqa: E402
 
 RUN = ["--window", "4", "--range", "2:42:4"]  # 10 windows
+LONG = ["--window", "16", "--range", "8:40:8"]  # windows long enough for a white point below full count
 
 
 @pytest.fixture(params=["RGGB", "none"])
@@ -173,9 +174,9 @@ def test_store_frames_are_linear_and_export_equals_a_plain_npy_run(cap, tmp_path
     """The store keeps linear frames (values above 1 kept) and the white point as an attribute;
     ``spikeview export`` maps them as a plain run does: the .npy files are identical."""
     store = tmp_path / "s.zarr"
-    assert main(["reconstruct", *cap, *RUN, "--out", str(store)]) == 0
+    assert main(["reconstruct", *cap, *LONG, "--out", str(store)]) == 0
     assert main(["export", str(store), "--out", str(tmp_path / "e.npy")]) == 0
-    assert main(["reconstruct", *cap, *RUN, "--out", str(tmp_path / "p.npy")]) == 0
+    assert main(["reconstruct", *cap, *LONG, "--out", str(tmp_path / "p.npy")]) == 0
     np.testing.assert_array_equal(np.load(tmp_path / "e.npy"), np.load(tmp_path / "p.npy"))
     g = zarr.open_group(str(store))
     white = g.attrs["spikeview"]["white_point"]
