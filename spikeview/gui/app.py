@@ -17,20 +17,11 @@ def configure_pyqtgraph() -> None:
     pg.setConfigOptions(imageAxisOrder="row-major", antialias=False, background=(24, 24, 24), foreground=(220, 220, 220))
 
 
-#: how often (s) a thread running Python code hands the interpreter lock to another: 1 ms instead of
-#: Python's 5 ms, so the window gets it back quickly while a worker runs Python code
-SWITCH_INTERVAL_S = 0.001
-
-
-def configure_runtime() -> None:
-    """Process settings the app needs to stay responsive while workers compute."""
-    if sys.getswitchinterval() > SWITCH_INTERVAL_S:
-        sys.setswitchinterval(SWITCH_INTERVAL_S)
-
-
 def make_application(argv: list[str] | None = None) -> Any:
     """The QApplication (created once), styled, with pyqtgraph configured."""
     from PySide6 import QtGui, QtWidgets
+
+    from spikeview.gui.workers import configure_runtime
 
     app = QtWidgets.QApplication.instance()
     if app is None:

@@ -27,7 +27,7 @@ from spikeview.gui.panels.guided import GuidedPanel
 from spikeview.gui.panels.rates import RatesPanel
 from spikeview.gui.panels.stream import StreamPanel
 from spikeview.gui.widgets import app_words
-from spikeview.gui.workers import Worker
+from spikeview.gui.workers import Worker, configure_runtime
 
 MAX_RECENT = 10
 #: bump when the dock layout changes incompatibly (older saved states are ignored)
@@ -105,8 +105,6 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def __init__(self, settings: QtCore.QSettings | None = None, session: Session | None = None):
         super().__init__()
-        from spikeview.gui.app import configure_runtime
-
         configure_runtime()
         core.preload()  # before any worker thread starts (see core.preload)
         self.setObjectName("spikeview_main")

@@ -32,6 +32,16 @@ from PySide6 import QtCore
 
 from spikeview.errors import Cancelled, SpikeviewError
 
+#: how often (s) a thread running Python code hands the interpreter lock to another: 1 ms instead of
+#: Python's 5 ms, so the window gets it back quickly while a worker runs Python code
+SWITCH_INTERVAL_S = 0.001
+
+
+def configure_runtime() -> None:
+    """Process settings the app needs to stay responsive while workers compute."""
+    if sys.getswitchinterval() > SWITCH_INTERVAL_S:
+        sys.setswitchinterval(SWITCH_INTERVAL_S)
+
 
 @dataclass
 class JobContext:
