@@ -1,7 +1,11 @@
 """``spikeview export OUT.zarr --out clip.mp4 | frames_%04d.exr | frames.npy``: a batch store to the usual formats.
 
 The export settings (fps, levels, compression…) come from the recipe stored in the Zarr store;
-flags given on the command line override them. Frames are read chunk by chunk (bounded memory).
+flags given on the command line override them. The store holds linear frames; each output maps them by
+the store's white point exactly as ``spikeview reconstruct`` does (``.npy`` clipped to [0, 1], PNG/MP4
+full scale at the white point, EXR linear), so an export equals the plain run's file. The store is
+checked first (:func:`spikeview.cluster.store.check_store`); frames are read chunk by chunk (bounded
+memory), a damaged chunk is named with its windows.
 """
 
 from __future__ import annotations

@@ -6,8 +6,10 @@ The batch path behind ``spikeview reconstruct INPUT --range A:B:STEP --out OUT.z
   sequence-wide state (colour cast α, white point) computed once, and ``compute_chunk`` (frames of
   a run of windows). Workers open the source and load the prior once per process (a cached
   loader), reading the input from its shared file path.
-* :mod:`spikeview.cluster.store` — the Zarr layout: ``frames`` (N, H, W, C) float32 in chunks of
-  W windows, the window ticks, the recipe as attributes, per-chunk completion markers.
+* :mod:`spikeview.cluster.store` — the Zarr layout: ``frames`` (N, H, W, C) float32 linear (the white
+  point is an attribute; ``spikeview export`` maps by it) in chunks of W windows, the window ticks, the
+  recipe as attributes, per-chunk completion markers; :func:`~spikeview.cluster.store.check_store`
+  validates a store before it is read.
 * :mod:`spikeview.cluster.run` — the driver: in-process loop or Dask client (``local:N`` or
   ``tcp://HOST:PORT``), resume, retries, progress (window by window; workers send events).
 * :mod:`spikeview.cluster.reconstruct` — :func:`reconstruct_to_store`, the one call for front ends

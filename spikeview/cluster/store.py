@@ -6,7 +6,9 @@ local store: temporary name, then rename):
 ==================  ===================  ================================================================
 array               shape, dtype         meaning
 ==================  ===================  ================================================================
-``frames``          (N, H, W, C) f4      linear frames in [0, 1]; C = 3 (Bayer) or 1 (monochrome);
+``frames``          (N, H, W, C) f4      linear frames (``Y·α/η``, not divided by the white point:
+                                         ``spikeview export`` maps them as ``reconstruct`` does);
+                                         C = 3 (Bayer) or 1 (monochrome);
                                          chunks of ``chunk`` windows (one Zarr chunk = one work chunk);
                                          NaN where no chunk has been written yet
 ``centre_tick``     (N,) i8              centre tick of each window
@@ -21,6 +23,9 @@ size, hash of its first and last MiB), ``settings`` (the recipe tables that deci
 given), ``recipe`` (the preset TOML, with the α estimate recorded, which ``spikeview reconstruct
 --preset`` re-runs), ``alpha`` (colour-cast estimate), ``white_point``, ``method``, ``window``,
 ``step``, ``tick_rate``, ``chunk``, ``keyframe``, ``n_windows``, ``frame_shape``.
+
+:func:`check_store` validates all of it before ``spikeview export`` or ``--resume`` reads a store
+(one sentence per problem); :meth:`StoreCheck.read_chunk` decodes one work chunk and names it on failure.
 """
 
 from __future__ import annotations
