@@ -256,6 +256,9 @@ PARAMS: tuple[Param, ...] = (
     _p("guided.seed", "--seed", "seed", "Seed", "Random seed (same seed and machine: same result).", lo=0, hi=2**31 - 1, step=1),
     _p("guided.warm_start", "--warm-start", "warm_start", "Warm start",
        "Start each window of a sequence from the previous result re-noised to t_s (faster, may smear motion)."),
+    _p("guided.temporal_radius", "--temporal-radius", "temporal_radius", "Temporal radius",
+       "Neighbouring windows on each side whose spikes a guided frame may borrow, aligned and used only where they match (0 = the window alone).",
+       unit="windows", lo=0, hi=8, step=1),
     # --- export
     _p("export.fps", "--fps", "export_fps", "Output fps", "MP4 playback rate in frames per second.",
        unit="fps", lo=0.01, hi=1000.0, step=1.0),

@@ -34,7 +34,7 @@ def start_estimate(obs: Observation, use_mosaic: bool = True, use_cast: bool = T
         from spikeview.guided.plan import choose_demosaic, estimate_sigma
 
         demosaic = choose_demosaic(float(estimate_sigma(obs, True, use_cast).max()), "auto", denoised=denoised,
-                                   mean_count=float(obs.y.mean()) * obs.window, shape=obs.shape)[0]
+                                   mean_count=obs.mean_count(), shape=obs.shape)[0]
 
     rgb = _demosaic(y, obs.cfa, demosaic)
     if use_cast and obs.alpha is not None:

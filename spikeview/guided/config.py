@@ -127,6 +127,9 @@ class GuidedConfig(Config):
         reuse: let the plan reuse the previous result when the window did not change (``None`` =
             on for video, decided by a count test).
         reuse_alpha: significance level of that count test (smaller = reuse more often).
+        temporal_radius: neighbouring windows on each side whose photons the observation may
+            borrow, aligned and weighted per photosite by how well they match
+            (:mod:`spikeview.guided.temporal`); 0 = the window alone (the paper).
         device, dtype: where and in what precision the sd prior runs (``"auto"`` = CUDA when
             available; ``float16``/``bfloat16`` need CUDA).
     """
@@ -167,6 +170,7 @@ class GuidedConfig(Config):
     cast_tolerance: float = 0.05
     reuse: bool | None = None
     reuse_alpha: float = 1e-3
+    temporal_radius: int = 3
     device: str = "auto"
     dtype: str = "float32"
 
@@ -180,7 +184,7 @@ class GuidedConfig(Config):
         _check_choice("demosaic", self.demosaic, DEMOSAICS)
         if self.fallback is not None:
             _check_choice("fallback", self.fallback, FALLBACKS)
-        for name in ("steps", "window", "levels", "data_steps", "seed", "alpha_max_windows", "chains"):
+        for name in ("steps", "window", "levels", "data_steps", "seed", "alpha_max_windows", "chains", "temporal_radius"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int):
                 raise ParameterError(f"guided.{name} = {v!r} must be a whole number.")

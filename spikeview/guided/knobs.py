@@ -13,7 +13,9 @@ control with the sentence as its tooltip. The rules follow the sampler exactly:
 * ``t_start``: with ``top_up`` (the default) the sampler adds only the noise missing to reach
   ``t_start``; when the start estimate's own noise already exceeds it in every channel, ``t_start``
   has no effect;
-* ``lam``: HQS only.
+* ``lam``: HQS only;
+* ``temporal_radius``: only when the capture holds a whole window beside this one (it acts on the
+  fallback's input too, so also when the plan skips diffusion).
 """
 
 from __future__ import annotations
@@ -24,7 +26,17 @@ from spikeview.guided.config import GuidedConfig
 from spikeview.guided.plan import Plan
 
 #: the knobs reported, by recipe path
-KNOBS = ("guided.s", "guided.k", "guided.levels", "guided.t_start", "guided.lam")
+KNOBS = ("guided.s", "guided.k", "guided.levels", "guided.t_start", "guided.lam", "guided.temporal_radius")
+
+
+def temporal_status(plan: Plan) -> str | None:
+    """Why ``guided.temporal_radius`` cannot act on this window (no whole neighbouring window in the
+    capture), or None."""
+    pool = getattr(plan, "pooling", None)
+    if pool is None or pool.offsets:
+        return None
+    return (f"the capture holds no whole {pool.window}-tick window beside this one ({pool.reason}), so there is no "
+            "neighbour to borrow spikes from")
 
 
 def knob_status(cfg: GuidedConfig, plan: Plan) -> dict[str, str | None]:
@@ -32,7 +44,10 @@ def knob_status(cfg: GuidedConfig, plan: Plan) -> dict[str, str | None]:
     out: dict[str, str | None] = {k: None for k in KNOBS}
     if not plan.diffusion:
         why = f"the plan skips diffusion for this window ({plan.reasons.get('diffusion', '')})"
-        return {k: why for k in KNOBS}
+        out = {k: why for k in KNOBS}
+        out["guided.temporal_radius"] = temporal_status(plan)  # pooling changes the fallback's input too
+        return out
+    out["guided.temporal_radius"] = temporal_status(plan)
     if cfg.guidance == "hqs" and cfg.data_steps == 0:
         out["guided.s"] = "HQS takes no data step here (data_steps = 0), so there is nothing for s to weigh"
     if not plan.quantise:

@@ -22,6 +22,7 @@ Haar detail of each Bayer plane, :func:`haar_noise_variance`) to the model's mea
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -59,9 +60,15 @@ KAPPA_RANGE = (1e-4, 4.0)
 PRIOR_COUNT = 0.5
 
 
-def binomial_variance(y: np.ndarray, window: int, prior: float = PRIOR_COUNT) -> np.ndarray:
-    """:func:`spikeview.ops.noise.tfp_variance` on a numpy array (float32, shape of ``y``)."""
+def binomial_variance(y: np.ndarray, window: "int | np.ndarray", prior: float = PRIOR_COUNT) -> np.ndarray:
+    """:func:`spikeview.ops.noise.tfp_variance` on a numpy array (float32, shape of ``y``); ``window``
+    may be a per-photosite array of effective windows (a pooled observation's ``dtau``)."""
     import torch
+
+    if isinstance(window, np.ndarray):
+        n = window.astype(np.float64)
+        p = (np.clip(y, 0.0, 1.0) * n + prior) / (n + 2 * prior)
+        return (p * (1.0 - p) / n).astype(np.float32)
 
     from spikeview.ops.noise import tfp_variance
 
@@ -116,6 +123,11 @@ class Observation:
         ticks: ``(a, b)``: the ticks ``[a, b)`` counted (``None`` when built from an array).
         center: the centre tick asked for (``None`` when built from an array).
         previous: the observation of the window before (same size), for the plan's reuse test.
+        dtau: ``(H, W)`` float32 effective window per photosite in ticks when neighbouring windows
+            were pooled (:mod:`spikeview.guided.temporal`; ``y`` is then pooled count / ``dtau``),
+            ``None`` = ``window`` everywhere.
+        pooling: what the temporal support pooled (:class:`spikeview.guided.temporal.Pooling`), or ``None``.
+        own: the centre window alone (a pooled observation's reuse test compares own windows).
     """
 
     y: np.ndarray
@@ -126,6 +138,9 @@ class Observation:
     ticks: tuple[int, int] | None = None
     center: int | None = None
     previous: "Observation | None" = field(default=None, repr=False)
+    dtau: np.ndarray | None = field(default=None, repr=False)
+    pooling: Any = field(default=None, repr=False)
+    own: "Observation | None" = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         y = np.asarray(self.y)
@@ -148,11 +163,16 @@ class Observation:
                 else:
                     raise ParameterError(f"alpha must be three finite positive gains [R, G, B], got {self.alpha!r}.")
             self.alpha = a
+        if self.dtau is not None:
+            d = np.asarray(self.dtau, dtype=np.float32)
+            if d.shape != self.y.shape or not np.all(d >= self.window):
+                raise ParameterError(f"Observation.dtau must be an {self.y.shape} map of effective windows >= window ({self.window} ticks).")
+            self.dtau = d
 
     # -------------------------------------------------------------------------- construction
     @classmethod
     def from_source(cls, source: SpikeSource, center: int, window: int = 10, *, alpha: np.ndarray | list[float] | None = None,
-                    eta: float = 2.0, previous: bool = False) -> "Observation":
+                    eta: float = 2.0, previous: bool = False, radius: int = 0, cache: Any = None) -> "Observation":
         """The ``window``-tick TFP window around ``center`` (see :func:`~spikeview.classical.windows.window_range`).
 
         Args:
@@ -163,19 +183,50 @@ class Observation:
                 :func:`spikeview.classical.colour_cast.estimate_alpha`); ``None`` = no colour cast.
             eta: range parameter.
             previous: also read the window just before (for the plan's reuse test), when there is one.
+            radius: pool the aligned neighbouring windows, up to ``radius`` on each side
+                (:func:`spikeview.guided.temporal.pool_counts`); 0 = this window alone.
+            cache: a :class:`spikeview.guided.temporal.WindowCache` shared by a sequence's frames.
         """
         a, b = window_range(center, window, source.n_frames)
-        y = counts_to_sfr(window_counts(source, a, b), b - a)
         prev = None
         if previous and a - window >= 0:
             pa, pb = a - window, a
             prev = cls(counts_to_sfr(window_counts(source, pa, pb), window), source.cfa, window, alpha, eta, (pa, pb), None)
-        return cls(y, source.cfa, b - a, alpha, eta, (a, b), int(center), prev)
+        if radius:
+            from spikeview.guided.temporal import pool_counts
+
+            counts, pool = pool_counts(source, a, b, radius, parse_cfa(source.cfa), cache)
+            if pool.dtau is not None:
+                own = cls(counts_to_sfr(window_counts(source, a, b), b - a), source.cfa, b - a, alpha, eta, (a, b), int(center))
+                return cls(counts / pool.dtau, source.cfa, b - a, alpha, eta, (a, b), int(center), prev, pool.dtau, pool, own)
+            return cls(counts / float(b - a), source.cfa, b - a, alpha, eta, (a, b), int(center), prev, None, pool)
+        from spikeview.guided.temporal import Pooling, neighbour_offsets
+
+        y = counts_to_sfr(window_counts(source, a, b), b - a)
+        pool = Pooling(0, b - a, neighbour_offsets(a, b, int(source.n_frames), 1), kind="off",
+                       reason="off (temporal_radius = 0): the window alone, as in the paper")
+        return cls(y, source.cfa, b - a, alpha, eta, (a, b), int(center), prev, None, pool)
 
     # ------------------------------------------------------------------------------ geometry
     @property
     def shape(self) -> tuple[int, int]:
         return (int(self.y.shape[0]), int(self.y.shape[1]))
+
+    @property
+    def effective_window(self) -> "int | np.ndarray":
+        """Δτ per photosite: ``dtau`` of a pooled observation, else ``window``."""
+        return self.window if self.dtau is None else self.dtau
+
+    def mean_count(self) -> float:
+        """Mean spikes per photosite over its (effective) window."""
+        return float((self.y * self.effective_window).mean())
+
+    def crop(self, y0: int, y1: int, x0: int, x1: int) -> "Observation":
+        """The observation on the photosites ``[y0:y1, x0:x1]`` (``previous`` and ``own`` not kept)."""
+        d = None if self.dtau is None else self.dtau[y0:y1, x0:x1]
+        pool = None if self.pooling is None else self.pooling.crop(y0, y1, x0, x1)
+        return Observation(self.y[y0:y1, x0:x1], self.cfa, self.window, self.alpha, self.eta, self.ticks, self.center,
+                           None, d, pool)
 
     @property
     def channels(self) -> int:
@@ -202,7 +253,7 @@ class Observation:
             ``(channels,)`` float64 in :data:`KAPPA_RANGE`; 1 where a channel's planes are too small
             or flat (no estimate).
         """
-        model = binomial_variance(self.local_rate(), self.window)
+        model = binomial_variance(self.local_rate(), self.effective_window)
         cmap = self.channel_map()
         est: dict[int, list[float]] = {c: [] for c in range(self.channels)}
         mod: dict[int, list[float]] = {c: [] for c in range(self.channels)}
@@ -245,4 +296,4 @@ class Observation:
         """``(H, W)`` float32 per-photosite variance of ``y`` (SFR² units): κ_c × the binomial model
         at the :meth:`local_rate`."""
         kappa = self.noise_scale()
-        return (binomial_variance(self.local_rate(), self.window) * kappa[self.channel_map()]).astype(np.float32)
+        return (binomial_variance(self.local_rate(), self.effective_window) * kappa[self.channel_map()]).astype(np.float32)

@@ -26,6 +26,9 @@ demosaic      ``auto``: Malvar-2004 for an estimate the prior denoises (diffusio
 reuse         the previous window's result is reused when the counts of this window and   ``reuse``
               the previous one agree within their noise (χ² test at level
               ``reuse_alpha``); ``changed`` marks the 16×16 blocks that did change
+temporal      what the observation pooled from its aligned neighbouring windows, per      ``temporal_radius``
+              photosite (:mod:`spikeview.guided.temporal`: static, aligned, mixed, fast
+              motion), or why it could not (capture too short)
 ============  ==========================================================================  ==================
 
 ``str(plan)`` prints the decisions and their reasons, one per line.
@@ -77,6 +80,8 @@ class Plan:
     reasons: dict[str, str] = field(default_factory=dict)
     quantise: bool = False
     demosaic: str = "malvar2004"
+    temporal: str = "off"
+    pooling: object = field(default=None, repr=False)
 
     def __str__(self) -> str:
         sig = ", ".join(f"{255 * s:.1f}" for s in self.sigma)
@@ -89,6 +94,7 @@ class Plan:
             "levels": str(self.levels),
             "diffusion": "on" if self.diffusion else f"off -> {self.fallback}",
             "reuse": "yes" if self.reuse else "no",
+            "temporal": self.temporal,
         }
         for key, val in values.items():
             lines.append(f"  {key:<9} {val:<16} {self.reasons.get(key, '')}")
@@ -176,6 +182,7 @@ def changed_blocks(obs: Observation, alpha: float = 1e-3) -> np.ndarray | None:
         ``(ceil(H/16), ceil(W/16))`` bool array (True = changed), or ``None`` without a previous window.
     """
     prev = obs.previous
+    obs = obs.own if obs.own is not None else obs  # a pooled window: compare the own windows (independent counts)
     if prev is None or prev.y.shape != obs.y.shape:
         return None
     var = obs.variance() + prev.variance()
@@ -237,7 +244,7 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     elif p.guidance == "dps" or p.prior == "sd":
         quantise, r["quantise"] = True, "DPS guidance: the residual of the non-squared loss sees the TFP's 1/Δτ steps"
     else:
-        count = float(obs.y.mean()) * obs.window
+        count = obs.mean_count()
         if count < Q_COUNT:
             quantise, r["quantise"] = True, (f"low rate ({count:.2f} spikes per photosite per window < {Q_COUNT:g}): the counts "
                                              f"are small integers and Q models their 1/Δτ steps")
@@ -292,6 +299,11 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
         demosaic, r["demosaic"] = "none", ("monochrome stream: no mosaic, no demosaic, no cast" if obs.cfa is None
                                            else "M is off: the gray frame is not demosaicked")
     else:
-        demosaic, r["demosaic"] = choose_demosaic(smax, p.demosaic, denoised=denoised, mean_count=float(obs.y.mean()) * obs.window,
+        demosaic, r["demosaic"] = choose_demosaic(smax, p.demosaic, denoised=denoised, mean_count=obs.mean_count(),
                                                   shape=obs.shape)
-    return Plan(mosaic, cast, levels, diffusion, fallback, reuse, changed, sigma, r, quantise, demosaic)
+    # --- temporal support (what the observation pooled: spikeview.guided.temporal)
+    pool = obs.pooling
+    temporal = "off" if pool is None or pool.kind in ("off", "unavailable") else pool.kind
+    r["temporal"] = pool.reason if pool is not None else "off (temporal_radius = 0): the window alone, as in the paper"
+    return Plan(mosaic, cast, levels, diffusion, fallback, reuse, changed, sigma, r, quantise, demosaic, temporal,
+                pooling=pool)

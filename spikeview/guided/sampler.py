@@ -170,9 +170,14 @@ class GuidedSampler:
     def forward_model(cls, obs: Observation, plan: Plan, params: GuidedConfig) -> ForwardModel:
         """A = Q∘C∘M for the plan (M off = gray frame, C off = no cast, Q as the plan decided)."""
         alpha = obs.alpha if (plan.cast and obs.alpha is not None) else None
-        return ForwardModel(obs.cfa if plan.mosaic else None, obs.window, alpha=alpha,
-                            eta=obs.eta if alpha is not None else 1.0, k=params.k if plan.quantise else None,
-                            dense_grad=params.dense_gradient, cast=alpha is not None, bands=plan.levels + 1, norm="l2")
+        fm = ForwardModel(obs.cfa if plan.mosaic else None, obs.window, alpha=alpha,
+                          eta=obs.eta if alpha is not None else 1.0, k=params.k if plan.quantise else None,
+                          dense_grad=params.dense_gradient, cast=alpha is not None, bands=plan.levels + 1, norm="l2")
+        if fm.quantise is not None and obs.dtau is not None:  # pooled windows: Q's step is 1/Δτ_eff per photosite
+            from spikeview.guided.temporal import pooled_quantise
+
+            fm.quantise = pooled_quantise(torch.from_numpy(obs.dtau)[None, None], params.k)
+        return fm
 
     @classmethod
     def data_term(cls, obs: Observation, plan: Plan, params: GuidedConfig) -> DataTerm:
@@ -335,5 +340,5 @@ def reconstruct_frame(source, center: int, params: GuidedConfig | None = None, *
 
     p = params if params is not None else GuidedConfig()
     a = resolve_alpha(source, p, alpha)
-    obs = Observation.from_source(source, center, p.window, alpha=a, eta=p.eta)
+    obs = Observation.from_source(source, center, p.window, alpha=a, eta=p.eta, radius=p.temporal_radius)
     return (sampler or GuidedSampler(p)).run(obs, p, callback, cancel)

@@ -12,6 +12,10 @@
   returns the previous result; when only some 16×16 blocks changed (and their bounding box covers
   less than half the frame) only that box (plus a 16-pixel margin, with the CFA phase kept) is
   sampled and pasted into the previous result.
+* ``params.temporal_radius``: each window pools the photons of up to that many aligned
+  neighbouring windows on each side where the motion allows (:mod:`spikeview.guided.temporal`),
+  read from the source at absolute ticks, so a frame never depends on the frames around it in the
+  output (chunks, ``--at``).
 * ``params.warm_start``: every window after the first starts from the previous result re-noised to
   ``t_start`` instead of from its own TFP estimate (the data term still comes from its own window).
 """
@@ -28,6 +32,7 @@ from spikeview.guided.config import GuidedConfig
 from spikeview.guided.observation import Observation
 from spikeview.guided.plan import BLOCK, make_plan
 from spikeview.guided.sampler import GuidedSampler
+from spikeview.guided.temporal import WindowCache
 from spikeview.io.source import SpikeSource
 
 #: margin (pixels) around changed blocks when only a region is re-sampled
@@ -67,7 +72,7 @@ def _crop_box(changed: np.ndarray, shape: tuple[int, int]) -> tuple[int, int, in
 
 
 def _crop_obs(obs: Observation, y0: int, y1: int, x0: int, x1: int) -> Observation:
-    return Observation(obs.y[y0:y1, x0:x1], obs.cfa, obs.window, obs.alpha, obs.eta, obs.ticks, obs.center)
+    return obs.crop(y0, y1, x0, x1)
 
 
 def _crop_to_roi(obs: Observation, roi: tuple[int, int, int, int]) -> Observation:
@@ -80,6 +85,8 @@ def _crop_to_roi(obs: Observation, roi: tuple[int, int, int, int]) -> Observatio
     out = _crop_obs(obs, y0, y0 + y.shape[0], x0, x0 + y.shape[1])
     if obs.previous is not None:
         out.previous = _crop_obs(obs.previous, y0, y0 + y.shape[0], x0, x0 + y.shape[1])
+    if obs.own is not None:
+        out.own = _crop_obs(obs.own, y0, y0 + y.shape[0], x0, x0 + y.shape[1])
     return out
 
 
@@ -115,9 +122,11 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
     centers = list(centers)
     n = len(centers)
     prev: np.ndarray | None = None
+    cache = WindowCache(4 * p.temporal_radius + 4)  # neighbouring windows are shared by consecutive frames
     for fi, c in enumerate(centers):
         want_prev = prev is not None and p.reuse is not False
-        obs = Observation.from_source(source, c, p.window, alpha=a, eta=p.eta, previous=want_prev)
+        obs = Observation.from_source(source, c, p.window, alpha=a, eta=p.eta, previous=want_prev,
+                                      radius=p.temporal_radius, cache=cache)
         if roi is not None:
             obs = _crop_to_roi(obs, roi)
         plan = make_plan(obs, p)

@@ -1,0 +1,188 @@
+"""Motion-aware temporal support (spikeview.guided.temporal): pooling, honesty of the data term, the plan,
+chunk invariance, and the sequences benchmark's temporal error. Monochrome and Bayer throughout."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from spikeview.guided.config import GuidedConfig
+from spikeview.guided.observation import Observation, binomial_variance
+from spikeview.guided.plan import make_plan
+from spikeview.guided.temporal import TILE, pool_counts
+from spikeview.io.source import ArraySource
+
+CFAS = [None, "RGGB"]
+
+
+def _texture(h=48, w=48, seed=0):
+    rng = np.random.default_rng(seed)
+    from scipy.ndimage import gaussian_filter
+
+    t = gaussian_filter(rng.random((h + 64, w + 64)), 2.0)
+    t = (t - t.min()) / (t.max() - t.min())
+    return (0.1 + 0.8 * t).astype(np.float32)
+
+
+def _spikes(rates: np.ndarray, seed=1) -> np.ndarray:
+    """Bernoulli spikes with per-tick rates ``(T, H, W)``."""
+    rng = np.random.default_rng(seed)
+    return (rng.random(rates.shape) < rates).astype(np.uint8)
+
+
+def _moving(ticks: int, speed: float, h=48, w=48, seed=0) -> np.ndarray:
+    """Rates of a texture panned by ``speed`` pixels per tick along x (integer positions per tick)."""
+    tex = _texture(h, w, seed)
+    return np.stack([tex[8:8 + h, 8 + int(round(speed * t)):8 + int(round(speed * t)) + w] for t in range(ticks)]) * 0.6
+
+
+@pytest.mark.parametrize("cfa", CFAS)
+def test_static_scene_pools_every_neighbour_with_zero_shift(cfa):
+    rates = np.repeat(_texture()[None, 8:56, 8:56] * 0.6, 90, axis=0)
+    src = ArraySource(_spikes(rates), cfa=cfa)
+    counts, pool = pool_counts(src, 40, 50, 3, cfa)
+    assert pool.offsets == (-1, 1, -2, 2, -3, 3)
+    assert pool.kind == "static" and pool.reason.startswith("static: ±3 windows")
+    full = pool.dtau == 70
+    assert full.mean() > 0.85
+    assert all(not np.any(s) for s in pool.shifts.values())
+    # a fully pooled photosite holds exactly the 70 ticks' spikes
+    total = src.count(10, 80).astype(np.float32)
+    np.testing.assert_array_equal(counts[full], total[full])
+    obs = Observation.from_source(src, 45, 10, radius=3)
+    np.testing.assert_allclose(obs.y, counts / pool.dtau, rtol=1e-6)
+    assert obs.mean_count() == pytest.approx(float(counts.mean()), rel=1e-5)
+    plan = make_plan(obs, GuidedConfig(temporal_radius=3))
+    assert plan.temporal == "static" and "static: ±3 windows" in str(plan)
+
+
+@pytest.mark.parametrize("cfa", CFAS)
+def test_moving_scene_is_aligned_by_its_motion(cfa):
+    # the content moves left by 0.15 px per tick = 1.5 px per window: what sits at x in the centre
+    # window sits at x - 1.5k in window k
+    rates = _moving(90, 0.15)
+    src = ArraySource(_spikes(rates), cfa=cfa)
+    _, pool = pool_counts(src, 40, 50, 2, cfa)
+    for k in (-2, -1, 1, 2):
+        sh = pool.shifts[k][pool.accepted[k]]
+        assert len(sh) >= 0.5 * pool.shifts[k][..., 0].size
+        dx = np.median(sh[:, 1])
+        assert abs(dx + 1.5 * k) <= (1 if cfa is None else 2), (k, dx)
+        assert np.all(np.abs(sh[:, 0]) <= 2)
+    assert pool.kind in ("aligned", "mixed")
+
+
+@pytest.mark.parametrize("cfa", CFAS)
+def test_a_change_in_the_centre_window_is_not_ghosted(cfa):
+    """A square that appears only in the centre window (a flash): its photosites keep their own window."""
+    rates = np.repeat(_texture(64, 64)[None, 8:72, 8:72] * 0.3, 70, axis=0)
+    rates[30:40, 16:32, 16:32] = 0.95
+    src = ArraySource(_spikes(rates), cfa=cfa)
+    _, pool = pool_counts(src, 30, 40, 3, cfa)
+    inner = pool.dtau[16:32, 16:32]
+    assert np.all(inner == 10), "the flash must not be averaged with the windows around it"
+    far = pool.dtau[48:, :].ravel().tolist() + pool.dtau[:, 48:].ravel().tolist()  # tiles away from the flash
+    assert np.mean(far) >= 55  # 4.5 of the 6 neighbours on average (the per-photosite test rejects a few by chance)
+
+
+@pytest.mark.parametrize("cfa", CFAS)
+def test_capture_too_short_and_radius_zero_say_why(cfa):
+    from spikeview.guided.knobs import knob_status
+
+    src = ArraySource(_spikes(np.full((10, 16, 16), 0.5)), cfa=cfa)
+    obs = Observation.from_source(src, 5, 10, radius=2)
+    assert obs.dtau is None and obs.pooling.kind == "unavailable"
+    plan = make_plan(obs, GuidedConfig(temporal_radius=2))
+    assert plan.temporal == "off" and "the capture holds 10 ticks" in plan.reasons["temporal"]
+    why = knob_status(GuidedConfig(temporal_radius=2), plan)["guided.temporal_radius"]
+    assert why is not None and "10 ticks" in why
+    long = ArraySource(_spikes(np.full((40, 16, 16), 0.5)), cfa=cfa)
+    obs = Observation.from_source(long, 15, 10, radius=2)
+    assert obs.pooling.offsets == (-1, 1, 2)  # only whole windows inside the capture
+    assert knob_status(GuidedConfig(temporal_radius=2), make_plan(obs, GuidedConfig(temporal_radius=2)))["guided.temporal_radius"] is None
+    plain = make_plan(Observation.from_source(long, 15, 10), GuidedConfig())
+    assert plain.temporal == "off" and "temporal_radius = 0" in plain.reasons["temporal"]
+
+
+@pytest.mark.parametrize("cfa", CFAS)
+def test_data_term_uses_the_effective_window(cfa):
+    """Noise weights from Δτ_eff per photosite; Q's step 1/Δτ_eff (hard-rounding limit)."""
+    import torch
+
+    from spikeview.guided.sampler import GuidedSampler
+
+    rng = np.random.default_rng(3)
+    dtau = np.where(rng.random((16, 16)) < 0.5, 10.0, 30.0).astype(np.float32)
+    y = (rng.integers(0, 10, (16, 16)) / dtau).astype(np.float32)
+    obs = Observation(y, cfa, 10, dtau=dtau)
+    v = binomial_variance(y, dtau)
+    for n in (10.0, 30.0):
+        m = dtau == n
+        np.testing.assert_allclose(v[m], binomial_variance(y, int(n))[m], rtol=1e-5)
+    assert obs.variance().shape == (16, 16)
+    plan = make_plan(obs, GuidedConfig(quantise=True))
+    fm = GuidedSampler.forward_model(obs, plan, GuidedConfig(quantise=True, k=1000.0))
+    assert "per-photosite" in fm.quantise.extra_repr()
+    # a value 0.3 of a step above level m rounds to m on its own grid (k = 1000 is nearly hard rounding)
+    m = rng.integers(0, 8, (16, 16)).astype(np.float32)
+    x = torch.from_numpy((m + 0.3) / dtau)[None, None]
+    out = fm.quantise(x)[0, 0].numpy()
+    np.testing.assert_allclose(out * dtau, m, atol=2e-3)
+    assert fm.quantise(x).shape == x.shape and fm(torch.rand(1, 1 if cfa is None else 3, 16, 16)).shape == (1, 1, 16, 16)
+    with pytest.raises(Exception, match="dtau"):
+        Observation(y, cfa, 10, dtau=np.full((16, 16), 5.0, dtype=np.float32))
+
+
+@pytest.mark.parametrize("cfa", CFAS)
+def test_sequence_frames_do_not_depend_on_the_chunking(cfa):
+    """reconstruct_windows over a range equals the same windows computed chunk by chunk (each chunk
+    starting at a keyframe) and the single-frame path; neighbours are read across chunk borders."""
+    from spikeview.cluster._compute import compute_chunk, prepare_state
+    from spikeview.guided.sampler import GuidedSampler
+    from spikeview.guided.priors.base import DenoiserPrior
+    from spikeview.pipeline import KEYFRAME, reconstruct_windows
+    from spikeview.recipe import Recipe
+
+    class Blur(DenoiserPrior):  # a quick, deterministic stand-in prior
+        def __init__(self, channels):
+            self.channels = channels
+            self.sigma_max = 75 / 255
+
+        def denoise(self, x, sigma):
+            import torch.nn.functional as F
+
+            return F.avg_pool2d(F.pad(x, (1, 1, 1, 1), mode="replicate"), 3, stride=1)
+
+    rates = _moving(200, 0.05, 32, 32)
+    src = ArraySource(_spikes(rates), cfa=cfa)
+    recipe = Recipe().with_values({"run.method": "guided", "guided.steps": 1, "guided.temporal_radius": 2})
+    data = recipe.to_dict()
+    centres = list(range(35, 165, 10))[:KEYFRAME] + []
+    state = prepare_state(src, data)
+    smp = GuidedSampler(recipe.guided, prior=Blur(1 if cfa is None else 3))
+    whole = np.stack(list(reconstruct_windows(src, centres, recipe, state, sampler=smp)))
+    # chunks of 4 windows, each the start of its own chain (as the batch path splits at keyframes)
+    parts = [compute_chunk(src, centres[i:i + 4], data, state, sampler=smp) for i in range(0, len(centres), 4)]
+    parts = [np.asarray(p).reshape((len(p),) + whole.shape[1:]) for p in parts]  # the store keeps a channel axis
+    np.testing.assert_array_equal(parts[0], whole[:4])
+    alone = np.stack(list(reconstruct_windows(src, [centres[4]], recipe, state, sampler=smp)))[0]
+    np.testing.assert_array_equal(alone, parts[1][0])  # --at reads its own neighbours, across the chunk border
+    # every chunk equals the same windows run as one sequence (its neighbours read outside the chunk)
+    for i, p in zip(range(0, len(centres), 4), parts):
+        ref = np.stack(list(reconstruct_windows(src, centres[i:i + 4], recipe, state, sampler=smp)))
+        np.testing.assert_array_equal(p, ref)
+    # and the pooling did use windows outside each chunk
+    obs = Observation.from_source(src, centres[4], 10, radius=2)
+    assert obs.pooling.offsets == (-1, 1, -2, 2) and obs.dtau is not None and obs.dtau.max() > 10
+
+
+def test_temporal_error_measures_flicker():
+    from spikeview.bench.temporal import temporal_error
+
+    g = [np.full((8, 8), 0.5, dtype=np.float32)] * 4
+    assert temporal_error(g, g) == pytest.approx(0.0, abs=1e-9)
+    flick = [g[0] + (0.02 if i % 2 else 0.0) for i in range(4)]
+    # every difference is ±0.02 (gain fitted over the sequence ~ 1/1.02 at most moves it slightly)
+    assert 4.0 < temporal_error(flick, g) < 5.5
+    rgb = [np.full((8, 8, 3), 0.5, dtype=np.float32)] * 3
+    assert temporal_error(rgb, rgb) == pytest.approx(0.0, abs=1e-9)
