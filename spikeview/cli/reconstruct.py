@@ -59,7 +59,8 @@ def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre
     from spikeview.guided import Observation, make_plan
     from spikeview.guided.knobs import knob_status
 
-    obs = Observation.from_source(source, centre, recipe.guided.window, alpha=state.alpha, eta=recipe.guided.eta)
+    obs = Observation.from_source(source, centre, recipe.guided.window, alpha=state.alpha, eta=recipe.guided.eta,
+                                  radius=recipe.guided.temporal_radius)
     plan = make_plan(obs, recipe.guided)
     print(plan, file=sys.stderr)
     for path, why in knob_status(recipe.guided, plan).items():
@@ -89,8 +90,9 @@ def run(args: argparse.Namespace) -> int:
         recipe = recipe_for_state(recipe, state)
         how = "set by --white" if "export.white" in given_flags(args) else (
             "from the preset" if getattr(args, "preset", None) and state.white is not None and
-            recipe.export.white != state.white else "the 99.9th percentile of the sequence's corrected rates")
-        print(f"white point {recipe.export.white:.4g} ({how}): EXR keeps values above it, npy/PNG/MP4 map it to full scale.",
+            recipe.export.white != state.white else "at most 0.1 % of the sequence's rates at or above it")
+        unit = "spikes per tick" if state.alpha is None else "Y·α/η, rates corrected for the colour cast"
+        print(f"white point {recipe.export.white:.4g} ({unit}; {how}): EXR keeps values above it, npy/PNG/MP4 map it to full scale.",
               file=sys.stderr)
         for note in inactive_notes(recipe, args, src, centres[0], state):
             print(f"note: {note}", file=sys.stderr)

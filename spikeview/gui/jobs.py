@@ -112,7 +112,7 @@ def window_observation(source: Any, tick: int, cfg: Any, alpha: np.ndarray | Non
     from spikeview.guided.observation import Observation
     from spikeview.guided.video import _crop_to_roi
 
-    obs = Observation.from_source(source, int(tick), cfg.window, alpha=alpha, eta=cfg.eta)
+    obs = Observation.from_source(source, int(tick), cfg.window, alpha=alpha, eta=cfg.eta, radius=cfg.temporal_radius)
     return obs if roi is None else _crop_to_roi(obs, roi)
 
 
@@ -207,7 +207,8 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     from spikeview import metrics
     from spikeview.guided.knobs import knob_status
     from spikeview.guided.plan import make_plan
-    from spikeview.pipeline import crop_roi, guided_scale, reconstruct_windows, sampler_params
+    from spikeview.cfa import crop_roi
+    from spikeview.pipeline import guided_scale, reconstruct_windows, sampler_params
 
     p = req.params
     recipe = req.recipe.with_values({"run.method": "guided"})
