@@ -86,10 +86,27 @@ def site_masks(cfa: str, height: int, width: int) -> dict[str, np.ndarray]:
     if cfa is None:
         raise ParameterError("site_masks needs a Bayer CFA, got monochrome ('none').")
     yy, xx = np.mgrid[0:height, 0:width]
-    quad_pos = {(0, 0): cfa[0], (0, 1): cfa[1], (1, 0): cfa[2], (1, 1): cfa[3]}
+    return {name: (yy % 2 == py) & (xx % 2 == px) for name, (py, px) in site_offsets(cfa).items()}
+
+
+def site_offsets(cfa: str) -> dict[str, tuple[int, int]]:
+    """Row/column parity ``(py, px)`` in the 2×2 quad of each Bayer site ``R``, ``Gr``, ``Gb``, ``B``
+    (``Gr`` shares rows with red): the one rule every per-site statistic uses."""
     red_row = 0 if "R" in (cfa[0], cfa[1]) else 1
-    out: dict[str, np.ndarray] = {}
-    for (py, px), ch in quad_pos.items():
-        name = ch if ch != "G" else ("Gr" if py == red_row else "Gb")
-        out[name] = (yy % 2 == py) & (xx % 2 == px)
+    out = {}
+    for (py, px), ch in zip(((0, 0), (0, 1), (1, 0), (1, 1)), cfa):
+        out[ch if ch != "G" else ("Gr" if py == red_row else "Gb")] = (py, px)
     return {k: out[k] for k in SITE_NAMES}
+
+
+def crop_roi(img: np.ndarray, roi: tuple[int, int, int, int] | None) -> tuple[np.ndarray, tuple[int, int]]:
+    """``img[y:y+h, x:x+w]`` for ``roi = (x, y, w, h)`` with ``x, y`` rounded down to even pixels (the
+    CFA phase stays that of the full frame); returns the crop and its ``(y, x)`` origin."""
+    if roi is None:
+        return img, (0, 0)
+    x, y, w, h = (int(v) for v in roi)
+    x0, y0 = max(0, x) & ~1, max(0, y) & ~1
+    x1, y1 = min(img.shape[1], x + w), min(img.shape[0], y + h)
+    if x1 - x0 < 2 or y1 - y0 < 2:
+        raise ParameterError("The region of interest is empty: draw a rectangle inside the frame.")
+    return img[y0:y1, x0:x1], (y0, x0)

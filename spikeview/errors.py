@@ -7,6 +7,8 @@ in a dialog or the status bar.
 
 from __future__ import annotations
 
+from typing import Any
+
 
 class SpikeviewError(Exception):
     """An error caused by the user's input (file, parameter, setting), with a fix in the message."""
@@ -33,6 +35,18 @@ class GeometryError(InputFileError):
 
 class Cancelled(Exception):
     """Raised inside long jobs when their cancel flag is set (not an error for the user)."""
+
+
+def is_cancelled(cancel: Any) -> bool:
+    """Whether a job's cancel flag is set: ``None`` (never), a ``threading.Event``-like (``is_set()``),
+    a callable, or a plain truth value. The one cancel check of the library's long loops."""
+    if cancel is None:
+        return False
+    if hasattr(cancel, "is_set"):
+        return bool(cancel.is_set())
+    if callable(cancel):
+        return bool(cancel())
+    return bool(cancel)
 
 
 class OutputFileError(SpikeviewError):

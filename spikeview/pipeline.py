@@ -175,19 +175,6 @@ def sampler_params(recipe: Recipe, state: SequenceState) -> Any:
     return recipe.guided.replace(eta=exposed_eta(recipe.classical.eta, state.white))
 
 
-def crop_roi(img: np.ndarray, roi: tuple[int, int, int, int] | None) -> tuple[np.ndarray, tuple[int, int]]:
-    """``img[y:y+h, x:x+w]`` for ``roi = (x, y, w, h)`` with ``x, y`` rounded down to even pixels (the
-    CFA phase stays that of the full frame); returns the crop and its ``(y, x)`` origin."""
-    if roi is None:
-        return img, (0, 0)
-    x, y, w, h = (int(v) for v in roi)
-    x0, y0 = max(0, x) & ~1, max(0, y) & ~1
-    x1, y1 = min(img.shape[1], x + w), min(img.shape[0], y + h)
-    if x1 - x0 < 2 or y1 - y0 < 2:
-        raise ParameterError("The region of interest is empty: draw a rectangle inside the frame.")
-    return img[y0:y1, x0:x1], (y0, x0)
-
-
 def reconstruct_windows(source: Any, centers: Iterable[int], recipe: Recipe, state: SequenceState | None = None, *,
                         roi: tuple[int, int, int, int] | None = None, callback: Callback | None = None,
                         cancel: Any = None, sampler: Any = None, infos: list | None = None) -> Iterator[np.ndarray]:
@@ -231,12 +218,12 @@ def reconstruct_windows(source: Any, centers: Iterable[int], recipe: Recipe, sta
                 yield frame * scale
         return
     from spikeview.classical.reconstruct import reconstruct_frames
-    from spikeview.errors import Cancelled
-    from spikeview.guided.sampler import _cancelled
+    from spikeview.cfa import crop_roi
+    from spikeview.errors import Cancelled, is_cancelled
 
     cfg = recipe.classical.replace(method=recipe.run.method)
     for i, frame in enumerate(reconstruct_frames(source, centers, cfg, alpha=state.alpha)):
-        if _cancelled(cancel):
+        if is_cancelled(cancel):
             raise Cancelled(f"reconstruction cancelled at frame {i + 1} of {n}")
         out = crop_roi(frame, roi)[0] if roi is not None else frame
         if callback is not None:

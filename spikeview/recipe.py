@@ -145,6 +145,11 @@ class Param:
         """argparse destination of :attr:`flag`."""
         return self.flag.lstrip("-").replace("-", "_")
 
+    @property
+    def optional(self) -> bool:
+        """Whether the field may be unset (``None``: the data or the plan decides)."""
+        return _optional(self.table, self.field)
+
     def kind(self) -> Any:
         """The field's type (``int``, ``float``, ``bool``, ``str``; optional types unwrapped)."""
         tp = _field_types()[self.table][self.field]
@@ -162,7 +167,7 @@ class Param:
         name = name or self.path
         kind = self.kind()
         if value is None:
-            if _optional(self.table, self.field):
+            if self.optional:
                 return None
             raise ParameterError(f"{name} needs a value; see --help for its range.")
         return check_value(name, kind, value, self.lo, self.hi, self.choices, lo_open=self.lo_open,

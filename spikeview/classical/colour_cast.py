@@ -26,7 +26,7 @@ import warnings
 
 import numpy as np
 
-from spikeview.cfa import CHANNEL_INDEX, CHANNEL_NAMES, SITE_NAMES, parse_cfa
+from spikeview.cfa import CHANNEL_INDEX, CHANNEL_NAMES, parse_cfa, site_offsets
 from spikeview.classical.tfp import window_counts
 from spikeview.errors import ParameterError
 from spikeview.io.source import SpikeSource
@@ -39,15 +39,6 @@ class ColourCastWarning(UserWarning):
 
 
 # --- per-site / per-channel statistics -------------------------------------------------------
-def _site_slices(cfa: str) -> dict[str, tuple[int, int]]:
-    """Offsets ``(row, col)`` in the 2×2 quad of each site name R, Gr, Gb, B."""
-    red_row = 0 if "R" in (cfa[0], cfa[1]) else 1
-    out = {}
-    for (py, px), ch in zip(((0, 0), (0, 1), (1, 0), (1, 1)), cfa):
-        out[ch if ch != "G" else ("Gr" if py == red_row else "Gb")] = (py, px)
-    return {k: out[k] for k in SITE_NAMES}
-
-
 def _as_frames(frame: np.ndarray, name: str) -> np.ndarray:
     arr = np.asarray(frame)
     if arr.ndim not in (2, 3) or min(arr.shape[-2:]) < 2:
@@ -60,7 +51,7 @@ def _site_sums(frame: np.ndarray, cfa: str | None) -> dict[str, tuple[float, int
     if cfa is None:
         return {"Y": (float(frame.sum(dtype=np.float64)), frame.size)}
     out = {}
-    for name, (py, px) in _site_slices(cfa).items():
+    for name, (py, px) in site_offsets(cfa).items():
         sub = frame[..., py::2, px::2]
         out[name] = (float(sub.sum(dtype=np.float64)), sub.size)
     return out

@@ -27,6 +27,7 @@ from spikeview.classical.colour_cast import (
 )
 from spikeview.classical.demosaic import DEMOSAIC_METHODS, check_method, demosaic
 from spikeview.classical.demosaic._common import quad_codes
+from spikeview.classical.noise import choose_demosaic, haar_noise_variance
 from spikeview.classical.display import Gamma, _check_gamma, _check_levels, encode8, to_display, transfer
 from spikeview.classical.tfi import DEFAULT_HALF_WINDOW, tfi
 from spikeview.classical.tfp import counts_to_sfr, tfp, window_counts
@@ -90,15 +91,12 @@ def auto_demosaic(mosaic: np.ndarray, cfa: str, requested: str = "auto") -> tupl
 
     ``requested`` other than ``"auto"`` is used as set. ``"auto"`` measures the noise of the
     (colour-corrected) mosaic — the largest per-Bayer-plane σ of the trimmed finest diagonal Haar
-    detail (:func:`spikeview.guided.observation.haar_noise_variance`) — and picks bilinear where
+    detail (:func:`spikeview.classical.noise.haar_noise_variance`) — and picks bilinear where
     noise dominates, Malvar-2004 where the window is clean
-    (:func:`spikeview.guided.plan.choose_demosaic`, the same rule as the guided plan's).
+    (:func:`spikeview.classical.noise.choose_demosaic`, the same rule as the guided plan's).
     """
     if requested != "auto":
         return requested, f"set by demosaic={requested}"
-    from spikeview.guided.observation import haar_noise_variance
-    from spikeview.guided.plan import choose_demosaic
-
     var = [haar_noise_variance(mosaic[i::2, j::2]) for i in (0, 1) for j in (0, 1)]
     sigma = max((float(np.sqrt(v)) for v in var if v is not None), default=0.0)
     return choose_demosaic(sigma, "auto", denoised=False, shape=mosaic.shape[-2:])

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from spikeview.cfa import flip_cfa, parse_cfa
+from spikeview.cfa import flip_cfa, parse_cfa, site_offsets
 from spikeview.errors import ParameterError
 from spikeview.gui.model import OpenedStream
 from spikeview.io.source import ArraySource, SpikeSource, StreamInfo
@@ -396,13 +396,6 @@ class RatesResult:
     alpha: np.ndarray  # (3,) gray-world α of this window (R, G, B), (1,) for monochrome
 
 
-def _site_offsets(cfa: str) -> dict[str, tuple[int, int]]:
-    """Row/column parity of each Bayer site (the core's rule, :mod:`spikeview.classical.colour_cast`)."""
-    from spikeview.classical.colour_cast import _site_slices
-
-    return _site_slices(cfa)
-
-
 def site_rates(sfr: np.ndarray, cfa: str | None, window: int, roi: tuple[int, int, int, int] | None = None,
                tick: int = 0) -> RatesResult:
     """Histograms of the SFR per Bayer site (``R``, ``Gr``, ``Gb``, ``B``; ``all`` for mono).
@@ -419,7 +412,7 @@ def site_rates(sfr: np.ndarray, cfa: str | None, window: int, roi: tuple[int, in
         x0, y0, w, h = roi
         sub = sfr[y0:y0 + h, x0:x0 + w]
     planes = {"all": sub} if cfa is None else {
-        name: sub[(py - y0) % 2::2, (px - x0) % 2::2] for name, (py, px) in _site_offsets(parse_cfa(cfa)).items()}
+        name: sub[(py - y0) % 2::2, (px - x0) % 2::2] for name, (py, px) in site_offsets(parse_cfa(cfa)).items()}
     hists, means, sizes = {}, {}, {}
     for name, plane in planes.items():
         idx = np.rint(plane * np.float32(n)).astype(np.intp).ravel()

@@ -124,9 +124,7 @@ TRI_STATE = {None: "auto", True: "on", False: "off"}
 
 
 def _optional_bool(p: Param) -> bool:
-    from spikeview.recipe import _optional
-
-    return p.kind() is bool and _optional(p.table, p.field)
+    return p.kind() is bool and p.optional
 
 
 def _recipe_spec(p: Param) -> ParamSpec:

@@ -44,7 +44,7 @@ _EXPORTS = {
     "HQSGuidance": "spikeview.guided.guidance",
     "GuidedSampler": "spikeview.guided.sampler",
     "RunInfo": "spikeview.guided.sampler",
-    "reconstruct_frame": "spikeview.guided.sampler",
+    "reconstruct_frame": "spikeview.guided.video",
     "reconstruct_sequence": "spikeview.guided.video",
     "resolve_alpha": "spikeview.guided.video",
     "baseline": "spikeview.guided.baseline",

@@ -27,6 +27,8 @@ from typing import Any
 import numpy as np
 
 from spikeview.cfa import channel_map, parse_cfa
+from spikeview.classical.noise import haar_noise_variance
+from spikeview.classical.noise import trim_factor as _trim_factor  # noqa: F401 (old name)
 from spikeview.classical.tfp import counts_to_sfr, window_counts
 from spikeview.classical.windows import window_range
 from spikeview.errors import ParameterError
@@ -77,37 +79,6 @@ def binomial_variance(y: np.ndarray, window: "int | np.ndarray", prior: float = 
 
 def _bayer_planes(y: np.ndarray) -> list[tuple[slice, slice]]:
     return [(slice(i, None, 2), slice(j, None, 2)) for i in (0, 1) for j in (0, 1)]
-
-
-def haar_noise_variance(plane: np.ndarray, keep: float = 0.9) -> float | None:
-    """Robust noise variance of a 2-D plane from its finest diagonal Haar detail.
-
-    ``HH = (a - b - c + d) / 2`` over non-overlapping 2×2 blocks has the noise's variance for white
-    noise and is nearly blind to smooth content. Edges give large ``HH``, so the largest
-    ``1 − keep`` of ``HH²`` are dropped and the trimmed mean is divided by its Gaussian value
-    (``E[z² | z² <= q] · keep`` for the ``keep`` quantile ``q`` of χ²₁, 0.623 for keep = 0.9).
-    A trimmed mean, not Donoho's median, because TFP values are quantised (multiples of 1/Δτ),
-    which makes the median of ``|HH|`` jump between levels.
-
-    Returns:
-        The variance, or ``None`` for planes smaller than 2×2 (no block).
-    """
-    h, w = plane.shape
-    h2, w2 = h - h % 2, w - w % 2
-    if h2 < 2 or w2 < 2:
-        return None
-    p = plane[:h2, :w2].astype(np.float64)
-    hh2 = np.sort((((p[0::2, 0::2] - p[0::2, 1::2] - p[1::2, 0::2] + p[1::2, 1::2]) / 2.0) ** 2).ravel())
-    n_keep = max(1, int(np.ceil(keep * hh2.size)))
-    return float(hh2[:n_keep].sum() / hh2.size) / _trim_factor(keep)
-
-
-def _trim_factor(keep: float) -> float:
-    """``E[z² · 1{z² <= q}]`` for ``z ~ N(0, 1)`` and ``q`` the ``keep`` quantile of ``z²``."""
-    from scipy.stats import norm
-
-    a = float(norm.ppf(0.5 + keep / 2.0))
-    return keep - 2.0 * a * float(norm.pdf(a))
 
 
 @dataclass

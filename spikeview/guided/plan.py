@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
+from spikeview.classical.noise import DEMOSAIC_CLEAN_SIGMA, SPARSE_COUNT, choose_demosaic  # noqa: F401 (the plan's rule)
 from spikeview.errors import ParameterError
 from spikeview.guided.config import GuidedConfig
 from spikeview.guided.observation import Observation
@@ -101,47 +102,11 @@ class Plan:
         return "\n".join(lines)
 
 
-#: noise σ (max over channels, fraction of 1) of the bilinear TFP estimate at or below which a window
-#: counts as clean, so a sharper demosaic pays off for an output that is not denoised afterwards
-DEMOSAIC_CLEAN_SIGMA = 8.0 / 255.0
-#: mean spikes per photosite per window below which counts are "sparse" (isolated single spikes)
-SPARSE_COUNT = 0.3
 #: HQS: mean spikes per photosite per window below which Q (soft quantisation) is switched on.
 #: Chosen on the tuning scenes of the guided benchmark (256×256, k = 20): Q gained +0.02 to +0.16 dB
 #: PSNR and +0.04 to +0.08 SSIM at 0.16–0.95 spikes, lost 0.22–0.34 dB at 1.3–2.1 spikes; the
 #: threshold sits between (benchmarks/results/guided.md)
 Q_COUNT = 1.1
-
-
-def choose_demosaic(sigma: float, requested: str = "auto", *, denoised: bool = False,
-                    mean_count: float | None = None, shape: tuple[int, int] | None = None) -> tuple[str, str]:
-    """The demosaic for a window with noise ``sigma``, and the reason (``requested`` other than
-    ``"auto"`` is used as set).
-
-    * ``denoised`` (the guided start estimate and the one-pass input: the prior removes the noise
-      afterwards): ``malvar2004``, sharper, whose amplified noise the prior takes out — except for
-      sparse counts (``mean_count``, spikes per photosite per window, below :data:`SPARSE_COUNT`),
-      where Malvar turns isolated spikes into ringing the prior keeps: ``bilinear`` (on the
-      tuning scenes at 128×128: +1.3 dB on the low-key scene, 0.16 spikes per photosite; Malvar
-      +0.1 to +0.4 dB on the others, 0.43 to 2.1 spikes);
-    * an output that is not denoised (TFP/TFI frames, the TFP fallback): ``bilinear`` where noise
-      dominates (``sigma > DEMOSAIC_CLEAN_SIGMA``) — Malvar/Menon sharpen the noise: on 10- to
-      200-tick windows of the benchmark scenes bilinear was ahead by 0.5–3.3 dB at σ >= 14/255,
-      Malvar ahead by at most 0.25 dB (one scene, 41–100 ticks) —, ``malvar2004`` where it is clean.
-    """
-    if requested != "auto":
-        return requested, f"set by demosaic={requested}"
-    if shape is not None and min(shape) < 3:
-        return "bilinear", f"a {shape[0]}x{shape[1]} frame is too small for Malvar-2004 (3x3 at least)"
-    if denoised and mean_count is not None and mean_count < SPARSE_COUNT:
-        return "bilinear", (f"sparse counts ({mean_count:.2f} spikes per photosite per window < {SPARSE_COUNT:g}): "
-                            "Malvar would ring around isolated spikes, bilinear averages them")
-    if denoised:
-        return "malvar2004", "the prior denoises afterwards: the sharper Malvar-2004 start, its amplified noise is removed"
-    if sigma <= DEMOSAIC_CLEAN_SIGMA:
-        return "malvar2004", f"clean window (noise σ {255 * sigma:.1f}/255 <= {255 * DEMOSAIC_CLEAN_SIGMA:.0f}/255): the sharper Malvar-2004"
-    return "bilinear", (f"noise dominates (σ {255 * sigma:.1f}/255 > {255 * DEMOSAIC_CLEAN_SIGMA:.0f}/255): "
-                        "Malvar/Menon would sharpen it, bilinear averages it")
 
 
 def max_levels(height: int, width: int) -> int:

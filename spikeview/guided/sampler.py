@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from spikeview.errors import Cancelled, ParameterError
+from spikeview.errors import Cancelled, ParameterError, is_cancelled
 from spikeview.guided.baseline import baseline, start_estimate, to_image, to_tensor
 from spikeview.guided.config import GuidedConfig
 from spikeview.guided.guidance import DPSGuidance, GuidanceRule, HQSGuidance
@@ -94,16 +94,6 @@ def load_prior(params: GuidedConfig, channels: int) -> Any:
 def is_latent(prior: Any) -> bool:
     """A latent-diffusion prior (it has a VAE) rather than a pixel-space denoiser."""
     return getattr(prior, "vae_factor", None) is not None
-
-
-def _cancelled(cancel: Any) -> bool:
-    if cancel is None:
-        return False
-    if hasattr(cancel, "is_set"):
-        return bool(cancel.is_set())
-    if callable(cancel):
-        return bool(cancel())
-    return bool(cancel)
 
 
 @dataclass
@@ -221,7 +211,7 @@ class GuidedSampler:
         plan = plan if plan is not None else make_plan(observation, p)
         info = RunInfo(plan=plan)
         self.info = info
-        if _cancelled(cancel):
+        if is_cancelled(cancel):
             raise Cancelled("guided reconstruction cancelled before the first step")
         channels = 3 if plan.mosaic else 1
         if plan.reuse and previous is not None and (previous.ndim == 3) == (channels == 3):
@@ -292,7 +282,7 @@ class GuidedSampler:
             x = space.start(start, schedule, gen) if latent else schedule.add_noise(start, add, gen)
             for i in range(p.steps):
                 done = chain * p.steps + i
-                if _cancelled(cancel):
+                if is_cancelled(cancel):
                     raise Cancelled(f"guided reconstruction cancelled at step {done + 1} of {total}")
                 sigma = schedule.sigma(i, x)
                 transform = ((i + 3 * chain) % 8) if (p.self_ensemble and not latent) else None
@@ -319,26 +309,3 @@ def _diverged(p: GuidedConfig, step: int, total: int) -> str:
     return (f"the guided sample diverged (non-finite values at step {step} of {total}, guidance = {p.guidance}); "
             f"{how}, or use method tfp for this stream.")
 
-
-def reconstruct_frame(source, center: int, params: GuidedConfig | None = None, *, alpha: np.ndarray | None = None,
-                      callback: Callback | None = None, cancel: Any = None, sampler: GuidedSampler | None = None) -> np.ndarray:
-    """Guided reconstruction of the window of ``source`` centred on tick ``center``.
-
-    Args:
-        source: a :class:`~spikeview.io.source.SpikeSource`.
-        center: centre tick.
-        params: settings (defaults if ``None``).
-        alpha: the sequence's gray-world gains; ``None`` uses ``params.alpha`` or estimates them over
-            the whole stream (:func:`spikeview.classical.colour_cast.estimate_alpha`).
-        callback, cancel: see :meth:`GuidedSampler.run`.
-        sampler: reuse a sampler (and its loaded prior).
-
-    Returns:
-        ``(H, W, 3)`` float32 in [0, 1] (``(H, W)`` for monochrome).
-    """
-    from spikeview.guided.video import resolve_alpha
-
-    p = params if params is not None else GuidedConfig()
-    a = resolve_alpha(source, p, alpha)
-    obs = Observation.from_source(source, center, p.window, alpha=a, eta=p.eta, radius=p.temporal_radius)
-    return (sampler or GuidedSampler(p)).run(obs, p, callback, cancel)

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from spikeview.cfa import crop_roi
 from spikeview.errors import ParameterError
 from spikeview.guided.config import GuidedConfig
 from spikeview.guided.observation import Observation
@@ -61,6 +62,28 @@ def resolve_alpha(source: SpikeSource, params: GuidedConfig, alpha: np.ndarray |
                       dtype=np.float64)
 
 
+def reconstruct_frame(source, center: int, params: GuidedConfig | None = None, *, alpha: np.ndarray | None = None,
+                      callback: Any = None, cancel: Any = None, sampler: GuidedSampler | None = None) -> np.ndarray:
+    """Guided reconstruction of the window of ``source`` centred on tick ``center``.
+
+    Args:
+        source: a :class:`~spikeview.io.source.SpikeSource`.
+        center: centre tick.
+        params: settings (defaults if ``None``).
+        alpha: the sequence's gray-world gains; ``None`` uses ``params.alpha`` or estimates them over
+            the whole stream (:func:`spikeview.classical.colour_cast.estimate_alpha`).
+        callback, cancel: see :meth:`GuidedSampler.run`.
+        sampler: reuse a sampler (and its loaded prior).
+
+    Returns:
+        ``(H, W, 3)`` float32 in [0, 1] (``(H, W)`` for monochrome).
+    """
+    p = params if params is not None else GuidedConfig()
+    a = resolve_alpha(source, p, alpha)
+    obs = Observation.from_source(source, center, p.window, alpha=a, eta=p.eta)
+    return (sampler or GuidedSampler(p)).run(obs, p, callback, cancel)
+
+
 def _crop_box(changed: np.ndarray, shape: tuple[int, int]) -> tuple[int, int, int, int] | None:
     """Even-aligned ``(y0, y1, x0, x1)`` box of the changed blocks, or None if it is too large to pay off."""
     rows, cols = np.nonzero(changed)
@@ -77,8 +100,6 @@ def _crop_obs(obs: Observation, y0: int, y1: int, x0: int, x1: int) -> Observati
 
 def _crop_to_roi(obs: Observation, roi: tuple[int, int, int, int]) -> Observation:
     """The observation (and its previous window) on ``roi = (x, y, w, h)``, origin on even pixels."""
-    from spikeview.pipeline import crop_roi
-
     y, (y0, x0) = crop_roi(obs.y, roi)
     if min(y.shape) < 8:
         raise ParameterError("The region of interest is too small for a guided reconstruction: draw one of at least 8x8 pixels.")
