@@ -257,8 +257,6 @@ PRESETS = {
     "nan fps": b"[export]\nfps = nan\n",
     "inf fps": b"[export]\nfps = inf\n",
     "tiny fps": b"[export]\nfps = 1e-300\n",
-    "stream of another size": b"[stream]\nformat = \"plain\"\nwidth = 64\nheight = 64\n",
-    "stream of another format": b"[stream]\nformat = \"raw1m\"\n",
 }
 
 
@@ -300,3 +298,36 @@ def test_bad_sidecars_give_one_sentence_and_leave_nothing(bases, tmp_path, capsy
             rc = main(["reconstruct", str(case / "c.dat"), "--range", "2:42:4", "--out", str(case / out)])
             _one_sentence(capsys, rc, needle="c.dat", what=f"{name} -> {out}")
             assert _listing(case) == before, (name, out)
+
+
+def test_a_preset_whose_stream_describes_another_file(bases, tmp_path, capsys):
+    """The input's sidecar wins over a preset's [stream] that disagrees with it (said in a note, with the
+    flags that choose otherwise); without a sidecar the preset's table is used and the note names the file
+    the preset was written for; geometry flags win over both."""
+    src = bases["bayer"][0]
+    preset = tmp_path / "other.toml"
+    preset.write_text("# spikeview reconstruct preset for /elsewhere/other.dat\n"
+                      "[stream]\nformat = \"plain\"\nwidth = 8\nheight = 8\ncfa = \"RGGB\"\n")
+    assert main(["reconstruct", src[0], "--preset", str(preset), "--at", "20", "--out", str(tmp_path / "a.npy")]) == 0
+    err = capsys.readouterr().err
+    assert "other.toml's [stream] table describes another file (width = 8, height = 8, cfa = 'RGGB')" in err, err
+    assert "read by its sidecar (give --width --height --cfa to choose otherwise)" in err, err
+    assert np.load(tmp_path / "a.npy").squeeze(0).shape == (16, 16)  # the sidecar's 16x16 monochrome
+    # a flag wins over both
+    assert main(["reconstruct", src[0], "--preset", str(preset), "--at", "20", "--cfa", "RGGB",
+                 "--out", str(tmp_path / "b.npy")]) == 0
+    err = capsys.readouterr().err
+    assert "(width = 8, height = 8)" in err and np.load(tmp_path / "b.npy").squeeze(0).shape == (16, 16, 3)
+    # no sidecar: the preset's table reads the file, and the note says whose table it is
+    bare = tmp_path / "bare.dat"
+    bare.write_bytes(Path(src[0]).read_bytes())
+    assert main(["reconstruct", str(bare), "--preset", str(preset), "--at", "20", "--out", str(tmp_path / "c.npy")]) == 0
+    err = capsys.readouterr().err
+    assert "other.toml was written for other.dat" in err and "bare.dat, which has no sidecar" in err, err
+    assert np.load(tmp_path / "c.npy").squeeze(0).shape == (8, 8, 3)
+    # the file's own preset (its header names this file) re-runs as recorded, sidecar or not
+    own = tmp_path / "own.toml"
+    own.write_text(preset.read_text().replace("/elsewhere/other.dat", f"/somewhere/{Path(src[0]).name}"))
+    assert main(["reconstruct", src[0], "--preset", str(own), "--at", "20", "--out", str(tmp_path / "d.npy")]) == 0
+    assert "[stream]" not in capsys.readouterr().err
+    assert np.load(tmp_path / "d.npy").squeeze(0).shape == (8, 8, 3)

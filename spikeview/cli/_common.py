@@ -77,8 +77,10 @@ def recipe_from_args(args: argparse.Namespace, base: Any = None):
 
     if base is not None:
         recipe = base
+    elif getattr(args, "preset", None):
+        recipe = preset_for_input(Recipe.load(args.preset), Path(args.preset), args)
     else:
-        recipe = Recipe.load(args.preset) if getattr(args, "preset", None) else Recipe()
+        recipe = Recipe()
     names = [f.name for f in dataclasses.fields(StreamTable)]
     stream = {k: getattr(args, k) for k in names if getattr(args, k, None) is not None}
     if stream:
@@ -86,6 +88,63 @@ def recipe_from_args(args: argparse.Namespace, base: Any = None):
     recipe = apply_flags(recipe, args)
     if getattr(args, "at", None) is not None or getattr(args, "range", None) is not None:
         recipe = recipe.with_values({"run.at": args.at, "run.range": args.range})
+    return recipe
+
+
+def preset_for_input(recipe: Any, preset: Path, args: argparse.Namespace):
+    """A preset's ``[stream]`` table checked against the input it is now used on.
+
+    The geometry flags given win over everything. A preset written for this file (its header line
+    names a file of the input's name) is used as recorded: it re-runs exactly. A preset written for
+    another file (or naming none) whose ``[stream]`` disagrees with the input's own sidecar describes
+    another file: the sidecar wins, said in one note with the flags that choose otherwise. Without a
+    sidecar the preset's table reads the file, with a note when the preset names another file.
+    """
+    import math
+
+    from spikeview.cfa import cfa_to_str, parse_cfa
+    from spikeview.io.sidecar import read_sidecar
+    from spikeview.recipe import StreamTable
+
+    table = recipe.stream.open_kwargs()
+    table.pop("layout", None)
+    flags = {k for k in table if getattr(args, k, None) is not None}
+    mine = {k: v for k, v in table.items() if k not in flags}
+    src = Path(getattr(args, "input", "") or "")
+    if not mine or not src.is_file():
+        return recipe
+    try:
+        first = preset.read_text(errors="replace").splitlines()[0]
+    except (OSError, IndexError):
+        first = ""
+    marker = "preset for "
+    named = Path(first.split(marker, 1)[1].strip()).name if marker in first else ""
+    if named == src.name:
+        return recipe  # this file's own preset: how it was read then (flags may have overridden the sidecar)
+    side = read_sidecar(src)  # a damaged sidecar says so itself, naming it
+    if side is not None and side.stream is not None:
+        def same(k: str, a: Any, b: Any) -> bool:
+            if k == "cfa":
+                return cfa_to_str(parse_cfa(a)) == cfa_to_str(parse_cfa(b))
+            if k == "tick_rate":
+                return math.isclose(float(a), float(b), rel_tol=1e-9)
+            return a == b
+
+        diff = {k: (v, getattr(side.stream, k)) for k, v in mine.items() if not same(k, v, getattr(side.stream, k))}
+        if diff:
+            there = ", ".join(f"{k} = {a!r}" for k, (a, _) in diff.items())
+            here = ", ".join(f"{k} = {b!r}" for k, (_, b) in diff.items())
+            wins = " ".join("--" + k.replace("_", "-") for k in diff)
+            print(f"note: {preset.name}'s [stream] table describes another file ({there}), not {src.name}, whose "
+                  f"sidecar says {here}; {src.name} is read by its sidecar (give {wins} to choose otherwise).",
+                  file=sys.stderr)
+            return dataclasses.replace(recipe, stream=dataclasses.replace(recipe.stream, **{k: None for k in diff}))
+        return recipe
+    if named:
+        shown = ", ".join(f"{k} = {v!r}" for k, v in mine.items())
+        print(f"note: {preset.name} was written for {named}; its [stream] table ({shown}) is used to read "
+              f"{src.name}, which has no sidecar (give the geometry flags, e.g. --width/--height/--cfa, if "
+              f"{src.name} differs).", file=sys.stderr)
     return recipe
 
 

@@ -76,15 +76,12 @@ def run_zarr(args: argparse.Namespace, *, cancel=None, client=None, reports: lis
     """
     require_extra()
     from spikeview.cluster.reconstruct import reconstruct_to_store, store_recipe
-    from spikeview.recipe import Recipe
 
     out = Path(args.out).absolute()
     base = None
-    if getattr(args, "preset", None):
-        base = Recipe.load(args.preset)
-    elif args.resume:
+    if not getattr(args, "preset", None) and args.resume:
         base = store_recipe(out)  # resume with the store's settings; flags given must agree with them
-    recipe = recipe_from_args(args, base if base is not None else Recipe())
+    recipe = recipe_from_args(args, base)  # --preset read there (its [stream] checked against the input)
     extra = {"tag_check": args.tag_check} if getattr(args, "tag_check", None) else {}
     bar: list[_Progress] = []
 
