@@ -95,6 +95,51 @@ def accuracy(tmp: Path) -> tuple[list[str], int, int, int]:
     return rows, first, base_first, total
 
 
+#: the wider set (issue 14): sizes x tick counts (few ticks included) x mono/Bayer x simulator scenes
+WIDE_SIZES = [(64, 64), (128, 128), (256, 256), (256, 128), (320, 240), (400, 250)]
+WIDE_TICKS = [50, 100, 200]
+WIDE_SCENES = ["demo", "flat", "gradient", "panning"]
+
+
+def wide_scene(kind: str, w: int, h: int, tmp: Path):
+    """A simulator scene: the demo, a flat grey, a smooth colour gradient (little texture: the Bayer row
+    pattern is most of the signal) or a textured still panning at 300 px/s."""
+    from test_geometry_guess import still_image
+
+    from spikeview.sim import MotionScene, demo_scene
+
+    if kind == "demo":
+        return demo_scene(size=max(w, h), seed=1) if w == h else MotionScene(still_image(tmp / "still.png"), (h, w))
+    if kind == "panning":
+        return MotionScene(still_image(tmp / "still.png"), (h, w), pan=(300.0, 100.0))
+    yy, xx = np.mgrid[0:h, 0:w] / max(w, h)
+    img = (np.full((h, w, 3), 0.7) if kind == "flat"
+           else np.stack([0.5 + 0.3 * xx, 0.6 + 0.2 * yy, 0.5 + 0.1 * xx], axis=-1)).astype(np.float32)
+    return MotionScene(img, (h, w))
+
+
+def wide_set(tmp: Path) -> tuple[list[str], dict[str, tuple[int, int]]]:
+    """Rank of the true size on the wider set; returns table rows and (hits, total) per CFA."""
+    from spikeview.io.geometry import rank_plain_geometries
+    from spikeview.sim import SimConfig, simulate_to_file
+
+    rows, hits = [], {"RGGB": [0, 0], "none": [0, 0]}
+    for w, h in WIDE_SIZES:
+        for ticks in WIDE_TICKS:
+            for cfa in ("RGGB", "none"):
+                for kind in WIDE_SCENES:
+                    cfg = SimConfig(n_ticks=ticks, width=w, height=h, cfa=cfa, seed=1)
+                    files = simulate_to_file(wide_scene(kind, w, h, tmp), cfg, tmp / "wide.dat", overwrite=True)
+                    files.dat.with_name(files.dat.name + ".toml").unlink(missing_ok=True)
+                    ranked = [g.size for g in rank_plain_geometries(files.dat, limit=None)]
+                    r = rank_of(ranked, (w, h))
+                    hits[cfa][0] += r == "1"
+                    hits[cfa][1] += 1
+                    if r != "1":
+                        rows.append(f"| {w}×{h} | {cfa} | {ticks} | {kind} | {r} | {ranked[0][0]}×{ranked[0][1]} |")
+    return rows, {k: (v[0], v[1]) for k, v in hits.items()}
+
+
 def make_gb_file(path: Path, blocks: int = 8, ticks: int = 1000) -> int:
     from test_geometry_guess import smooth_rates
 
@@ -124,7 +169,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "geometry.md")
     ap.add_argument("--tmp", type=Path, default=None, help="folder for the temporary files (needs 1 GB)")
+    ap.add_argument("--wide", action="store_true", help="only the wider set of simulator captures (issue 14)")
     args = ap.parse_args(argv)
+    if args.wide:
+        with tempfile.TemporaryDirectory(dir=args.tmp) as d:
+            t0 = time.perf_counter()
+            rows, hits = wide_set(Path(d))
+            print(f"wider set: true size first on RGGB {hits['RGGB'][0]} of {hits['RGGB'][1]}, mono {hits['none'][0]} of "
+                  f"{hits['none'][1]} ({time.perf_counter() - t0:.0f} s); misses:")
+            print("| size | CFA | ticks | scene | rank | first guess |\n|---|---|---:|---|---:|---|")
+            print("\n".join(rows) if rows else "(none)")
+        return 0
 
     from test_geometry_guess import write_capture
 

@@ -182,26 +182,39 @@ def has_sidecar(path: str | Path) -> bool:
 def probe_file(path: str | Path) -> tuple[dict[str, Any], list[tuple[int, int]], str]:
     """What the open dialog starts from for a file without a sidecar.
 
-    Returns the settings detection found (format, width, height; CFA and flip as the ecosystem
-    defaults: RGGB, rows flipped for plain files), the ``(width, height)`` candidates when the
+    Returns the settings detection found (format, width, height; the CFA the rates show, as
+    ``spikeview info`` warns about it: :func:`spikeview.io.geometry.guess_cfa`; rows flipped for
+    plain files), the ``(width, height)`` candidates when the
     geometry is ambiguous, and a sentence about it. Other errors (missing, empty file) raise.
     """
-    from spikeview.errors import GeometryError
+    from spikeview.errors import GeometryError, SpikeviewError
     from spikeview.io import open_source
 
     path = Path(path)
-    initial: dict[str, Any] = {"cfa": "RGGB", "flip_vertical": True}
+    initial: dict[str, Any] = {"cfa": "none", "flip_vertical": True}
     try:
         with open_source(path) as src:
             info = src.info
             initial.update(format=info.format, width=info.width, height=info.height,
-                           flip_vertical=info.flip_vertical)
+                           flip_vertical=info.flip_vertical, cfa=_cfa_guess(src))
             return initial, [], f"Detected {info.format}, {info.width}×{info.height}, {info.n_frames} ticks."
     except GeometryError as e:
         cands = list(e.candidates)
         if cands:
             initial.update(width=cands[0][0], height=cands[0][1])
+            try:  # the colour filter the most likely geometry shows, as `spikeview info` would warn
+                with open_source(path, width=cands[0][0], height=cands[0][1], cfa=None) as src:
+                    initial["cfa"] = _cfa_guess(src)
+            except SpikeviewError:
+                pass
         return initial, cands, str(e)
+
+
+def _cfa_guess(src: Any) -> str:
+    """The CFA the rates of ``src`` show (:func:`spikeview.io.geometry.guess_cfa`), ``"none"`` for monochrome."""
+    from spikeview.io.geometry import guess_cfa, mean_rates
+
+    return (guess_cfa(mean_rates(src)) or "none") if src.n_frames > 0 else "none"
 
 
 def write_stream_sidecar(stream: OpenedStream) -> Path:

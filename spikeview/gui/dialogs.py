@@ -43,6 +43,12 @@ def settings_preview(stream: OpenedStream) -> tuple[np.ndarray, np.ndarray, str,
     hint = ""
     if src.cfa is not None:
         hint = cfa_hint(core.site_rates(sfr, src.cfa, window).means)
+    else:  # the library's check, the one `spikeview info` prints (a colour filter read as monochrome)
+        from spikeview.gui.widgets import app_words
+        from spikeview.io.geometry import mean_rates, monochrome_cfa_warning
+
+        note = monochrome_cfa_warning(mean_rates(src))
+        hint = app_words(f"Probably not monochrome: {note}") if note else ""
     return rgb, mosaic, desc, hint
 
 

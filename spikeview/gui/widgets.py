@@ -28,6 +28,9 @@ _APP_WORDS = (
     ("pass --format, --width and --height to be explicit", "choose the format, width and height in the Open dialog"),
     ("pass --width and --height (and --format if it is not plain)", "choose the width and height in the Open dialog"),
     ("check --format", "check the file format"),
+    ("read as monochrome (--cfa none)", "read as monochrome (CFA none)"),
+    ("as behind a colour filter: pass --cfa ", "as behind a colour filter: choose CFA "),
+    (" (or --cfa ", " in File ▸ Stream settings (CFA, flip)… (or "),
     ("--tag-check lenient (tag_check='lenient')", "lenient tag checking (tag_check = \"lenient\" in the sidecar)"),
 )
 

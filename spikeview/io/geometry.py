@@ -68,6 +68,8 @@ class GeometryGuess:
             (1 = as good as the best; 0 when there is a single frame).
         spatial: mean correlation of the rate image with itself 1–4 rows down (−1 … 1).
         known: a known sensor size.
+        pattern: sharpness of a colour filter's 2×2 site pattern at this width, relative to the
+            sharpest width of the same frame size (0 when the file shows no filter pattern).
         reasons: short phrases for people ("known sensor size", "rows line up" …).
     """
 
@@ -78,6 +80,7 @@ class GeometryGuess:
     spatial: float = 0.0
     known: bool = False
     reasons: list[str] = field(default_factory=list)
+    pattern: float = 0.0
 
     @property
     def size(self) -> tuple[int, int]:
@@ -180,6 +183,62 @@ def frame_signal(block: np.ndarray, frame_bytes: int, buf: np.ndarray | None = N
     a = frames[:half].mean(axis=0, dtype=np.float64)
     b = frames[half:2 * half].mean(axis=0, dtype=np.float64)
     return max(0.0, float(np.mean((a - a.mean()) * (b - b.mean()))))
+
+
+def repeats_within(block: np.ndarray, frame_bytes: int, multiple: int) -> float | None:
+    """Whether the stream repeats every ``frame_bytes`` inside frames of ``multiple`` bytes: about 1 if so.
+
+    Folding at a sub-period can keep most of the signal when the scene has little texture: a Bayer
+    filter's row pattern repeats every two rows, so a flat colour scene folds as well at a few rows
+    as at the whole frame. Only the pixels' own fixed pattern and the scene tell the two apart, and
+    they repeat at the true frame size only. Fold at ``multiple`` (a multiple of ``frame_bytes``
+    consistent with the file) and compare its consecutive ``frame_bytes`` parts: the covariance of
+    part ``j`` (first half of the frames) with part ``j + 1`` (second half), over the covariance of
+    each part with itself (the same halves). Noise is in one half only, so it cancels in both.
+
+    Returns:
+        The ratio (about 1 when ``frame_bytes`` is a period; the share of the signal that merely
+        repeats when it is not), or ``None`` with too few frames to tell.
+    """
+    m = block.size // multiple
+    k = multiple // frame_bytes
+    if m < 8 or k < 2:
+        return None
+    frames = block[:m * multiple].reshape(m, k, frame_bytes)
+    half = m // 2
+    a = frames[:half].mean(axis=0, dtype=np.float64)
+    b = frames[half:2 * half].mean(axis=0, dtype=np.float64)
+    a -= a.mean()
+    b -= b.mean()
+    own = float(np.mean(a * b))
+    if own <= 0:
+        return None
+    cross = float(np.mean(a * np.roll(b, -1, axis=0)))
+    return cross / own
+
+
+def bayer_contrast(rates: np.ndarray, width: int) -> float:
+    """Relative spread of the four 2×2 site means of the rate image at ``width`` (0 for odd widths).
+
+    A colour filter gives its four sites clearly different rates at the true width only: at twice
+    the width every stored "row" holds two sensor rows (red-green, then green-blue) and at half the
+    width two stored rows share one sensor row, so the sites mix and the spread shrinks.
+    """
+    if width % 2 or rates.size % width:
+        return 0.0
+    img = rates.reshape(-1, width)
+    h = img.shape[0] - img.shape[0] % 2
+    if h < 2:
+        return 0.0
+    sites = np.array([img[py:h:2, px::2].mean(dtype=np.float64) for py in (0, 1) for px in (0, 1)])
+    m = float(sites.mean())
+    return float(sites.std() / m) if m > 0 else 0.0
+
+
+#: a 2×2 site spread (:func:`bayer_contrast`) above this is a colour filter's, not chance
+BAYER_CONTRAST = 0.08
+#: frame sizes whose parts repeat at or above this ratio (:func:`repeats_within`) are a period of the file
+REPEAT_TOLERANCE = 0.8
 
 
 def rate_vector(buf: np.ndarray, frame_bytes: int, budget: int = SAMPLE_BYTES, runs: int = 4) -> np.ndarray:
@@ -293,11 +352,37 @@ def rank_geometries(buf: np.ndarray, *, limit: int | None = 8) -> list[GeometryG
     # 1. frame size: the smallest that keeps the scene when the stream is folded at it
     block = read_block(buf)
     t_raw = {fb: (frame_signal(block, fb, buf) if size // fb >= 4 else 0.0) for fb in by_fb}
-    best_t = max(t_raw.values())
-    # a scene holds a good part of the per-byte variance; noise alone leaves a few hundredths by chance
-    signal = best_t > 0.05 * max(float(block.var()), 1e-12)
-    t_rel = {fb: (v / best_t if signal else 0.0) for fb, v in t_raw.items()}
-    consistent = sorted(fb for fb, v in t_rel.items() if v >= TEMPORAL_TOLERANCE) if signal else []
+    # a scene holds a good part of the per-byte variance; noise alone leaves a few hundredths by chance.
+    # A flat scene holds little (only the pixels' fixed pattern), but with many positions and frames even
+    # that stands far above the chance level of the estimate: noise variance / (frames / 2) / sqrt(positions)
+    var = max(float(block.var()), 1e-12)
+
+    def _chance(fb: int) -> float:
+        whole = block.size // fb >= 4
+        m = block.size // fb if whole else min(size // fb, 8)
+        return var / max(1, m // 2) / math.sqrt(max(1, fb if whole else min(fb, BLOCK_BYTES // 16)))
+
+    chance = {fb: _chance(fb) for fb in t_raw}
+    signal = max(t_raw.values()) > 0.05 * var or max(t_raw[fb] / chance[fb] for fb in t_raw) > 20
+    # the scale: the best signal, measured where many frames fold (>= 50). Multiples of the frame size
+    # folded over a few frames read high: integrate-and-fire pixels fire almost periodically, so every
+    # k-th tick of a flat scene can repeat (aliasing) and both halves keep the same offset
+    best_t = max(max(t_raw.values()), 1e-30)
+    many = [t_raw[fb] for fb in t_raw if block.size // fb >= 50]
+    if many and max(many) >= 0.5 * best_t:
+        best_t = max(many)
+    t_rel = {fb: (min(1.0, v / best_t) if signal else 0.0) for fb, v in t_raw.items()}
+    consistent = sorted(fb for fb, v in t_raw.items() if v + 2 * chance[fb] >= TEMPORAL_TOLERANCE * best_t) if signal else []
+    # a consistent frame size that the larger consistent ones do not repeat within is only a sub-period
+    # (a Bayer row pattern on a flat scene): move it behind the sizes that do repeat
+    if len(consistent) > 1:
+        def _period(fb: int) -> bool:
+            larger = [f for f in consistent if f > fb and f % fb == 0 and block.size // f >= 8]
+            ratios = [r for f in larger[:2] if (r := repeats_within(block, fb, f)) is not None]
+            return not ratios or min(ratios) >= REPEAT_TOLERANCE
+        periods = [fb for fb in consistent if _period(fb)]
+        if periods:
+            consistent = periods + [fb for fb in consistent if fb not in periods]
     frame_order = consistent + sorted((fb for fb in by_fb if fb not in consistent), key=lambda fb: (-t_rel[fb], fb))
 
     # 2. width from the spatial smoothness, for the most plausible frame sizes
@@ -308,12 +393,30 @@ def rank_geometries(buf: np.ndarray, *, limit: int | None = 8) -> list[GeometryG
         measure = (rank == 0 and fb <= SAMPLE_BYTES) or (0 < rank < 3 and signal and fb <= SAMPLE_BYTES // 8)
         rates = pair_sums(rate_vector(buf, fb, SAMPLE_BYTES if rank == 0 else SAMPLE_BYTES // 8)) if measure else None
         lags = _Lags(rates) if rates is not None else None
+        raw = rate_vector(buf, fb, SAMPLE_BYTES // 8) if rates is not None else None
+        contrast = {w: bayer_contrast(raw, w) for w, _ in by_fb[fb]} if raw is not None else {}
+        top = max(contrast.values(), default=0.0)
+        if top > BAYER_CONTRAST:  # only a colour filter's signature counts: one diagonal alike (the greens)
+            wt = max(contrast, key=contrast.get)
+            if guess_cfa(raw.reshape(-1, wt)) is None:
+                top = 0.0
         for w, h in by_fb[fb]:
             g = GeometryGuess(w, h, size // fb, temporal=round(t_rel[fb], 4), known=(w, h) in KNOWN_SIZES)
             if rates is not None:
                 g.spatial = round(spatial_score(rates.reshape(h, w), lags=lags), 4)
+            if top > BAYER_CONTRAST:  # a colour filter: its 2x2 pattern is sharpest at the true width
+                g.pattern = round(contrast[w] / top, 4)
+                if w % 2 == 0 and h % 2 == 0:
+                    # the filter's row pattern (R+G rows, G+B rows) also lines up rows at twice the width:
+                    # score the rows with each site divided by its mean at this width (the scene alone)
+                    img = raw.reshape(h, w).astype(np.float64)
+                    for py in (0, 1):
+                        for px in (0, 1):
+                            m = float(img[py::2, px::2].mean())
+                            img[py::2, px::2] /= m if m > 0 else 1.0
+                    g.spatial = round(max(g.spatial, spatial_score(pair_sums(img.ravel()).reshape(h, w))), 4)
             group.append(g)
-        group.sort(key=lambda g: (-(g.spatial + _prior(g.width, g.height)), -g.width))
+        group.sort(key=lambda g: (-(g.spatial + 0.5 * g.pattern + _prior(g.width, g.height)), -g.width))
         guesses += group
     if not signal:  # nothing to measure (a black, uniform or random file): known sizes, common shapes, more ticks
         guesses.sort(key=lambda g: (-_prior(g.width, g.height), -g.n_frames, -g.width))
@@ -365,6 +468,101 @@ def _imbalance(a: float, b: float) -> float:
     return abs(a - b) / m if m > 0 else 0.0
 
 
+#: leading bytes of formats people open by mistake
+_MAGIC = ((b"\x89PNG\r\n\x1a\n", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"GIF8", "a GIF image"),
+          (b"II*\x00", "a TIFF image"), (b"MM\x00*", "a TIFF image"), (b"BM", "a BMP image"),
+          (b"v/1\x01", "an OpenEXR image"), (b"%PDF", "a PDF document"), (b"PK\x03\x04", "a zip archive"),
+          (b"\x1f\x8b", "a gzip archive"), (b"\x93NUMPY", "a .npy array without the .npy suffix"))
+
+
+def not_spike_data(buf: np.ndarray) -> str | None:
+    """Why the bytes of a file offered as a plain spike stream are not one, or ``None`` if they may be.
+
+    A plain stream has no header, so only what it is not can be told: a known file signature (an
+    image, an archive), text (every byte printable), or random bytes with no row structure (each bit
+    set half the time, byte values uniform, and no frame size at which pixels repeat from tick to
+    tick, :func:`rank_geometries`).
+    """
+    head = bytes(np.asarray(buf[:16]))
+    for magic, what in _MAGIC:
+        if head.startswith(magic):
+            return what
+    if len(head) >= 12 and head[4:8] == b"ftyp":
+        return "an MP4/MOV video"
+    sample = np.asarray(buf[: 1 << 16])
+    if sample.size == 0:
+        return None
+    text = (sample >= 0x20) & (sample != 0x7F) | np.isin(sample, (0x09, 0x0A, 0x0D))
+    if text.all():
+        try:
+            bytes(sample).decode("utf-8")
+            return "it holds text"
+        except UnicodeDecodeError:
+            pass
+    if buf.size >= 4096:
+        hist = np.bincount(sample, minlength=256).astype(np.float64)
+        expected = sample.size / 256.0
+        chi2_stat = float(((hist - expected) ** 2 / expected).sum())
+        # uniform bytes: chi-square near its 255 degrees of freedom (p < 1e-6 above about 385)
+        if chi2_stat < 400 and not any(g.temporal > 0 for g in rank_geometries(buf, limit=3)):
+            return "random bytes with no row structure"
+    return None
+
+
+def guess_cfa(rates: np.ndarray) -> str | None:
+    """The colour filter a mean rate image ``(H, W)`` (flips applied) shows, or ``None`` (monochrome).
+
+    A Bayer filter makes its four 2×2 sites fire at clearly different rates while the two greens (one
+    diagonal) fire alike: the sites are a filter's when their spread (:func:`bayer_contrast`) exceeds
+    :data:`BAYER_CONTRAST` and stands far above the spread of the site means (z > 8), and one diagonal
+    is much closer than the other. Green is that diagonal; of the other two, red is taken to be the
+    brighter (the usual sensor response; the warning names the alternative). The app's open dialog
+    and ``spikeview info`` start from this guess.
+    """
+    h, w = rates.shape
+    he, we = h - h % 2, w - w % 2
+    if he < 2 or we < 2:
+        return None
+    sites = {(py, px): rates[py:he:2, px:we:2].ravel() for py in (0, 1) for px in (0, 1)}
+    means = {k: float(v.mean()) for k, v in sites.items()}
+    m = float(np.mean(list(means.values())))
+    if m <= 0 or bayer_contrast(np.ascontiguousarray(rates[:he, :we]).ravel(), we) <= BAYER_CONTRAST:
+        return None
+    se = math.sqrt(max(float(v.var()) / max(1, v.size) for v in sites.values()))
+    spread = max(means.values()) - min(means.values())
+    if se > 0 and spread / se < 8:
+        return None
+    main = _imbalance(means[(0, 0)], means[(1, 1)])
+    anti = _imbalance(means[(0, 1)], means[(1, 0)])
+    if anti < 0.5 * main:  # greens on the anti-diagonal: RGGB or BGGR
+        return "RGGB" if means[(0, 0)] >= means[(1, 1)] else "BGGR"
+    if main < 0.5 * anti:  # greens on the main diagonal: GRBG or GBRG
+        return "GRBG" if means[(0, 1)] >= means[(1, 0)] else "GBRG"
+    return None
+
+
+def mean_rates(src, max_ticks: int = 512, windows: int = 8) -> np.ndarray:
+    """Mean spikes per tick of every pixel ``(H, W)`` over up to ``max_ticks`` ticks in ``windows``
+    windows spread over the stream."""
+    return _mean_rates(src, max_ticks, windows)
+
+
+_ALTERNATIVE = {"RGGB": "BGGR", "BGGR": "RGGB", "GRBG": "GBRG", "GBRG": "GRBG"}
+
+
+def monochrome_cfa_warning(rates: np.ndarray) -> str | None:
+    """The sentence for a stream read as monochrome whose 2×2 sites fire like a colour filter's, naming
+    the ``--cfa`` value to use (:func:`guess_cfa`), or ``None``."""
+    cfa = guess_cfa(rates)
+    if cfa is None:
+        return None
+    he, we = rates.shape[0] - rates.shape[0] % 2, rates.shape[1] - rates.shape[1] % 2
+    site = [float(rates[py:he:2, px:we:2].mean()) for py in (0, 1) for px in (0, 1)]
+    return (f"read as monochrome (--cfa none), but its 2x2 sites fire at clearly different rates "
+            f"({' / '.join(f'{v:.3f}' for v in site)} spikes per tick), as behind a colour filter: pass --cfa {cfa} "
+            f"(or --cfa {_ALTERNATIVE[cfa]} if red and blue come out swapped).")
+
+
 def rate_warnings(src, *, check_width: bool = True) -> list[str]:
     """Sentences for people when the firing rates suggest a wrong width, colour filter or flip.
 
@@ -414,6 +612,10 @@ def rate_warnings(src, *, check_width: bool = True) -> list[str]:
                 out.append(f"the rows do not line up at width {w} (the rates look sheared); the frames are probably "
                            f"{best[1]}x{best[2]}: check --width and --height.")
     cfa = parse_cfa(src.cfa) if src.cfa is not None else None
+    if cfa is None and not out:
+        note = monochrome_cfa_warning(rates)
+        if note is not None:
+            out.append(note)
     if cfa is not None and w % 2:
         out.append(f"a colour filter ({cfa_to_str(cfa)}) with an odd width ({w}) shifts the Bayer pattern on every "
                    "row, which no sensor does; check --width, or pass --cfa none for a monochrome capture.")
