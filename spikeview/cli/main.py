@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+from pathlib import Path
 import sys
 from typing import Callable, Sequence
 
@@ -109,6 +110,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "app":
+        inp = getattr(args, "input", None)
+        if inp and not Path(str(inp)).exists():  # the file first: a display would not help a missing file
+            _print_error(f"{inp}: file not found; check the path.")
+            return 1
         problem = display_problem()
         if problem is not None:
             _print_error(problem)
