@@ -31,7 +31,7 @@ from typing import Any
 
 from spikeview.classical_config import ClassicalConfig
 from spikeview.config import Config, load_toml
-from spikeview.errors import ParameterError
+from spikeview.errors import InputFileError, ParameterError
 from spikeview.export.settings import EXR_COMPRESSIONS, TRANSFERS, X264_PRESETS, ExportConfig
 from spikeview.guided.config import GuidedConfig
 
@@ -423,8 +423,17 @@ class Recipe(Config):
     def load(cls, path: Any, table: str | None = None) -> Recipe:
         data = load_toml(path)
         if not data:
-            raise ParameterError(f"{path}: the preset is empty; save one from the app or use a <out>.preset.toml a run wrote.")
-        return cls.from_dict(data, where=str(path))
+            raise ParameterError(f"{path}: the preset is empty; save one from the app (File ▸ Save preset…) or use a "
+                                 "<out>.preset.toml a run wrote.")
+        try:
+            recipe = cls.from_dict(data, where=str(path))
+        except ParameterError as e:  # a value a config rejects: the sentence names the file too
+            text = str(e)
+            raise ParameterError(text if text.startswith(str(path)) else f"{path}: {text}") from None
+        tables = data["params"] if "params" in data and isinstance(data["params"], dict) and not set(data) & set(TABLES) else data
+        if not {"classical", "guided", "export"} & set(tables):
+            raise InputFileError(f"{path}: no [classical], [guided] or [export] table; it is not a spikeview preset.")
+        return recipe
 
     def save(self, path: Any, header: str = "# spikeview recipe (read by the app and by `spikeview reconstruct --preset`)") -> Any:
         from spikeview._files import write_atomic

@@ -21,9 +21,8 @@ import os
 from pathlib import Path
 from typing import Any
 
-from spikeview.errors import InputFileError, ParameterError
 from spikeview.gui.model import Session
-from spikeview.recipe import TABLES, Recipe, StreamTable
+from spikeview.recipe import Recipe, StreamTable
 
 
 def session_recipe(session: Session) -> Recipe:
@@ -50,31 +49,7 @@ def save_preset(session: Session, path: str | os.PathLike[str]) -> Path:
         path, header="# spikeview parameter preset (read by the app and by `spikeview reconstruct --preset`)")
 
 
-def recipe_from_preset(data: dict[str, Any], where: str = "preset") -> Recipe:
-    """A recipe from a preset dict (or an export's ``params`` record), every table validated.
-
-    Raises:
-        ParameterError: a value the recipe rejects; the message starts with ``where``.
-    """
-    if "params" in data and isinstance(data["params"], dict) and not set(data) & set(TABLES):
-        data = data["params"]  # an export's record
-    unknown = sorted(set(data) - set(TABLES))
-    if unknown:
-        raise ParameterError(f"{where}: unknown table(s) {', '.join(unknown)}; a preset holds {', '.join(TABLES)}.")
-    if not {"classical", "guided", "export"} & set(data):
-        raise InputFileError(f"{where}: no [classical], [guided] or [export] table; it is not a spikeview preset.")
-    try:
-        return Recipe.from_dict(data, where=where)
-    except ParameterError as e:
-        text = str(e)
-        raise ParameterError(text if text.startswith(where) else f"{where}: {text}") from None
-
-
 def load_preset(session: Session, path: str | os.PathLike[str]) -> None:
-    """Load a preset into the session as one undo step (nothing changes if any value is invalid)."""
-    from spikeview.config import load_toml
-
-    data = load_toml(path)
-    if not data:
-        raise ParameterError(f"{path}: the preset is empty; save one with File ▸ Save preset… or use a <out>.preset.toml a run wrote.")
-    session.load_recipe(recipe_from_preset(data, where=str(path)), label=f"Load preset {Path(path).name}")
+    """Load a preset (:meth:`Recipe.load <spikeview.recipe.Recipe.load>`, the CLI's ``--preset``) into the
+    session as one undo step (nothing changes if any value is invalid)."""
+    session.load_recipe(Recipe.load(path), label=f"Load preset {Path(path).name}")
