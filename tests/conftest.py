@@ -27,3 +27,26 @@ def _isolated_qt_settings(request, tmp_path_factory):
     for fmt in (QtCore.QSettings.Format.NativeFormat, QtCore.QSettings.Format.IniFormat):
         QtCore.QSettings.setPath(fmt, QtCore.QSettings.Scope.UserScope, folder)
     yield
+
+
+@pytest.fixture
+def settings(tmp_path):
+    """The app's settings in a file of this test's own (an INI in ``tmp_path``)."""
+    from PySide6 import QtCore
+
+    return QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat)
+
+
+@pytest.fixture
+def window(qtbot, settings):
+    """The main window, shown offscreen at 1400×900 with pyqtgraph configured as the app does; closed after the test."""
+    from spikeview.gui.app import configure_pyqtgraph
+    from spikeview.gui.main_window import MainWindow
+
+    configure_pyqtgraph()
+    w = MainWindow(settings=settings)
+    qtbot.addWidget(w)
+    w.resize(1400, 900)
+    w.show()
+    yield w
+    w.close()

@@ -44,22 +44,6 @@ def demo_stream() -> core.OpenedStream:
     return core.memory_stream(cap, "test capture", cap.gt_at)
 
 
-@pytest.fixture
-def settings(tmp_path):
-    return QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat)
-
-
-@pytest.fixture
-def window(qtbot, settings):
-    configure_pyqtgraph()
-    w = MainWindow(settings=settings)
-    qtbot.addWidget(w)
-    w.resize(1400, 900)
-    w.show()
-    yield w
-    w.close()
-
-
 def frames_at(window, tick: int):
     f = window.controller.last_frames
     return f is not None and f.tick == tick and window.stream_panel.tfp.image() is not None

@@ -10,11 +10,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("pytestqt")
-from PySide6 import QtCore  # noqa: E402
-
-from spikeview.gui.app import configure_pyqtgraph  # noqa: E402
 from spikeview.gui.live_panel import format_bytes, format_elapsed, indicator_state, install_live  # noqa: E402
-from spikeview.gui.main_window import MainWindow  # noqa: E402
 from spikeview.io import ArraySource, encode_raw1m, open_source, read_sidecar  # noqa: E402
 from spikeview.live import LiveStatus, SimCamera  # noqa: E402
 from spikeview.live.mockusb import Fault, MockBackend  # noqa: E402
@@ -28,18 +24,6 @@ WAIT_MS = 30_000
 def spikes() -> np.ndarray:
     rng = np.random.default_rng(42)
     return rng.integers(0, 2, (50, 32, 32), dtype=np.uint8)
-
-
-@pytest.fixture
-def window(qtbot, tmp_path):
-    configure_pyqtgraph()
-    settings = QtCore.QSettings(str(tmp_path / "settings.ini"), QtCore.QSettings.Format.IniFormat)
-    w = MainWindow(settings=settings)
-    qtbot.addWidget(w)
-    w.resize(1200, 800)
-    w.show()
-    yield w
-    w.close()
 
 
 def test_install_adds_the_menu_action_and_the_dock(window):
