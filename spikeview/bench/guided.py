@@ -35,6 +35,7 @@ import json
 import os
 import platform
 import statistics
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -78,16 +79,20 @@ def clipped_fraction(out: np.ndarray) -> float:
 
 # ------------------------------------------------------------------------------- the user path
 class Sequence:
-    """What the CLI computes once per sequence: α (gray-world) and the white point, for window ``window``."""
+    """What the CLI computes once per sequence (:func:`spikeview.pipeline.prepare_sequence`): α (gray-world)
+    and the white point, for window ``window``."""
 
     def __init__(self, source, window: int = 10, eta: float | None = None):
-        from spikeview.classical.colour_cast import DEFAULT_ETA, estimate_alpha, estimate_white
+        from spikeview.classical.colour_cast import DEFAULT_ETA
+        from spikeview.pipeline import prepare_sequence
+        from spikeview.recipe import Recipe
 
         self.source = source
         self.window = window
         self.eta = DEFAULT_ETA if eta is None else eta
-        self.alpha = None if source.cfa is None else np.asarray(estimate_alpha(source, window=window), dtype=np.float64)
-        self.white = estimate_white(source, self.alpha, window=window, eta=self.eta)
+        recipe = Recipe().with_values({"classical.window": window, "classical.alpha_window": window, "classical.eta": self.eta})
+        state = prepare_sequence(source, recipe)
+        self.alpha, self.white = state.alpha, state.white
 
     def observation(self, center: int, level: float | None = None):
         """The guided sampler's observation, exposed so the white point maps to ``level`` (default
@@ -395,7 +400,12 @@ def write_report(res: dict, out: Path, notes: list[str] | None = None) -> None:
 
 
 def _plot(M, front, names, path: Path, ref: str) -> None:
-    import matplotlib
+    """The error-against-run-time figure; skipped with a note without matplotlib (``pip install spikeview[bench]``)."""
+    try:
+        import matplotlib
+    except ImportError:
+        print(f"note: {path.name} not drawn: matplotlib is not installed (pip install 'spikeview[bench]').", file=sys.stderr)
+        return
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
