@@ -184,3 +184,9 @@ def test_store_frames_are_linear_and_export_equals_a_plain_npy_run(cap, tmp_path
     expected = np.clip(frames / np.float32(white), 0, 1)
     np.testing.assert_allclose(np.load(tmp_path / "e.npy").reshape(expected.shape), expected, rtol=1e-6)
     assert white != 1.0 and not np.allclose(frames, expected)  # the store is not the bounded output
+
+
+def test_absurd_local_cluster_is_refused_before_any_work(cap, tmp_path, capsys):
+    assert main(["reconstruct", *cap, *RUN, "--cluster", "local:99999", "--out", str(tmp_path / "s.zarr")]) == 1
+    _err(capsys, "local:99999", "cores")
+    assert _names(tmp_path) == ["in"]

@@ -188,6 +188,10 @@ def parse_cluster(text: str) -> tuple[str, Any]:
             n = 0
         if n < 1:
             raise ParameterError(f"--cluster {text!r}: local:N needs a whole number of workers >= 1, e.g. local:2.")
+        cores = os.cpu_count() or 1
+        if n > 4 * cores:  # each worker is a process with its own copy of the prior: thousands never start
+            raise ParameterError(f"--cluster {text!r}: {n} worker processes is far more than this machine's {cores} "
+                                 f"cores; use at most local:{4 * cores} (local:{cores} is usually fastest).")
         return "local", n
     if "://" in t and t.split("://", 1)[1]:
         return "address", t

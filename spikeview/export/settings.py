@@ -89,6 +89,8 @@ class ExportConfig(Config):
             raise bad("compression", self.compression, f"use one of {', '.join(EXR_COMPRESSIONS)}")
         if self.png_bits not in (8, 16):
             raise bad("png_bits", self.png_bits, "use 8 or 16")
+        if self.white is not None and 0 < self.white < 1e-6:  # 1/white must stay finite in float32 frames
+            raise bad("white", self.white, "use a white point of at least 1e-06 (linear frame units)")
         if not (math.isfinite(self.black) and (self.white is None or (math.isfinite(self.white) and self.black < self.white))):
             raise bad("black/white", (self.black, self.white), "black must be less than white, e.g. 0 and 1")
         if self.transfer not in TRANSFERS:
