@@ -194,9 +194,11 @@ def test_damaged_chunks_and_markers_are_named_by_export_and_recomputed_by_resume
         case.mkdir()
         src, store, frames = _copy(bases, kind, case)
         damage(store)
-        line = _one_sentence(capsys, main(["export", str(store), "--out", str(case / "o.npy")]))
-        assert needle in line and "--resume" in line, (name, line)
-        assert not (case / "o.npy").exists() and not (case / "o.npy.preset.toml").exists()
+        before = _listing(case)
+        for out in ["o.npy"] + (["o.mp4", "f_%03d.png", "f_%03d.exr"] if i < 4 else []):
+            line = _one_sentence(capsys, main(["export", str(store), "--out", str(case / out)]))
+            assert needle in line and "--resume" in line, (name, line)
+            assert _listing(case) == before, (name, out)  # no partial output, no preset
         assert main(["reconstruct", *src, "--out", str(store), "--resume"]) == 0, name
         assert "recomput" in capsys.readouterr().err, name
         g = zarr.open_group(str(store), mode="r")

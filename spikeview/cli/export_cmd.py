@@ -75,6 +75,8 @@ def run(args: argparse.Namespace) -> int:
 
     # the store holds linear frames; the output maps them by the white point, as reconstruct does
     ecfg, expose = exposure_mapping(recipe, state_from_attrs(attrs), out)
+    for i in range(check.n_chunks):  # every chunk decodes before the first frame is written (no partial output)
+        check.read_chunk(i)
     with open_exporter(out, n, shape, ecfg, meta, overwrite=args.overwrite, inputs=[store],
                        extra_outputs=[preset_path(out)]) as ex, progress(n, f"{store.name} → {out.name}") as bar:
         for lo in range(0, n, chunk):
