@@ -310,11 +310,11 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
     Gray-world (:func:`estimate_alpha`) sets the channel **ratios**; this sets the **exposure**.
     The corrected TFP values ``Y_c · α_c / η`` of every photosite of ``max_windows`` windows of
     ``window`` ticks spread over the stream (:func:`sample_starts`; the same windows as the α
-    estimate) are pooled, and the lowest of their values with at most ``100 − percentile`` % of them
-    **at or above** it is returned (the ``percentile``-th percentile, or the next quantisation level
-    above it when the level it falls on holds more photosites). Mapping that value to full scale
-    puts at most ``100 − percentile`` % of the TFP values of such windows at full scale (0.1 % by
-    default; more only when more than that are saturated at the largest value), and it
+    estimate) are pooled, each spread over its quantisation step (a count ``k`` of ``window`` ticks
+    stands for the rates within half a step of ``k/window``, never above one spike per tick), and the
+    ``percentile``-th percentile of that spread is returned. Mapping it to full scale puts at most
+    ``100 − percentile`` % of the TFP values of such windows at full scale (0.1 % by default) even
+    when the level the percentile falls on holds more photosites than that, and it
     is chosen **once per sequence**, so frames do not flicker. Use the reconstruction's own window:
     shorter windows are noisier and put the percentile higher.
 
@@ -359,18 +359,28 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
                 g = 1.0 if gains is None else float(gains[py, px])
                 h = np.bincount(np.asarray(counts[py::2, px::2]).ravel(), minlength=n_ticks + 1)[: n_ticks + 1]
                 hist[g] = hist.get(g, 0) + h
-    values = np.concatenate([np.arange(n_ticks + 1) / n_ticks * g / eta for g in hist])
+    # TFP values are quantised (multiples of 1/Δτ): a level can hold several percent of the photosites
+    # (3 % of a Spike-Zoo clip sit on its top level), and a white point ON that level would show them
+    # all at full scale. Each count k stands for the rates within half a step of k/Δτ (never above 1
+    # spike per tick), so the percentile is taken of that spread: a level holding the tail is split
+    levels = np.arange(n_ticks + 1, dtype=np.float64)
+    lo = np.concatenate([np.maximum(levels - 0.5, 0.0) / n_ticks * g / eta for g in hist])
+    hi = np.concatenate([np.minimum(levels + 0.5, n_ticks) / n_ticks * g / eta for g in hist])
     weights = np.concatenate([hist[g] for g in hist]).astype(np.float64)
-    values, inverse = np.unique(values, return_inverse=True)
-    weights = np.bincount(inverse.ravel(), weights=weights, minlength=values.size)
-    values, weights = values[weights > 0], weights[weights > 0]  # only values that occur
+    spiking = float(sum(float(h[1:].sum()) for h in hist.values()))
+    keep = weights > 0
+    lo, hi, weights = lo[keep], hi[keep], weights[keep]
     total = float(weights.sum())
-    if total <= 0:
+    if total <= 0 or spiking <= 0:  # no spike at all: any white point shows black; the gray-world mean
         return 1.0 / eta
-    # the lowest value with at most (100 - percentile) % of the values AT OR ABOVE it: TFP values are
-    # quantised (multiples of 1/Δτ), so the plain percentile can sit on a level that holds several
-    # percent of the photosites, all of which would then show at full scale (3 % of a Spike-Zoo clip)
-    tail = total - np.concatenate(([0.0], np.cumsum(weights)[:-1]))  # weight of values >= values[i]
-    ok = np.flatnonzero(tail <= (100.0 - float(percentile)) / 100.0 * total * (1 + 1e-12))
-    white = float(values[ok[0]]) if ok.size else float(values[-1])
+    target = float(percentile) / 100.0 * total
+    a, b = float(lo.min()), float(hi.max())
+    width = np.maximum(hi - lo, 1e-300)
+    for _ in range(60):  # bisection on the piecewise-linear cumulative weight
+        mid = 0.5 * (a + b)
+        if float((weights * np.clip((mid - lo) / width, 0.0, 1.0)).sum()) < target:
+            a = mid
+        else:
+            b = mid
+    white = b
     return white if white > 0 else 1.0 / eta
