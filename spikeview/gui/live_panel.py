@@ -666,39 +666,14 @@ def install_live(window: Any, backend: Any = None) -> LivePanel:
         The :class:`LivePanel` (also at ``window.live_panel``).
     """
     panel = LivePanel(window, backend=backend)
-    dock = QtWidgets.QDockWidget("Live camera", window)
-    dock.setObjectName("dock_live")
-    dock.setWidget(panel)
-    dock.setFeatures(QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetMovable
-                     | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetFloatable
-                     | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetClosable)
-    if not window.restoreDockWidget(dock):
-        below = getattr(window, "docks", {}).get("degradation")
-        if below is not None:  # a tab beside the degradation preview: the window still fits 1366×768
-            window.tabifyDockWidget(below, dock)
-            below.raise_()
-        else:
-            window.addDockWidget(QtCore.Qt.DockWidgetArea.LeftDockWidgetArea, dock)
+    dock = window.add_panel("live", "Live camera", panel, beside="degradation")
     panel.dock = dock
 
     act = QtGui.QAction("Open &camera…", window)
     act.setObjectName("act_open_camera")
     act.setStatusTip("Open a USB spike camera or a simulated camera, live")
     act.triggered.connect(lambda: (dock.show(), dock.raise_(), panel.open_dialog()))
-    window.addAction(act)
-    menus = {a.text().replace("&", ""): a.menu() for a in window.menuBar().actions() if a.menu() is not None}
-    file_menu = menus.get("File")
-    if file_menu is not None:
-        before = next((a for a in file_menu.actions() if a.menu() is not None), None)  # "Open recent"
-        if before is not None:
-            file_menu.insertAction(before, act)
-        else:
-            file_menu.addAction(act)
-    else:
-        window.menuBar().addAction(act)
-    view_menu = menus.get("View")
-    if view_menu is not None:
-        view_menu.insertAction(view_menu.actions()[0] if view_menu.actions() else None, dock.toggleViewAction())
+    window.add_file_action(act)
     panel.action = act
 
     window.installEventFilter(_CloseFilter(panel))

@@ -128,17 +128,13 @@ class MainWindow(QtWidgets.QMainWindow):
         self.degradation_panel = DegradationPanel(s)
         self.guided_panel = GuidedPanel(s)
         self.export_panel = ExportPanel(s)
-        self.docks: dict[str, QtWidgets.QDockWidget] = {}
+        self.docks: dict[str, QtWidgets.QDockWidget] = {}  # the panels default_layout places
+        self.file_menu: QtWidgets.QMenu | None = None
+        self.view_menu: QtWidgets.QMenu | None = None
         for key, title, panel in (("stream", "Stream", self.stream_panel), ("rates", "Firing rates and colour cast", self.rates_panel),
                                   ("degradation", "Degradation preview", self.degradation_panel),
                                   ("guided", "Guided reconstruction", self.guided_panel), ("export", "Export", self.export_panel)):
-            dock = QtWidgets.QDockWidget(title, self)
-            dock.setObjectName(f"dock_{key}")
-            dock.setWidget(panel)
-            dock.setFeatures(QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetMovable
-                             | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetFloatable
-                             | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetClosable)
-            self.docks[key] = dock
+            self.add_panel(key, title, panel)
         placeholder = QtWidgets.QWidget()
         placeholder.setObjectName("central_placeholder")
         placeholder.setMaximumSize(0, 0)
@@ -175,6 +171,40 @@ class MainWindow(QtWidgets.QMainWindow):
         self._params_timer.timeout.connect(self._save_params)
 
     # ------------------------------------------------------------------------------ layout
+    def add_panel(self, key: str, title: str, widget: QtWidgets.QWidget, *, beside: str | None = None) -> QtWidgets.QDockWidget:
+        """Put ``widget`` in a dockable panel named ``dock_<key>``; how every panel joins the window.
+
+        Without ``beside`` the panel is one of :attr:`docks`, placed by :meth:`default_layout`. With it
+        (a panel added after the window is built, such as live capture) the panel goes where the
+        saved layout had it, else in a tab beside the panel ``beside``, and its toggle heads the
+        View menu.
+        """
+        dock = QtWidgets.QDockWidget(title, self)
+        dock.setObjectName(f"dock_{key}")
+        dock.setWidget(widget)
+        dock.setFeatures(QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetMovable
+                         | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetFloatable
+                         | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetClosable)
+        if beside is None:
+            self.docks[key] = dock
+            return dock
+        if not self.restoreDockWidget(dock):
+            below = self.docks.get(beside)
+            if below is not None:  # a tab beside it: the window still fits 1366×768
+                self.tabifyDockWidget(below, dock)
+                below.raise_()
+            else:
+                self.addDockWidget(QtCore.Qt.DockWidgetArea.LeftDockWidgetArea, dock)
+        if self.view_menu is not None:
+            first = self.view_menu.actions()[0] if self.view_menu.actions() else None
+            self.view_menu.insertAction(first, dock.toggleViewAction())
+        return dock
+
+    def add_file_action(self, action: QtGui.QAction) -> None:
+        """An *Open …* entry of the File menu (above *Open recent*), with its shortcut window-wide."""
+        self.addAction(action)
+        self.file_menu.insertAction(self.recent_menu.menuAction(), action)
+
     def default_layout(self) -> None:
         d = self.docks
         for dock in d.values():
@@ -225,7 +255,7 @@ class MainWindow(QtWidgets.QMainWindow):
         mb = self.menuBar()
         K = QtGui.QKeySequence.StandardKey
         s = self.session
-        f = mb.addMenu("&File")
+        f = self.file_menu = mb.addMenu("&File")
         self.act_open = self._action(f, "&Open…", self.open_dialog, K.Open, "Open a spike capture", name="act_open")
         self._action(f, "Open the &demo capture", lambda: self.open_demo(), tip="The built-in simulated capture")
         self.recent_menu = f.addMenu("Open &recent")
@@ -264,7 +294,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self._action(g, "&Run", self.controller.run_guided, "Ctrl+R", name="act_run")
         self._action(g, "&Cancel", self.controller.cancel_guided, "Escape", name="act_cancel")
 
-        v = mb.addMenu("&View")
+        v = self.view_menu = mb.addMenu("&View")
         for dock in self.docks.values():
             v.addAction(dock.toggleViewAction())
         v.addSeparator()
