@@ -309,7 +309,7 @@ def test_a_preset_whose_stream_describes_another_file(bases, tmp_path, capsys):
     src = bases["bayer"][0]
     preset = tmp_path / "other.toml"
     preset.write_text("# spikeview reconstruct preset for /elsewhere/other.dat\n"
-                      "[stream]\nformat = \"plain\"\nwidth = 8\nheight = 8\ncfa = \"RGGB\"\n")
+                      "[stream]\nformat = \"plain\"\nwidth = 8\nheight = 8\ncfa = \"RGGB\"\n[classical]\nwindow = 4\n")
     assert main(["reconstruct", src[0], "--preset", str(preset), "--at", "20", "--out", str(tmp_path / "a.npy")]) == 0
     err = capsys.readouterr().err
     assert "other.toml's [stream] table describes another file (width = 8, height = 8, cfa = 'RGGB')" in err, err
