@@ -31,6 +31,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from _common import write_report  # noqa: E402  (benchmarks/_common.py)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -109,10 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     ]
     for size, name, med, mn, c in rows:
         lines.append(f"| {size}×{size} | {name} | {med:.3f} | {mn:.3f} | {c:.3f} | {med / base[size]:.2f} |")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    print(f"wrote {args.out}")
-    return 0
+    return write_report(args.out, lines)
 
 
 if __name__ == "__main__":

@@ -42,6 +42,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from _common import cpu_model  # noqa: E402  (benchmarks/_common.py)
 
 
 # ------------------------------------------------------------------------------------ data
@@ -80,14 +81,7 @@ def synthetic_capture(folder: Path, size: int, ticks: int, seed: int = 0) -> Pat
 
 # ------------------------------------------------------------------------------------ helpers
 def machine() -> str:
-    model = platform.processor() or "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    model = cpu_model(platform.processor() or "unknown CPU")
     import pyqtgraph
     import PySide6
 

@@ -37,6 +37,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from _common import cpu_model, write_report  # noqa: E402  (benchmarks/_common.py)
 
 from spikeview.io.raw1m import RAW1M_FRAME_BYTES, Raw1MDecoder, encode_raw1m  # noqa: E402
 from spikeview.live.decode import raw1m_to_packed  # noqa: E402
@@ -139,14 +140,7 @@ def case_camera(raw: np.ndarray, total: int, record_dir: str | None = None, **se
 
 # ------------------------------------------------------------------------------------------ report
 def machine() -> str:
-    model = "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    model = cpu_model()
     return (f"{platform.platform()}, {model}, os.cpu_count() = {os.cpu_count()}, Python {platform.python_version()}, "
             f"numpy {np.__version__}")
 
@@ -257,10 +251,7 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| {name} | {bps / 1e6:,.0f} | {bps / RAW1M_FRAME_BYTES:,.0f} | {bps / USB3_BPS:.2f} | "
                      f"{bps / SENSOR_BPS:.2f} | {cpu / wall:.2f} | {nbytes / max(cpu, 1e-9) / 1e6:,.0f} | {note} |")
     lines += findings(rows)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    print(f"wrote {args.out}")
-    return 0
+    return write_report(args.out, lines)
 
 
 if __name__ == "__main__":
