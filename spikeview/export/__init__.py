@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import itertools
 import os
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -102,15 +102,12 @@ def open_exporter(
     frame_shape: tuple[int, ...],
     config: ExportConfig | Mapping[str, Any] | None = None,
     metadata: ExportMetadata | Mapping[str, Any] | None = None,
-    *,
-    cancel: CancelCheck | None = None,
-    progress: ProgressCallback | None = None,
-    overwrite: bool = False,
-    inputs: Iterable[str | os.PathLike[str] | None] = (),
-    extra_outputs: Iterable[str | os.PathLike[str]] = (),
-    announce: Callable[[str], None] | None = None,
+    **options: Any,
 ) -> Exporter:
     """Open an exporter for ``n_frames`` frames, choosing the format from the suffix of ``out``.
+
+    ``options`` are the keyword arguments of :class:`Exporter` (``cancel``, ``progress``, ``overwrite``,
+    ``inputs``, ``extra_outputs``, ``announce``), described here:
 
     Args:
         out: output file (``.mp4``, ``.npy``, single-frame ``.exr``/``.png``) or printf pattern
@@ -149,8 +146,7 @@ def open_exporter(
         metadata = ExportMetadata()
     elif isinstance(metadata, Mapping):
         metadata = ExportMetadata.from_dict(dict(metadata), where="export metadata")
-    return cls(path, n_frames, frame_shape, config, metadata, cancel=cancel, progress=progress,
-               overwrite=overwrite, inputs=inputs, extra_outputs=extra_outputs, announce=announce)
+    return cls(path, n_frames, frame_shape, config, metadata, **options)
 
 
 def export_frames(
