@@ -89,6 +89,13 @@ def check_writable(path: str | os.PathLike[str], overwrite: bool = False,
     if path.is_dir():
         raise OutputFileError(f"{path}: is a folder; give a file name inside it.")
     if (path.exists() or path.is_symlink()) and not overwrite:
+        for companion in (".preset.toml", ".toml"):  # the settings written beside an earlier output
+            if path.name.endswith(companion) and len(path.name) > len(companion):
+                owner = path.with_name(path.name[: -len(companion)])
+                if not owner.exists():
+                    raise OutputFileError(
+                        f"{path}: the settings file of an earlier run whose output {owner.name} is gone is still there "
+                        f"and would be replaced; delete it, choose another output name, or pass --overwrite.")
         raise OutputFileError(f"{path}: the file already exists; choose another name, or pass --overwrite to replace it.")
     return path
 

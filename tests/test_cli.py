@@ -110,7 +110,9 @@ def test_reconstruct_npy_matches_library_and_preset_reproduces(capture, tmp_path
     with open_source(path, width=96, height=64, cfa="RGGB") as src:
         ref = np.stack(list(reconstruct_frames(src, range(0, 400, 50), ClassicalConfig(window=10, demosaic="bilinear"))))
     np.testing.assert_array_equal(frames, np.clip(ref * np.float32(1.0 / white), 0.0, 1.0))
-    assert (ref * np.float32(1.0 / white) > 1.0).mean() <= 0.002  # clipped: the white point is the 99.9th percentile
+    # clipped beyond half a quantisation step: at most 0.2 % (the white point is the 99.9th percentile of the
+    # TFP values spread over their steps, so it may split the top level, whose values then clip by a few %)
+    assert (ref * np.float32(1.0 / white) > 1.05).mean() <= 0.002
     # the preset beside the output re-runs the same reconstruction exactly
     again = tmp_path / "again.npy"
     assert main(["reconstruct", str(path), "--preset", str(preset), "--out", str(again)]) == 0

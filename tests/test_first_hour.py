@@ -11,3 +11,57 @@ def test_a_missing_file_is_named_before_the_missing_display(tmp_path, monkeypatc
     assert main([str(tmp_path / "nosuch.dat")]) == 1
     err = capsys.readouterr().err
     assert "nosuch.dat: file not found" in err and "display" not in err
+
+
+def _capture(tmp_path):
+    from test_geometry_guess import write_capture
+
+    return write_capture(tmp_path / "c.dat", 32, 32, 200, cfa=True, sidecar=True)
+
+
+def test_arguments_are_checked_before_any_informational_line(tmp_path, capsys):
+    cap = _capture(tmp_path)
+    assert main(["reconstruct", str(cap), "--at", "100", "--out", str(tmp_path / "z.xyz")]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("spikeview: error: ") and "unknown export format '.xyz'" in err and "white point" not in err
+
+
+def test_a_leftover_settings_file_gets_a_clear_sentence_first(tmp_path, capsys):
+    cap = _capture(tmp_path)
+    out = tmp_path / "lo.npy"
+    assert main(["reconstruct", str(cap), "--at", "100", "--out", str(out)]) == 0
+    out.unlink()  # the user deleted the output; its settings files stayed
+    capsys.readouterr()
+    assert main(["reconstruct", str(cap), "--at", "100", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "settings file of an earlier run whose output lo.npy is gone" in err and "white point" not in err
+    assert main(["reconstruct", str(cap), "--at", "100", "--out", str(out), "--overwrite"]) == 0
+
+
+def test_an_mp4_without_at_or_range_says_it_holds_one_frame(tmp_path, capsys):
+    cap = _capture(tmp_path)
+    assert main(["reconstruct", str(cap), "--out", str(tmp_path / "v.mp4")]) == 0
+    assert "the video holds one frame" in capsys.readouterr().err
+
+
+def test_the_npy_layout_hint_uses_the_command_line_syntax(tmp_path):
+    import numpy as np
+
+    from spikeview.io import open_source
+
+    path = tmp_path / "a.npy"
+    np.save(path, (np.random.default_rng(0).random((20, 30, 40)) < 0.3).astype(np.uint8))
+    with open_source(path) as src:
+        assert any("--layout hwt" in w for w in src.info.warnings)
+
+
+def test_simulate_names_the_users_file_not_its_temporary(tmp_path, capsys, monkeypatch):
+    from test_full_disk import fail_writes_under
+
+    out = tmp_path / "out"
+    out.mkdir()
+    fail_writes_under(monkeypatch, out, "write", 20_000, ".dat.tmp")
+    assert main(["simulate", "--demo", "--size", "32", "--ticks", "3000", "--gt-every", "10", "--no-noise",
+                 "--out", str(out / "s.dat")]) == 1
+    err = capsys.readouterr().err
+    assert "s.dat" in err and ".tmp" not in err

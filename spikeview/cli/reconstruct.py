@@ -77,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
 
     recipe = recipe_from_args(args)
     out = Path(args.out)
+    _check_output_first(out, args)
     src = open_source_from_args(args, recipe)
     with src:
         recipe = recipe.with_values({f"stream.{k}": v for k, v in StreamTable.from_info(src.info, getattr(args, "layout", None)).to_dict().items()})
@@ -90,12 +91,15 @@ def run(args: argparse.Namespace) -> int:
         recipe = recipe_for_state(recipe, state)
         how = "set by --white" if "export.white" in given_flags(args) else (
             "from the preset" if getattr(args, "preset", None) and state.white is not None and
-            recipe.export.white != state.white else "at most 0.1 % of the sequence's rates at or above it")
+            recipe.export.white != state.white else "the 99.9th percentile of the sequence's rates")
         unit = "spikes per tick" if state.alpha is None else "Y·α/η, rates corrected for the colour cast"
         print(f"white point {recipe.export.white:.4g} ({unit}; {how}): EXR keeps values above it, npy/PNG/MP4 map it to full scale.",
               file=sys.stderr)
         for note in inactive_notes(recipe, args, src, centres[0], state):
             print(f"note: {note}", file=sys.stderr)
+        if out.suffix.lower() == ".mp4" and recipe.run.at is None and recipe.run.range is None:
+            print(f"note: no --at or --range, so the video holds one frame (the window at tick {centres[0]}); pass "
+                  f"--range 0:{src.n_frames} for the whole capture.", file=sys.stderr)
         if out.suffix.lower() == ".mp4":
             factor = slow_motion_factor(src.tick_rate, step, recipe.export.fps)
             print(f"{len(centres)} frames, one per {step} ticks, at {recipe.export.fps:g} fps: {describe_slow_motion(factor)}",
@@ -112,6 +116,23 @@ def run(args: argparse.Namespace) -> int:
         _write_preset(out, recipe, src)
     print(f"wrote {len(centres)} frame{'s' if len(centres) != 1 else ''} to {out}; settings in {preset_path(out)}")
     return 0
+
+
+def _check_output_first(out: Path, args: argparse.Namespace) -> None:
+    """The output's format and the files it would replace, checked before any informational line (the
+    exporter checks again when it opens; nothing is written here)."""
+    from spikeview._files import check_writable
+    from spikeview.errors import ParameterError
+    from spikeview.export import SUFFIXES
+
+    if out.suffix.lower() not in SUFFIXES:
+        raise ParameterError(f"{out}: unknown export format {out.suffix or '(no suffix)'!r}; end the name with "
+                             f"{', '.join(SUFFIXES[:-1])} or {SUFFIXES[-1]}.")
+    overwrite = bool(getattr(args, "overwrite", False))
+    inputs = [getattr(args, "input", None), getattr(args, "preset", None)]
+    if "%" not in out.name:
+        check_writable(out, overwrite, inputs)
+    check_writable(preset_path(out), overwrite, inputs)
 
 
 def _parse(text: str, step: int) -> tuple[int, int, int]:

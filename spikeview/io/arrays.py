@@ -120,12 +120,12 @@ def decide_layout(shape: tuple[int, ...], *, layout: str | None = None, width: i
         if len(matches) == 1:
             return matches[0], None
         return "thw", (f"array of shape {shape} fits {width or '?'}x{height or '?'} frames either way; read it as "
-                       f"(T, H, W) — pass layout='hwt' if time is the last axis.")
+                       f"(T, H, W) — pass --layout hwt (layout='hwt' in Python) if time is the last axis.")
     if frame["thw"] in KNOWN_FRAME_SHAPES:
         return "thw", f"array of shape {shape} read as (T, H, W) (its last two axes are a known sensor size)."
     if frame["hwt"] in KNOWN_FRAME_SHAPES:
         return "hwt", f"array of shape {shape} read as (H, W, T) (its first two axes are a known sensor size)."
-    return "thw", (f"array of shape {shape} read as (T, H, W), the usual order; pass layout='hwt' if time is the "
+    return "thw", (f"array of shape {shape} read as (T, H, W), the usual order; pass --layout hwt (layout='hwt' in Python) if time is the "
                    f"last axis.")
 
 

@@ -277,8 +277,13 @@ def simulate_to_file(scene: Scene | str | Path, config: SimConfig, out_path: str
                 pass
         if isinstance(e, OSError):
             raise OutputFileError(f"{out_path}: could not write the simulation: {os_error_sentence(e)}.") from None
-        if isinstance(e, OutputFileError) and out_path.name not in str(e):
-            raise OutputFileError(f"{out_path}: {e}") from None
+        if isinstance(e, OutputFileError):
+            # name the user's files, never the temporaries they were being written to
+            msg = str(e)
+            for tmp, final in ((tmp_dat, dat), (tmp_gt, gt_path)):
+                msg = msg.replace(str(tmp), str(final)).replace(tmp.name, final.name)
+            if msg != str(e) or out_path.name not in msg:
+                raise OutputFileError(msg if out_path.name in msg else f"{out_path}: {msg}") from None
         raise
     finally:
         if not isinstance(scene, Scene):
