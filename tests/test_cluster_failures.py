@@ -190,3 +190,9 @@ def test_absurd_local_cluster_is_refused_before_any_work(cap, tmp_path, capsys):
     assert main(["reconstruct", *cap, *RUN, "--cluster", "local:99999", "--out", str(tmp_path / "s.zarr")]) == 1
     _err(capsys, "local:99999", "cores")
     assert _names(tmp_path) == ["in"]
+
+
+def test_a_store_in_a_missing_folder(cap, tmp_path, capsys):
+    assert main(["reconstruct", *cap, *RUN, "--out", str(tmp_path / "nosuch" / "s.zarr")]) == 1
+    _err(capsys, "the folder", "does not exist")
+    assert _names(tmp_path) == ["in"]

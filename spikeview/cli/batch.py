@@ -105,5 +105,5 @@ def run_zarr(args: argparse.Namespace, *, cancel=None, client=None, reports: lis
     rate = report.windows_per_second
     print(f"wrote {report.windows} window{'s' if report.windows != 1 else ''} in {report.seconds:.1f} s"
           + (f" ({rate:.2f} windows/s)" if report.windows else "")
-          + f" to {out}; export with: spikeview export {out.name} --out clip.mp4")
+          + f" to {out}; export with: spikeview export {args.out} --out clip.mp4")
     return 0

@@ -97,7 +97,11 @@ def reconstruct_to_store(input_path: str | os.PathLike[str], recipe: Any, out: s
             raise ParameterError(f"{out.name} already exists; add --resume to finish it, --overwrite to start it "
                                  "again, or choose another --out.")
         attrs = check_store(out).attrs  # every attribute checked before it is trusted
-    elif out.parent.is_dir() and not os.access(out.parent, os.W_OK | os.X_OK):
+    elif not out.parent.is_dir():
+        from spikeview.errors import OutputFileError
+
+        raise OutputFileError(f"{out}: the folder {out.parent} does not exist; create it or choose another output path.")
+    elif not os.access(out.parent, os.W_OK | os.X_OK):
         from spikeview.errors import OutputFileError
 
         raise OutputFileError(f"{out}: the folder {out.parent} is read-only; choose a folder you can write to with --out.")
