@@ -139,9 +139,7 @@ def guided_scale(state: SequenceState) -> float:
 
 def output_white(recipe: Recipe, state: SequenceState) -> float:
     """The white point the outputs use: ``[export] white`` when set, else the sequence's estimate (else 1)."""
-    if recipe.export.white is not None:
-        return float(recipe.export.white)
-    return float(state.white) if state.white else 1.0
+    return recipe.export.white_or(state.white)
 
 
 def exposure_mapping(recipe: Recipe, state: SequenceState, out: str | Path) -> tuple[Any, Callable[[np.ndarray], np.ndarray]]:

@@ -23,7 +23,7 @@ def encode_display(frame: np.ndarray, config: ExportConfig) -> np.ndarray:
     Returns:
         float32 array of the same shape in ``[0, 1]``, display-encoded.
     """
-    white = 1.0 if config.white is None else config.white
+    white = config.white_or()
     x = (frame.astype(np.float32) - np.float32(config.black)) / np.float32(white - config.black)
     x = np.clip(x, 0.0, 1.0)
     if config.transfer == "srgb":

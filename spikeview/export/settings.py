@@ -102,6 +102,13 @@ class ExportConfig(Config):
         if self.even_size not in EVEN_SIZE_MODES:
             raise bad("even_size", self.even_size, f"use one of {', '.join(EVEN_SIZE_MODES)}")
 
+    def white_or(self, estimate: float | None = None) -> float:
+        """The white point outputs and the app use — the one "unset" rule: :attr:`white` when set, else
+        the sequence's ``estimate`` (:func:`spikeview.pipeline.prepare_sequence`), else 1."""
+        if self.white is not None:
+            return float(self.white)
+        return float(estimate) if estimate else 1.0
+
 
 def tomlable(value: Any, name: str = "params") -> Any:
     """``value`` converted to what TOML can store (numpy scalars to Python, tuples to lists, ``None`` dropped).
