@@ -123,8 +123,10 @@ RECOMPUTED = {
     "garbage done marker": (_file("done/c/1", "garbage"), "completion markers of chunk(s) 1"),
     "empty done marker": (_file("done/c/1", "empty"), "completion markers of chunk(s) 1"),
     "done marker of 7": (_done_value(7), "completion markers of chunk(s) 1"),
-    "missing seconds array": (_file("seconds", "delete"), "completion markers"),
 }
+
+#: the timings array (not needed by export): --resume rewrites it without recomputing anything
+TIMINGS = {"missing seconds array": _file("seconds", "delete"), "garbage seconds metadata": _file("seconds/zarr.json", "garbage")}
 
 #: damages refused by export and by --resume alike (one sentence naming the store)
 REFUSED = {
@@ -205,6 +207,28 @@ def test_damaged_chunks_and_markers_are_named_by_export_and_recomputed_by_resume
         assert np.asarray(g["done"][:]).all(), name
         np.testing.assert_array_equal(np.asarray(g["frames"][:]), frames, err_msg=name)
         assert main(["export", str(store), "--out", str(case / "o.npy")]) == 0, name
+
+
+@pytest.mark.parametrize("name", sorted(TIMINGS))
+def test_lost_timings_do_not_stop_export_and_resume_rewrites_them(bases, tmp_path, capsys, monkeypatch, name):
+    import spikeview.pipeline as pipeline
+
+    src, store, frames = _copy(bases, "mono", tmp_path)
+    TIMINGS[name](store)
+    assert main(["export", str(store), "--out", str(tmp_path / "o.npy")]) == 0
+    computed = []
+    real = pipeline.reconstruct_windows
+
+    def counting(*a, **k):
+        for f in real(*a, **k):
+            computed.append(1)
+            yield f
+
+    monkeypatch.setattr(pipeline, "reconstruct_windows", counting)
+    assert main(["reconstruct", *src, "--out", str(store), "--resume"]) == 0
+    assert computed == []  # every chunk was done: nothing recomputed
+    g = zarr.open_group(str(store), mode="r")
+    assert g["seconds"].shape == (3,) and np.asarray(g["done"][:]).all()
 
 
 def test_a_file_or_an_empty_folder_named_like_a_store(bases, tmp_path, capsys):

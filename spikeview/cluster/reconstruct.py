@@ -231,7 +231,9 @@ def _run_store(input_path, recipe, out: Path, chunk: int, attrs, client, progres
             except InputFileError:
                 redo.append(int(i))
         again = sorted(set(redo) | set(check.unreadable)) if not check.markers_lost else []
-        if redo or check.unreadable or check.markers_lost:
+        if check.seconds_lost and not (redo or check.unreadable or check.markers_lost):
+            repair_markers(check, [])  # the timings array only: nothing to recompute
+        elif redo or check.unreadable or check.markers_lost:
             repair_markers(check, redo)
             say(f"note: {out.name}: " + ("its completion markers are missing or unreadable; every chunk is recomputed"
                                          if check.markers_lost else

@@ -204,13 +204,15 @@ class StoreCheck:
         attrs: the ``spikeview`` attribute (every field checked).
         done: ``(n_chunks,)`` bool, chunks marked complete by a readable marker.
         unreadable: chunks whose marker is missing or unreadable (not in ``done``).
-        markers_lost: the ``done`` array itself (or ``seconds``) is missing or cannot be opened.
+        markers_lost: the ``done`` array itself is missing or cannot be opened.
+        seconds_lost: the ``seconds`` array (timings) is missing or cannot be opened.
     """
 
     def __init__(self, path: Path, group: Any, attrs: dict[str, Any], done: np.ndarray, unreadable: list[int],
                  markers_lost: bool):
         self.path, self.group, self.attrs = path, group, attrs
         self.done, self.unreadable, self.markers_lost = done, unreadable, markers_lost
+        self.seconds_lost = False
 
     @property
     def n_chunks(self) -> int:
@@ -343,9 +345,13 @@ def check_store(path: str | os.PathLike[str]) -> StoreCheck:
     done = np.zeros(n_chunks, dtype=bool)
     try:
         array("done", (n_chunks,), "uint8", (1,))
-        array("seconds", (n_chunks,), "float64")
     except InputFileError:
         lost = True
+    try:
+        array("seconds", (n_chunks,), "float64", (1,))
+        seconds_lost = False
+    except InputFileError:
+        seconds_lost = True  # timings only: export does not need them, --resume rewrites the array
     if not lost:
         marks = group["done"]
         for i in range(n_chunks):
@@ -357,7 +363,9 @@ def check_store(path: str | os.PathLike[str]) -> StoreCheck:
                 done[i] = True
             elif v != 0:
                 unreadable.append(i)
-    return StoreCheck(p, group, attrs, done, unreadable, lost)
+    check = StoreCheck(p, group, attrs, done, unreadable, lost)
+    check.seconds_lost = seconds_lost
+    return check
 
 
 def repair_markers(check: StoreCheck, redo: list[int]) -> None:
@@ -365,16 +373,17 @@ def repair_markers(check: StoreCheck, redo: list[int]) -> None:
     ``done``/``seconds`` arrays when they are lost, else clear those markers."""
     import zarr
 
-    n = check.n_chunks
-    if check.markers_lost:
-        import shutil
+    import shutil
 
-        for name in ("done", "seconds"):
-            shutil.rmtree(check.path / name, ignore_errors=True)  # garbage metadata: zarr cannot delete it itself
+    n = check.n_chunks
+    lost = [name for name, gone in (("done", check.markers_lost), ("seconds", check.seconds_lost)) if gone]
+    for name in lost:
+        shutil.rmtree(check.path / name, ignore_errors=True)  # garbage metadata: zarr cannot delete it itself
     g = zarr.open_group(str(check.path), mode="r+")
+    if check.seconds_lost:
+        g.create_array("seconds", shape=(n,), chunks=(1,), dtype="float64", fill_value=np.nan)
     if check.markers_lost:
         g.create_array("done", shape=(n,), chunks=(1,), dtype="uint8", fill_value=0)[:] = check.done.astype(np.uint8)
-        g.create_array("seconds", shape=(n,), chunks=(1,), dtype="float64", fill_value=np.nan)
         return
     for i in sorted(set(redo) | set(check.unreadable)):
         g["done"][i] = 0
