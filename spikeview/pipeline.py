@@ -111,14 +111,18 @@ def prepare_sequence(source: Any, recipe: Recipe) -> SequenceState:
 
 
 def recipe_for_state(recipe: Recipe, state: SequenceState) -> Recipe:
-    """``recipe`` with the sequence's α and white point recorded (a saved preset then reproduces the
-    frames exactly)."""
+    """``recipe`` with the sequence's α, white point and, for the guided method, the prior's precision
+    (``auto`` resolved for this CPU) recorded (a saved preset then reproduces the frames exactly)."""
     values: dict[str, Any] = {}
     if state.alpha is not None and recipe.classical.alpha is None:
         values["classical.alpha"] = [float(v) for v in state.alpha]
     out = recipe.with_values(values) if values else recipe
     if state.white is not None and recipe.export.white is None:  # recorded as found (no slider range applies)
         out = dataclasses.replace(out, export=out.export.replace(white=float(state.white)))
+    if out.run.method == "guided" and out.guided.precision == "auto":  # the prior's arithmetic, as this CPU resolves it
+        from spikeview.guided.precision import resolve_precision
+
+        out = out.with_values({"guided.precision": resolve_precision("auto")[0]})
     return out
 
 

@@ -29,6 +29,9 @@ reuse         the previous window's result is reused when the counts of this win
 temporal      what the observation pooled from its aligned neighbouring windows, per      ``temporal_radius``
               photosite (:mod:`spikeview.guided.temporal`: static, aligned, mixed, fast
               motion), or why it could not (capture too short)
+precision     the prior's arithmetic: ``auto`` = the fastest path within 0.1 dB / 0.005    ``precision``
+              SSIM of float32 on the bench for this CPU's features (bfloat16 on high-noise
+              steps, NNPACK float32, or oneDNN float32: :mod:`spikeview.guided.precision`)
 ============  ==========================================================================  ==================
 
 ``str(plan)`` prints the decisions and their reasons, one per line.
@@ -68,6 +71,8 @@ class Plan:
         sigma: per-channel data-derived noise level of the corrected TFP estimate (fraction of 1).
         reasons: one sentence per choice, keyed by the attribute name.
         demosaic: the demosaic of the start estimate / TFP fallback; ``"none"`` without M.
+        precision: the prior's arithmetic (``guided.precision`` resolved for this CPU; ``""`` for
+            the sd prior, which runs in ``guided.dtype``).
     """
 
     mosaic: bool
@@ -82,6 +87,7 @@ class Plan:
     quantise: bool = False
     demosaic: str = "malvar2004"
     temporal: str = "off"
+    precision: str = ""
     pooling: object = field(default=None, repr=False)
 
     def __str__(self) -> str:
@@ -96,6 +102,7 @@ class Plan:
             "diffusion": "on" if self.diffusion else f"off -> {self.fallback}",
             "reuse": "yes" if self.reuse else "no",
             "temporal": self.temporal,
+            "precision": self.precision or "-",
         }
         for key, val in values.items():
             lines.append(f"  {key:<9} {val:<16} {self.reasons.get(key, '')}")
@@ -270,5 +277,12 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     pool = obs.pooling
     temporal = "off" if pool is None or pool.kind in ("off", "unavailable") else pool.kind
     r["temporal"] = pool.reason if pool is not None else "off (temporal_radius = 0): the window alone, as in the paper"
+    # --- arithmetic of the prior (spikeview.guided.precision: resolved from the CPU's features)
+    if p.prior == "sd":
+        precision, r["precision"] = "", f"the sd prior runs in guided.dtype = {p.dtype}"
+    else:
+        from spikeview.guided.precision import resolve_precision
+
+        precision, r["precision"] = resolve_precision(p.precision)
     return Plan(mosaic, cast, levels, diffusion, fallback, reuse, changed, sigma, r, quantise, demosaic, temporal,
-                pooling=pool)
+                pooling=pool, precision=precision)

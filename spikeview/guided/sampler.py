@@ -44,6 +44,7 @@ from spikeview.guided.config import GuidedConfig
 from spikeview.guided.guidance import DPSGuidance, GuidanceRule, HQSGuidance
 from spikeview.guided.likelihood import DataTerm
 from spikeview.guided.observation import Observation
+from spikeview.guided import precision as prec
 from spikeview.guided.plan import Plan, make_plan
 from spikeview.guided.priors.base import DenoiserPrior
 from spikeview.guided.schedule import VESchedule
@@ -106,6 +107,7 @@ class RunInfo:
         steps: prior calls made by the sampler.
         sigma_start: per-channel σ' of the first prior call (fractions of 1).
         seconds: wall-clock time of the run.
+        precision: the prior's arithmetic (``guided.precision`` resolved for this CPU).
     """
 
     plan: Plan | None = None
@@ -113,6 +115,7 @@ class RunInfo:
     steps: int = 0
     sigma_start: list[float] = field(default_factory=list)
     seconds: float = 0.0
+    precision: str = ""
 
 
 class GuidedSampler:
@@ -227,6 +230,7 @@ class GuidedSampler:
                 out = baseline(observation, denoiser, sigma_scale=p.sigma_scale,
                                use_mosaic=plan.mosaic, use_cast=plan.cast, demosaic=p.demosaic)
             info.mode, info.seconds = plan.fallback, time.perf_counter() - t0
+            info.precision = "float32" if plan.fallback == "baseline" else ""
             if callback is not None:
                 callback(1, 1, out)
             return out
@@ -239,6 +243,7 @@ class GuidedSampler:
         """The one sampling loop, for a pixel-space denoiser (VE schedule) and a latent model (DDIM) alike."""
         prior = self.prior_for(channels, p)
         latent = is_latent(prior)
+        self.info.precision = "float32" if latent else (plan.precision or prec.resolve_precision(p.precision)[0])
         rule = self._guidance if self._guidance is not None else self.guidance_for(p, prior, obs.shape)
         gen = torch.Generator().manual_seed(int(p.seed))
         data = self.data_term(obs, plan, p)
@@ -275,6 +280,8 @@ class GuidedSampler:
             schedule = VESchedule(tuple(sigma_first), p.sigma_end)
             schedule.set_timesteps(p.steps)
             add = torch.as_tensor(sigma_add, dtype=start.dtype).view(1, -1, 1, 1)
+        # the prior's arithmetic per step (bfloat16 only at high noise levels: spikeview.guided.precision)
+        layer_prec = prec.step_precisions(self.info.precision, p.steps if latent else schedule.sigmas[:p.steps].min(axis=1))
         total = p.steps * p.chains
         acc = torch.zeros_like(start)
         for chain in range(p.chains):
@@ -286,7 +293,8 @@ class GuidedSampler:
                     raise Cancelled(f"guided reconstruction cancelled at step {done + 1} of {total}")
                 sigma = schedule.sigma(i, x)
                 transform = ((i + 3 * chain) % 8) if (p.self_ensemble and not latent) else None
-                x, x0 = rule.step(prior, schedule, data, x, i, sigma, zeta=p.zeta, generator=gen, transform=transform)
+                x, x0 = rule.step(prec.at_precision(prior, layer_prec[i]), schedule, data, x, i, sigma, zeta=p.zeta,
+                                  generator=gen, transform=transform)
                 if not (bool(torch.isfinite(x).all()) and bool(torch.isfinite(x0).all())):
                     raise ParameterError(_diverged(p, done + 1, total))
                 x0 = x0.float().cpu()

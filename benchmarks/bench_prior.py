@@ -1,0 +1,400 @@
+"""The FFDNet prior's arithmetic on this CPU: speed of each path, and what each costs on the bench.
+
+What it measures (one process, ``torch.set_num_threads(2)``; the machine is shared, so variants are
+**interleaved** A, B, C, A, B, C … after a warm-up and the ratios are taken within the same run):
+
+1. **one FFDNet pass** (RGB, σ = 25/255, no autograd) at 256² and 1000² for:
+   ``eager float32`` (today's path: NCHW, the reference), ``channels-last float32`` (the float32
+   path now: channels-last, strips), ``torch.compile`` (the channels-last body compiled with
+   inductor; its warm-up reported separately; skipped without a C++ compiler), ``bf16 hidden
+   layers`` (first/last layer float32) and ``bf16 all layers``;
+2. **one guided frame** (the CLI's default recipe on a simulated demo capture of that size: gray-world
+   α, white point, exposure, plan; ``GuidedSampler.run`` only, no start-up) for today's float32
+   path, ``--precision float32`` and ``--precision auto`` (what this CPU resolves it to);
+3. **quality** (``--quality``, on by default): the held-out scenes of ``spikeview bench``
+   (:mod:`spikeview.bench.data`, 256×256, 2 windows each) reconstructed with the default recipe under
+   each mixed-precision candidate (which layers in bf16, how many final steps float32), PSNR/SSIM
+   (gain-fitted, data_range 1, :func:`spikeview.bench.guided.score`) minus float32's on the same
+   windows: mean and worst scene;
+4. **peak memory** (``--memory``, on by default): ``ru_maxrss`` of a subprocess running
+   ``spikeview reconstruct big.dat --method guided --at 100`` on a 1000×1000 capture (and 2000×2000
+   with ``--big``), per precision.
+
+Also recorded: ``lscpu`` model name and the flags that matter (avx2, avx512f, avx512_bf16,
+amx_bf16…), torch's CPU capability, the 1-minute load before and after, CPU seconds beside wall
+seconds (wall ≫ CPU/2 means other processes took the cores).
+
+Usage::
+
+    python benchmarks/bench_prior.py            # full run (~5 min), writes benchmarks/results/prior.{md,json}
+    python benchmarks/bench_prior.py --quick    # 256² and one 1000² pass, fewer repeats, small quality set (~1.5 min)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+FLAGS = ("avx2", "avx512f", "avx512_bf16", "avx512_vnni", "amx_tile", "amx_bf16", "amx_int8")
+#: candidates measured for quality: name -> (guided.precision, layers in bf16, bf16 on steps with σ >= threshold)
+CANDIDATES = {
+    "float32-fast (NNPACK)": ("float32-fast", None, None),
+    "bf16 hidden, σ ≥ 45/255 (1 of 6 steps)": ("bfloat16-mixed", "bfloat16", 45 / 255),
+    "bf16 hidden, σ ≥ 30/255 (2 of 6 steps)": ("bfloat16-mixed", "bfloat16", 30 / 255),
+    "bf16 hidden, σ ≥ 18/255 (3 of 6 steps)": ("bfloat16-mixed", "bfloat16", 18 / 255),
+    "bf16 hidden, all but the last step": ("bfloat16-mixed", "bfloat16", 6 / 255),
+    "bf16 all layers, every step (blunt)": ("bfloat16-mixed", "bfloat16-all", 0.0),
+}
+
+
+# ------------------------------------------------------------------------------------ machine
+def machine() -> dict:
+    from spikeview.guided.precision import cpu_flags, cpu_summary
+
+    model = platform.processor() or platform.machine()
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True, timeout=10).stdout
+        for line in out.splitlines():
+            if line.startswith("Model name:"):
+                model = line.split(":", 1)[1].strip()
+    except (OSError, subprocess.SubprocessError):
+        pass
+    import torch
+
+    flags = cpu_flags()
+    return {"model": model, "cpus": os.cpu_count(), "flags": [f for f in FLAGS if f in flags], "torch": torch.__version__,
+            "capability": cpu_summary()["capability"], "onednn_bf16": cpu_summary()["onednn_bf16"],
+            "compiler": shutil.which(os.environ.get("CXX", "g++")) or shutil.which("cc") or "", "load_before": os.getloadavg()[0]}
+
+
+# ----------------------------------------------------------------------------- the reference
+def reference_forward(net, x, sigma):
+    """Today's FFDNet forward before this benchmark's changes: NCHW, float32, out-of-place ReLU."""
+    import torch
+    import torch.nn.functional as F
+
+    h, w = x.shape[-2:]
+    pad_h, pad_w = h % 2, w % 2
+    xp = F.pad(x, (0, pad_w, 0, pad_h), mode="reflect") if (pad_h or pad_w) else x
+    nmap = net._noise_map(sigma, x, (pad_h, pad_w))
+    feats = torch.cat((nmap, F.pixel_unshuffle(xp, 2)), dim=1)
+    last = len(net.weight) - 1
+    for i, (weight, bias) in enumerate(zip(net.weight, net.bias, strict=True)):
+        feats = F.conv2d(feats, weight.to(x.dtype), bias.to(x.dtype), padding=1)
+        if i < last:
+            feats = F.relu(feats)
+    return (xp - F.pixel_shuffle(feats, 2))[..., :h, :w]
+
+
+class ReferencePrior:
+    """The FFDNet prior as it ran before (NCHW float32 eager) for the sampler: the 1.0× baseline."""
+
+    def __init__(self, net):
+        self.net, self.channels, self.sigma_max = net, net.channels, net.sigma_max
+
+    def denoise(self, x, sigma):
+        return reference_forward(self.net, x, sigma)
+
+
+def interleaved(fns: dict, repeats: int, warmup: int = 1) -> dict:
+    """Median wall and CPU seconds of each function, called A, B, C, A, B, C … after ``warmup`` rounds."""
+    for _ in range(warmup):
+        for f in fns.values():
+            f()
+    wall = {k: [] for k in fns}
+    cpu = {k: [] for k in fns}
+    for _ in range(repeats):
+        for k, f in fns.items():
+            c0, t0 = time.process_time(), time.perf_counter()
+            f()
+            wall[k].append(time.perf_counter() - t0)
+            cpu[k].append(time.process_time() - c0)
+    return {k: {"wall": statistics.median(wall[k]), "min": min(wall[k]), "cpu": statistics.median(cpu[k]),
+                "n": repeats} for k in fns}
+
+
+# ----------------------------------------------------------------------------------- 1. pass
+def bench_pass(size: int, repeats: int, compile_ok: bool) -> dict:
+    import torch
+
+    from spikeview.guided.priors.ffdnet import FFDNetDenoiser
+
+    net = FFDNetDenoiser(color=True)
+    g = torch.Generator().manual_seed(size)
+    x = torch.rand(1, 3, size, size, generator=g)
+    s = 25.0 / 255.0
+    ng = torch.inference_mode
+    fns = {"eager float32 (today)": lambda: _nog(ng, reference_forward, net, x, s),
+           "channels-last float32": lambda: _nog(ng, net, x, s, "float32"),
+           "NNPACK float32 (float32-fast)": lambda: _nog(ng, net, x, s, "float32-fast"),
+           "bf16 hidden layers": lambda: _nog(ng, net, x, s, "bfloat16"),
+           "bf16 all layers": lambda: _nog(ng, net, x, s, "bfloat16-all")}
+    extra = {}
+    if compile_ok:
+        import torch.nn.functional as F
+
+        layers = net._layers(torch.float32, "float32")
+        body = torch.compile(lambda f: FFDNetDenoiser._body(f, layers, inplace=False), dynamic=False)
+
+        def compiled():
+            with torch.no_grad():
+                nmap = net._noise_map(s, x, (0, 0))
+                feats = torch.cat((nmap, F.pixel_unshuffle(x, 2)), dim=1).contiguous(memory_format=torch.channels_last)
+                return x - F.pixel_shuffle(body(feats).contiguous(), 2)
+
+        t0 = time.perf_counter()
+        try:
+            compiled()
+            extra["compile_warmup_s"] = time.perf_counter() - t0
+            fns["torch.compile float32 (channels-last)"] = compiled
+        except Exception as e:  # noqa: BLE001 - inductor raises many kinds; the row is then left out with the reason
+            extra["compile_error"] = f"{type(e).__name__}: {str(e).splitlines()[0][:160]}"
+    with torch.inference_mode():
+        ref = reference_forward(net, x, s)
+        diffs = {"channels-last float32": float((net(x, s, "float32") - ref).abs().max()),
+                 "NNPACK float32 (float32-fast)": float((net(x, s, "float32-fast") - ref).abs().max()),
+                 "bf16 hidden layers": float((net(x, s, "bfloat16") - ref).abs().max()),
+                 "bf16 all layers": float((net(x, s, "bfloat16-all") - ref).abs().max())}
+        if "torch.compile float32 (channels-last)" in fns:
+            diffs["torch.compile float32 (channels-last)"] = float((fns["torch.compile float32 (channels-last)"]() - ref).abs().max())
+    res = interleaved(fns, repeats)
+    return {"size": size, "rows": res, "max_abs_diff": diffs, **extra}
+
+
+def _nog(ctx, f, *a):
+    with ctx():
+        return f(*a)
+
+
+# ------------------------------------------------------------------------------ 2. guided frame
+def simulate(size: int, folder: Path) -> Path:
+    """A demo capture of ``size``² (200 ticks) written by the CLI, as a user would."""
+    out = folder / f"demo{size}.dat"
+    if not out.exists():
+        subprocess.run([sys.executable, "-m", "spikeview", "simulate", "--demo", "--size", str(size), "--ticks", "200",
+                        "--out", str(out), "--overwrite"], check=True, capture_output=True)
+    return out
+
+
+def user_observation(path: Path, center: int = 100):
+    """The observation and sampler settings ``spikeview reconstruct PATH --method guided --at CENTER`` uses."""
+    from spikeview.guided.observation import Observation
+    from spikeview.io import open_source
+    from spikeview.pipeline import prepare_sequence, sampler_params
+    from spikeview.recipe import Recipe
+
+    src = open_source(str(path))
+    recipe = Recipe().with_values({"run.method": "guided"})
+    state = prepare_sequence(src, recipe)
+    params = sampler_params(recipe, state)
+    return Observation.from_source(src, center, params.window, alpha=state.alpha, eta=params.eta), params
+
+
+def bench_frame(path: Path, repeats: int) -> dict:
+    import numpy as np
+
+    from spikeview.guided.precision import resolve_precision
+    from spikeview.guided.sampler import GuidedSampler, load_prior
+
+    obs, params = user_observation(path)
+    net = load_prior(params, 3)
+    ref = GuidedSampler(params, prior=ReferencePrior(net))
+    smp = GuidedSampler(params, prior=net)
+    auto = resolve_precision("auto")[0]
+    outs = {}
+
+    def run(name, sampler, p):
+        def f():
+            outs[name] = sampler.run(obs, p)
+        return f
+
+    fns = {"eager float32 (today)": run("ref", ref, params.replace(precision="float32")),
+           "--precision float32": run("float32", smp, params.replace(precision="float32")),
+           "--precision float32-fast": run("float32-fast", smp, params.replace(precision="float32-fast")),
+           "--precision bfloat16-mixed": run("bfloat16-mixed", smp, params.replace(precision="bfloat16-mixed"))}
+    res = interleaved(fns, repeats)
+    diff = {f"{k} vs today": float(np.abs(outs[k] - outs["ref"]).max()) for k in ("float32", "float32-fast", "bfloat16-mixed")}
+    return {"size": obs.shape[0], "rows": res, "max_abs_diff": diff, "auto": auto, "steps": params.steps,
+            "mode": smp.info.mode}
+
+
+# --------------------------------------------------------------------------------- 3. quality
+def bench_quality(frames: int, size: int, scenes: list[str] | None) -> dict:
+    import numpy as np
+
+    from spikeview.bench.data import SCENES, TUNE_SCENES, make_cases
+    from spikeview.bench.guided import Sequence, score
+    from spikeview.guided import precision as prec
+    from spikeview.guided.config import GuidedConfig
+    from spikeview.guided.sampler import GuidedSampler, load_prior
+
+    held = scenes or [n for n in SCENES if n not in TUNE_SCENES]
+    prior = load_prior(GuidedConfig(), 3)
+    smp = GuidedSampler(GuidedConfig(), prior=prior)
+    rows: dict[str, dict[str, list]] = {}
+    t0 = time.perf_counter()
+    for case in make_cases(held, size=size, frames=frames):
+        seq = Sequence(case.source)
+        obs = seq.observation(case.center)
+        f32 = score(smp.run(obs, GuidedConfig(precision="float32")), case.gt)
+        for name, (precision, layers, threshold) in CANDIDATES.items():
+            old = prec.MIXED_LAYERS, prec.MIXED_BF16_SIGMA
+            prec.MIXED_LAYERS = layers or old[0]
+            prec.MIXED_BF16_SIGMA = old[1] if threshold is None else threshold
+            try:
+                q = score(smp.run(obs, GuidedConfig(precision=precision)), case.gt)
+            finally:
+                prec.MIXED_LAYERS, prec.MIXED_BF16_SIGMA = old
+            rows.setdefault(name, {}).setdefault(case.scene, []).append((q[0] - f32[0], q[1] - f32[1]))
+    out = {}
+    for name, per in rows.items():
+        d = {sc: (float(np.mean([a for a, _ in v])), float(np.mean([b for _, b in v]))) for sc, v in per.items()}
+        worst = min(d, key=lambda sc: d[sc][0])
+        out[name] = {"dpsnr_mean": float(np.mean([a for a, _ in d.values()])), "dssim_mean": float(np.mean([b for _, b in d.values()])),
+                     "dpsnr_worst": min(a for a, _ in d.values()), "dssim_worst": min(b for _, b in d.values()),
+                     "worst_scene": worst, "per_scene": d}
+    return {"scenes": held, "size": size, "frames": frames, "rows": out, "seconds": time.perf_counter() - t0}
+
+
+# ---------------------------------------------------------------------------------- 4. memory
+def peak_rss(path: Path, precision: str) -> dict:
+    """Peak RSS (MB) and wall seconds of ``spikeview reconstruct PATH --method guided --at 100`` in a child."""
+    with tempfile.TemporaryDirectory() as d:
+        out = Path(d) / "frame.npy"
+        code = ("import resource, subprocess, sys, time; t = time.perf_counter(); "
+                "r = subprocess.run(sys.argv[1:], capture_output=True, text=True); "
+                "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, time.perf_counter() - t, r.returncode); "
+                "sys.stderr.write(r.stderr[-2000:])")
+        cmd = [sys.executable, "-c", code, sys.executable, "-m", "spikeview", "reconstruct", str(path), "--method", "guided",
+               "--at", "100", "--precision", precision, "--out", str(out), "--overwrite"]
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        kb, wall, rc = r.stdout.split()
+        plan_line = next((ln.strip() for ln in r.stderr.splitlines() if ln.strip().startswith("precision")), "")
+        return {"precision": precision, "peak_mb": int(kb) / 1024, "wall_s": float(wall), "rc": int(rc), "plan": plan_line}
+
+
+# ---------------------------------------------------------------------------------- report
+def write_report(res: dict, out: Path) -> None:
+    m = res["machine"]
+    L = ["# FFDNet prior: precision and backend (benchmarks/bench_prior.py)", "",
+         f"Machine: {m['model']}, {m['cpus']} CPUs, flags {' '.join(m['flags']) or '(none of ' + ', '.join(FLAGS) + ')'}; "
+         f"torch {m['torch']} (CPU capability {m['capability']}, oneDNN bf16 {m['onednn_bf16']}); 2 threads. "
+         f"1-min load {m['load_before']:.1f} before, {res['load_after']:.1f} after. Command: `{res['command']}`; "
+         f"{res['minutes']:.1f} min.", "",
+         "Medians of interleaved repeats after a warm-up; × = eager float32 (today) / this, in the same run. "
+         "CPU s is the process's CPU time (2 threads): wall ≫ CPU/2 means other jobs held the cores.", ""]
+    for p in res["passes"]:
+        base = p["rows"]["eager float32 (today)"]["wall"]
+        L += [f"## One FFDNet pass, {p['size']}×{p['size']} RGB", "", "| path | median wall s | min s | CPU s | × today | max abs diff vs today |",
+              "|---|---|---|---|---|---|"]
+        for k, v in p["rows"].items():
+            d = p["max_abs_diff"].get(k)
+            L.append(f"| {k} | {v['wall']:.3f} | {v['min']:.3f} | {v['cpu']:.3f} | {base / v['wall']:.2f}× | {'—' if d is None else f'{d:.2g}'} |")
+        if "compile_warmup_s" in p:
+            L.append(f"\ntorch.compile warm-up (first call, compiling): {p['compile_warmup_s']:.1f} s.")
+        if "compile_error" in p:
+            L.append(f"\ntorch.compile unavailable: {p['compile_error']}.")
+        L.append("")
+    for f in res["frames"]:
+        base = f["rows"]["eager float32 (today)"]["wall"]
+        L += [f"## One guided frame, {f['size']}×{f['size']} (CLI default recipe, {f['steps']} steps, sampler only)", "",
+              "| path | median wall s | min s | CPU s | × today |", "|---|---|---|---|---|"]
+        for k, v in f["rows"].items():
+            L.append(f"| {k} | {v['wall']:.2f} | {v['min']:.2f} | {v['cpu']:.2f} | {base / v['wall']:.2f}× |")
+        L += ["", "Max abs pixel difference vs today: " + ", ".join(f"{k} {v:.2g}" for k, v in f["max_abs_diff"].items()) + ".", ""]
+    q = res.get("quality")
+    if q:
+        L += [f"## Quality of the mixed-precision candidates (held-out bench scenes, {q['size']}×{q['size']}, {q['frames']} windows each)", "",
+              f"Scenes: {', '.join(q['scenes'])}. Δ = candidate − float32 on the same windows (gain-fitted PSNR/SSIM, data_range 1). "
+              "Budget: ≥ −0.1 dB and ≥ −0.005 SSIM.", "",
+              "| candidate | ΔPSNR mean | ΔSSIM mean | ΔPSNR worst scene | ΔSSIM worst | worst scene | within budget |", "|---|---|---|---|---|---|---|"]
+        for k, v in q["rows"].items():
+            ok = v["dpsnr_worst"] >= -0.1 and v["dssim_worst"] >= -0.005
+            L.append(f"| {k} | {v['dpsnr_mean']:+.3f} | {v['dssim_mean']:+.4f} | {v['dpsnr_worst']:+.3f} | {v['dssim_worst']:+.4f} | "
+                     f"{v['worst_scene']} | {'yes' if ok else 'no'} |")
+        L.append("")
+    mem = res.get("memory") or []
+    if mem:
+        L += ["## Peak memory of `spikeview reconstruct big.dat --method guided --at 100` (child process ru_maxrss)", "",
+              "| capture | --precision | peak MB | wall s (incl. start-up) | plan line |", "|---|---|---|---|---|"]
+        for r in mem:
+            L.append(f"| {r['capture']} | {r['precision']} | {r['peak_mb']:.0f} | {r['wall_s']:.1f} | {r['plan']} |")
+        L.append("")
+    out.write_text("\n".join(L), encoding="utf-8")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="256² frames, one 1000² pass, 3 repeats, 3 held-out scenes x 1 window")
+    ap.add_argument("--repeats", type=int, default=None)
+    ap.add_argument("--no-quality", dest="quality", action="store_false")
+    ap.add_argument("--no-memory", dest="memory", action="store_false")
+    ap.add_argument("--no-compile", dest="compile", action="store_false")
+    ap.add_argument("--big", action="store_true", help="also the peak memory of a 2000x2000 frame")
+    ap.add_argument("--out", type=Path, default=None, help="folder for prior.md/prior.json (default benchmarks/results; "
+                    "--quick writes nothing unless given)")
+    a = ap.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(2)
+    t_start = time.time()
+    res: dict = {"machine": machine(), "command": "python benchmarks/bench_prior.py" + (" " + " ".join(argv or sys.argv[1:])).rstrip()}
+    print(f"{res['machine']['model']}: flags {res['machine']['flags']}, load {res['machine']['load_before']:.1f}", flush=True)
+    rep = a.repeats or 3
+    compile_ok = a.compile and bool(res["machine"]["compiler"])
+    res["passes"] = []
+    for size in ((256, 1000)):
+        r = bench_pass(size, rep if size <= 256 or not a.quick else 2, compile_ok and size <= (256 if a.quick else 1000))
+        res["passes"].append(r)
+        print(f"pass {size}: " + ", ".join(f"{k} {v['wall']:.3f}s" for k, v in r["rows"].items()), flush=True)
+    work = Path(tempfile.mkdtemp(prefix="bench_prior_"))
+    try:
+        res["frames"] = []
+        for size in ((256,) if a.quick else (256, 1000)):
+            r = bench_frame(simulate(size, work), rep)
+            res["frames"].append(r)
+            print(f"frame {size}: " + ", ".join(f"{k} {v['wall']:.2f}s" for k, v in r["rows"].items()), flush=True)
+        if a.quality:
+            res["quality"] = bench_quality(1 if a.quick else 2, 128 if a.quick else 256,
+                                           ["rocket", "colorwheel", "page_bright"] if a.quick else None)
+            for k, v in res["quality"]["rows"].items():
+                print(f"quality {k}: ΔPSNR mean {v['dpsnr_mean']:+.3f} worst {v['dpsnr_worst']:+.3f} ({v['worst_scene']}), "
+                      f"ΔSSIM mean {v['dssim_mean']:+.4f} worst {v['dssim_worst']:+.4f}", flush=True)
+        if a.memory:
+            res["memory"] = []
+            sizes = (256,) if a.quick else ((1000, 2000) if a.big else (1000,))
+            for size in sizes:
+                path = simulate(size, work)
+                for precision in ("float32", "auto"):
+                    r = peak_rss(path, precision)
+                    r["capture"] = f"{size}×{size}"
+                    res["memory"].append(r)
+                    print(f"memory {size} {precision}: {r['peak_mb']:.0f} MB, {r['wall_s']:.1f} s, {r['plan']}", flush=True)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    res["load_after"] = os.getloadavg()[0]
+    res["minutes"] = (time.time() - t_start) / 60
+    out = a.out if a.out is not None else (None if a.quick else ROOT / "benchmarks" / "results")
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "prior.json").write_text(json.dumps(res, indent=1), encoding="utf-8")
+        write_report(res, out / "prior.md")
+        print(f"wrote {out / 'prior.md'}")
+    print(f"load {res['machine']['load_before']:.1f} -> {res['load_after']:.1f}, {res['minutes']:.1f} min")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

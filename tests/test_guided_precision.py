@@ -1,0 +1,164 @@
+"""The prior's arithmetic (issue 15): the faster float32 paths give the reference numbers, bfloat16 is
+spent only where the policy says, ``auto`` follows the CPU, and the choice shows in the plan and the
+recipe (Bayer and monochrome alike)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+from spikeview.errors import ParameterError
+from spikeview.guided import precision as prec
+from spikeview.guided.config import GuidedConfig
+from spikeview.guided.observation import Observation
+from spikeview.guided.plan import make_plan
+from spikeview.guided.priors import ffdnet
+from spikeview.guided.priors.ffdnet import FFDNetDenoiser
+from spikeview.guided.sampler import GuidedSampler
+from test_guided_helpers import make_source
+
+BF16_CPU = dict(capability="AVX512", avx2=True, avx512f=True, avx512_bf16=True, amx_bf16=False, onednn_bf16=True, nnpack=True)
+AVX2_CPU = dict(capability="AVX2", avx2=True, avx512f=False, avx512_bf16=False, amx_bf16=False, onednn_bf16=False, nnpack=True)
+BARE_CPU = dict(AVX2_CPU, nnpack=False)
+
+
+def reference(net: FFDNetDenoiser, x: torch.Tensor, sigma: float) -> torch.Tensor:
+    """The forward pass as it was before (NCHW float32, out-of-place ReLU)."""
+    h, w = x.shape[-2:]
+    ph, pw = h % 2, w % 2
+    xp = F.pad(x, (0, pw, 0, ph), mode="reflect") if (ph or pw) else x
+    feats = torch.cat((net._noise_map(sigma, x, (ph, pw)), F.pixel_unshuffle(xp, 2)), dim=1)
+    for i, (wt, b) in enumerate(zip(net.weight, net.bias, strict=True)):
+        feats = F.conv2d(feats, wt, b, padding=1)
+        if i < len(net.weight) - 1:
+            feats = F.relu(feats)
+    return (xp - F.pixel_shuffle(feats, 2))[..., :h, :w]
+
+
+@pytest.fixture(scope="module", params=[True, False], ids=["rgb", "gray"])
+def net(request):
+    return FFDNetDenoiser(color=request.param, pretrained=False, generator=torch.Generator().manual_seed(3))
+
+
+def _image(net, h, w, seed=0):
+    return torch.rand(1, net.channels, h, w, generator=torch.Generator().manual_seed(seed))
+
+
+@pytest.mark.parametrize("size", [(33, 46), (64, 64)])
+def test_float32_paths_match_the_reference(net, size):
+    x = _image(net, *size)
+    with torch.no_grad():
+        ref = reference(net, x, 0.1)
+        assert (net(x, 0.1) - ref).abs().max() < 1e-5
+        if ffdnet.nnpack_ok():
+            assert (net(x, 0.1, "float32-fast") - ref).abs().max() < 1e-4
+
+
+def test_strips_give_the_whole_volume(net, monkeypatch):
+    x = _image(net, 150, 40, seed=1)
+    with torch.no_grad():
+        whole = net(x, 0.08)
+        monkeypatch.setattr(ffdnet, "STRIP_ROWS", 16)  # 75 half-resolution rows: 5 strips with 12-row halos
+        strips = net(x, 0.08)
+        assert (strips - whole).abs().max() < 1e-6
+        assert (strips - reference(net, x, 0.08)).abs().max() < 1e-5
+
+
+def test_autograd_path_is_the_reference(net):
+    x = _image(net, 20, 24, seed=2)
+    xa, xb = x.clone().requires_grad_(True), x.clone().requires_grad_(True)
+    reference(net, xa, 0.1).square().sum().backward()
+    net(xb, 0.1).square().sum().backward()
+    assert torch.equal(xa.grad, xb.grad)
+
+
+def test_bfloat16_keeps_first_and_last_layer_float32(net):
+    layers = net._layers(torch.float32, "bfloat16")
+    dtypes = [w.dtype for w, _ in layers]
+    assert dtypes[0] == dtypes[-1] == torch.float32 and set(dtypes[1:-1]) == {torch.bfloat16}
+    assert {w.dtype for w, _ in net._layers(torch.float32, "bfloat16-all")} == {torch.bfloat16}
+    x = _image(net, 32, 32, seed=3)
+    with torch.no_grad():
+        d = (net(x, 0.1, "bfloat16") - net(x, 0.1)).abs()
+    assert 0 < float(d.max()) < 0.1 and net(x, 0.1, "bfloat16").dtype == torch.float32
+    with pytest.raises(ParameterError, match="precision must be one of"):
+        net(x, 0.1, "float16")
+
+
+def test_edited_weights_are_not_served_from_the_cache():
+    net = FFDNetDenoiser(color=False, pretrained=False, generator=torch.Generator().manual_seed(5))
+    x = _image(net, 16, 16)
+    with torch.no_grad():
+        before = net(x, 0.1)
+        net.weight[-1].mul_(0.5)
+        after = net(x, 0.1)
+        assert (after - reference(net, x, 0.1)).abs().max() < 1e-5 and not torch.allclose(before, after)
+
+
+def test_auto_follows_the_cpu():
+    assert prec.resolve_precision("auto", BF16_CPU)[0] == ("bfloat16-mixed" if prec.AUTO_BF16 else "float32-fast")
+    assert prec.resolve_precision("auto", AVX2_CPU)[0] == "float32-fast"
+    choice, why = prec.resolve_precision("auto", BARE_CPU)
+    assert choice == "float32" and "no NNPACK" in why
+    assert prec.resolve_precision("float32-fast", BARE_CPU)[0] == "float32"
+    for p in ("float32", "bfloat16-mixed"):
+        choice, why = prec.resolve_precision(p, AVX2_CPU)
+        assert choice == p and f"set by precision={p}" in why
+
+
+def test_bfloat16_only_on_high_noise_steps():
+    sig = np.geomspace(50, 5, 6) / 255
+    steps = prec.step_precisions("bfloat16-mixed", sig, threshold=30 / 255)
+    assert steps == ["bfloat16"] * 2 + ["float32-fast"] * 4
+    assert prec.step_precisions("float32", sig) == ["float32"] * 6
+    assert prec.step_precisions("bfloat16-mixed", 4) == ["float32"] * 4  # a latent prior: no FFDNet layers
+
+
+def test_config_and_recipe_know_the_field():
+    from spikeview.recipe import BY_PATH, Recipe
+
+    with pytest.raises(ParameterError, match="guided.precision"):
+        GuidedConfig(precision="fp8")
+    p = BY_PATH["guided.precision"]
+    assert p.flag == "--precision" and p.key == "precision" and set(p.choices) == set(prec.PRECISIONS)
+    assert Recipe().guided.precision == "auto"
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", None], ids=["bayer", "mono"])
+def test_plan_prints_the_precision_and_the_sampler_uses_it(cfa, monkeypatch):
+    src = make_source("texture", 24, 24, ticks=40, cfa=cfa)
+    alpha = np.array([1.6, 1.0, 2.0]) if cfa else None
+    obs = Observation.from_source(src, 20, 10, alpha=alpha, eta=2.0)
+    plan = make_plan(obs, GuidedConfig(precision="bfloat16-mixed"))
+    assert plan.precision == "bfloat16-mixed" and "precision" in str(plan) and "bfloat16" in plan.reasons["precision"]
+    net = FFDNetDenoiser(color=cfa is not None, pretrained=False, generator=torch.Generator().manual_seed(0))
+    seen = []
+    real = net.denoise
+
+    def spy(x, sigma, precision="float32"):
+        seen.append(precision)
+        return real(x, sigma, precision)
+
+    monkeypatch.setattr(net, "denoise", spy)
+    smp = GuidedSampler(prior=net)
+    cfg = GuidedConfig(precision="bfloat16-mixed", steps=4, t_start=60 / 255, diffusion="always")
+    out = smp.run(obs, cfg)
+    assert out.shape == ((24, 24, 3) if cfa else (24, 24)) and smp.info.precision == "bfloat16-mixed"
+    assert seen[0] == "bfloat16" and seen[-1] == "float32-fast"
+    seen.clear()
+    f32 = smp.run(obs, cfg.replace(precision="float32"))
+    assert set(seen) == {"float32"} and np.abs(f32 - out).max() > 0
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", None], ids=["bayer", "mono"])
+def test_recipe_records_the_resolved_precision(cfa):
+    from spikeview.pipeline import SequenceState, recipe_for_state
+    from spikeview.recipe import Recipe
+
+    state = SequenceState(np.array([1.0, 1.0, 1.0]) if cfa else None, 0.8)
+    guided = recipe_for_state(Recipe().with_values({"run.method": "guided"}), state)
+    assert guided.guided.precision == prec.resolve_precision("auto")[0] != "auto"
+    kept = recipe_for_state(Recipe().with_values({"run.method": "guided", "guided.precision": "float32"}), state)
+    assert kept.guided.precision == "float32"
