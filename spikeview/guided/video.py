@@ -161,7 +161,7 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
                 and plan.changed.any()):
             box = _crop_box(plan.changed, obs.shape)
             if box is not None:
-                out = _resample_region(smp, obs, p, box, prev, cb, cancel, init)
+                out = _resample_region(smp, obs, p, box, prev, cb, cancel, init, plan.sigma)
                 if out is not None:
                     smp.info.plan = plan  # report the frame's plan (with its changed blocks)
         if out is None:
@@ -173,8 +173,9 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
 
 
 def _resample_region(smp: GuidedSampler, obs: Observation, p: GuidedConfig, box: tuple[int, int, int, int],
-                     prev: np.ndarray, cb: Any, cancel: Any, init: np.ndarray | None) -> np.ndarray | None:
-    """Sample only the changed box (plus margin) and paste it into the previous result."""
+                     prev: np.ndarray, cb: Any, cancel: Any, init: np.ndarray | None, sigma: np.ndarray) -> np.ndarray | None:
+    """Sample only the changed box (plus margin) and paste it into the previous result; ``sigma`` is the
+    noise the frame's plan measured on the whole window (more samples than the box holds)."""
     y0, y1, x0, x1 = box
     h, w = obs.shape
     # margins rounded to even offsets so the crop keeps the CFA phase
@@ -184,7 +185,7 @@ def _resample_region(smp: GuidedSampler, obs: Observation, p: GuidedConfig, box:
         return None
     sub = _crop_obs(obs, cy0, cy1, cx0, cx1)
     sub_plan = make_plan(sub, p.replace(reuse=False))
-    sub_plan.sigma = make_plan(obs, p.replace(reuse=False)).sigma  # noise of the whole frame (more samples)
+    sub_plan.sigma = sigma
     sub_init = None if init is None else init[cy0:cy1, cx0:cx1]
     part = smp.run(sub, p, cb, cancel, init=sub_init, plan=sub_plan)
     if part.ndim != prev.ndim:
