@@ -437,7 +437,11 @@ def main(argv=None) -> int:
     p.add_argument("--scenes", default=None, help="comma-separated scene names (default: all; 'none': only Spike-Zoo)")
     p.add_argument("--spikezoo", default=None, help="folder holding the unzipped spikezoo wheel (spikezoo/data/base)")
     p.add_argument("--out", default=None, help="results folder (default benchmarks/results; none for --quick)")
+    p.add_argument("--sequences", action="store_true",
+                   help="only the sequences benchmark (back-to-back windows: PSNR/SSIM and temporal error; spikeview.bench.temporal)")
     a = p.parse_args(argv)
+    if a.sequences:
+        return _sequences(a, a.out if a.out is not None else (None if a.quick else "benchmarks/results"))
     size = a.size or (64 if a.quick else 256)
     scenes = ([] if a.scenes == "none" else a.scenes.split(",")) if a.scenes else (["astronaut", "rocket", "coffee_dark", "colorwheel"] if a.quick else None)
     out = a.out if a.out is not None else (None if a.quick else "benchmarks/results")
@@ -447,4 +451,15 @@ def main(argv=None) -> int:
         print(f"{m:<40} tune {d['psnr_tune']:6.2f}  held {d['psnr_held']:6.2f} / {d['ssim_held']:.3f}  {d['seconds']:.2f} s  clip {100 * d['clipped']:.2f}%")
     for z in res["spikezoo"]:
         print(z["clip"], {k: round(z[k]["psnr"], 2) for k in ("TFP-10", "TFP-41", "guided-10")})
+    if a.scenes is None:  # the whole benchmark: the sequences too
+        return _sequences(a, out)
+    return 0
+
+
+def _sequences(a: argparse.Namespace, out: str | None) -> int:
+    """The sequences benchmark (:mod:`spikeview.bench.temporal`): 128×128 (64 with --quick), 12 frames (4)."""
+    from spikeview.bench.temporal import report, run_sequences
+
+    res = run_sequences(out, size=a.size or (64 if a.quick else 128), frames=4 if a.quick else 12, quick=a.quick)
+    print(report(res))
     return 0

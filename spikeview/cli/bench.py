@@ -13,6 +13,8 @@ def add_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size", type=int, help="frame size of the synthetic set (default 256)")
     p.add_argument("--frames", type=int, default=2, help="windows per scene (default 2)")
     p.add_argument("--out", metavar="DIR", help="folder for guided.md, guided.json and guided_pareto.png (default benchmarks/results)")
+    p.add_argument("--sequences", action="store_true",
+                   help="only the sequences benchmark: back-to-back windows of static, slow and fast scenes, PSNR/SSIM and temporal error (temporal.md)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -21,6 +23,8 @@ def run(args: argparse.Namespace) -> int:
     argv = ["--frames", str(args.frames)]
     if args.quick:
         argv.append("--quick")
+    if getattr(args, "sequences", False):
+        argv.append("--sequences")
     if args.size:
         argv += ["--size", str(args.size)]
     if args.out:

@@ -6,21 +6,26 @@ the spikes of the ``radius`` windows of ``window`` ticks on each side (``guided.
 neighbour to the centre window, then merge with per-photosite weights that fall back to the centre
 window where the match fails.
 
-**Align.** Each window's counts are summed over 2×2 super-pixels (Bayer: one super-pixel per CFA
-period, so every shift keeps the CFA phase; monochrome: full resolution) and smoothed by a Gaussian
-(σ = :data:`SMOOTH` guide pixels). For every :data:`TILE`-pixel tile the neighbour ``k`` windows
-away is matched to the centre window by exhaustive integer block matching within ``±(1 + 2|k|)``
-guide pixels (capped at :data:`MAX_SEARCH`): the cost is the tile's sum of squared differences plus
-a small penalty per pixel of displacement (:data:`SHIFT_PENALTY` of the noise-only SSD), so that
-flat and static tiles keep a zero shift rather than one chosen by the noise.
+**Align.** Each window's counts are summed over 2×2 super-pixels (one CFA period: every shift keeps
+the Bayer phase; monochrome alike, which also quarters the search) and smoothed by a Gaussian (σ =
+:data:`SMOOTH` super-pixels). Per :data:`TILE`-photosite tile one constant velocity is searched for
+all neighbours at once (:func:`estimate_motion`: exhaustive, up to :data:`MAX_SPEED` photosites per
+window, neighbour ``k`` read at ``round(k·v)``), with a small penalty on speed so that static and
+flat tiles keep ``v = 0``. Using every neighbour for one velocity gives a usable estimate where one
+pair of 10-tick windows is dominated by noise; a rotating or deforming object is matched locally,
+tile by tile.
 
-**Decide.** A tile's best match is accepted when its SSD is within :data:`TILE_CHI` times what the
-noise alone gives (``E[SSD] = Σ κ·Σk²·(g₀ + g_k)``: Poisson-like counts whose variance/mean ratio
-``κ`` is measured on the centre window, :func:`count_dispersion`). Inside an accepted tile every
-photosite is checked again: the 3×3 sums of same-colour photosites of the centre and the aligned
-neighbour must agree within :data:`PIXEL_Z` standard deviations (occlusions, an edge the tile's
-shift does not fit, something fast inside a slow tile). Weights are 0 or 1: a photosite either
-takes a neighbour's whole window or none of it.
+**Decide.** A neighbour's tile is accepted when the SSD of its *unsmoothed* super-pixel counts at the
+chosen shift is within :data:`TILE_CHI` times what the noise alone gives (64 independent values
+per tile; counts' variance ``κ·g(1 − g/cap)``, binomial-shaped because an integrate-and-fire pixel
+is far from Poisson, with the scale κ measured on the centre window, :func:`count_dispersion`;
+adjacent windows' counts anti-correlate, :data:`ADJACENT_DISPERSION`). Inside an accepted tile
+every photosite is checked too: the 3×3 sum of same-colour photosites of the aligned neighbour must
+agree within :data:`PIXEL_Z` standard deviations with what was pooled so far (the centre window and
+the accepted nearer windows), and a photosite takes window ``k`` only if it took every window
+between ``k`` and the centre. Weights are 0 or 1: a photosite takes a neighbour's whole window or
+none of it, and falls back to its own window where nothing matches (occlusions, fast or
+non-rigid motion, a flash).
 
 **What the data term sees.** The pooled observation is ``y = N / Δτ_eff`` with ``N`` the pooled
 count and ``Δτ_eff = window · (1 + pooled neighbours)`` per photosite
@@ -57,8 +62,9 @@ SHIFT_PENALTY = 0.1
 #: fires late in the next): their difference has about this much more variance than two independent
 #: windows' (measured on static simulated scenes: 1.39 to 1.45)
 ADJACENT_DISPERSION = 1.4
-#: a tile's match is accepted when its SSD is at most this many times the noise-only SSD
-TILE_CHI = 2.0
+#: a tile's match is accepted when the SSD of its unsmoothed super-pixel counts is at most this many
+#: times the noise-only SSD (64 super-pixels per tile: a static tile exceeds 1.5 with probability ~0.5 %)
+TILE_CHI = 1.5
 #: per-photosite test: 3×3 same-colour sums must agree within this many standard deviations
 PIXEL_Z = 2.5
 #: largest radius accepted by the config
@@ -141,23 +147,26 @@ def neighbour_offsets(a: int, b: int, n_frames: int, radius: int) -> tuple[int, 
 
 
 # ------------------------------------------------------------------------------------ alignment
-def _guide_raw(counts: np.ndarray, cfa: str | None) -> np.ndarray:
-    """Counts summed over 2×2 super-pixels (Bayer) or as they are (monochrome), float32."""
+def _guide_raw(counts: np.ndarray, cfa: str | None = None) -> np.ndarray:
+    """Counts summed over 2×2 super-pixels (one CFA period of a Bayer mosaic; monochrome alike), float32."""
     c = counts.astype(np.float32, copy=False)
-    if cfa is None:
-        return c
     h2, w2 = (c.shape[0] // 2) * 2, (c.shape[1] // 2) * 2
     return c[0:h2:2, 0:w2:2] + c[1:h2:2, 0:w2:2] + c[0:h2:2, 1:w2:2] + c[1:h2:2, 1:w2:2]
 
 
-def count_dispersion(raw: np.ndarray, keep: float = 0.9) -> float:
-    """Variance/mean ratio κ of counts, in [0.05, 4].
+def _binvar(g: np.ndarray, cap: float) -> np.ndarray:
+    """Binomial-shaped variance ``g (1 − g/cap)`` of counts ``g`` out of at most ``cap`` (before the scale κ)."""
+    return np.maximum(g * (1.0 - g / cap), 0.0)
 
-    Per 2×2 block the finest diagonal Haar detail ``HH = (a − b − c + d)/2`` has the counts' variance
-    (``κ ×`` their mean) and is nearly blind to smooth content; ``κ = Σ HH² / Σ mean`` over the
-    blocks, leaving out the ``1 − keep`` of blocks with the largest ``HH² / (mean + 1)`` (edges), and
-    corrected for the trimming as in :func:`spikeview.guided.observation.haar_noise_variance`. A ratio
-    per block, so a bright region does not set the noise of a dark one.
+
+def count_dispersion(raw: np.ndarray, cap: float, keep: float = 0.9) -> float:
+    """Scale κ of the counts' variance ``κ · g (1 − g/cap)`` (``cap``: the most spikes a value can hold), in [0.05, 4].
+
+    Integrate-and-fire counts are far from Poisson: a bright photosite fires almost regularly. Per
+    2×2 block of ``raw`` the finest diagonal Haar detail ``HH = (a − b − c + d)/2`` has the counts'
+    variance and is nearly blind to smooth content; ``κ = Σ HH² / Σ m (1 − m/cap)`` over the blocks
+    (``m`` their mean), leaving out the ``1 − keep`` of blocks with the largest ratio (edges) and
+    corrected for that trimming as in :func:`spikeview.guided.observation.haar_noise_variance`.
     """
     from spikeview.guided.observation import _trim_factor
 
@@ -167,43 +176,37 @@ def count_dispersion(raw: np.ndarray, keep: float = 0.9) -> float:
     p = raw[:h2, :w2].astype(np.float64)
     a, b, c, d = p[0::2, 0::2], p[0::2, 1::2], p[1::2, 0::2], p[1::2, 1::2]
     hh2 = (((a - b - c + d) / 2.0) ** 2).ravel()
-    m = ((a + b + c + d) / 4.0).ravel()
-    ratio = hh2 / (m + 1.0)
+    v = _binvar((a + b + c + d).ravel() / 4.0, cap)
+    ratio = hh2 / (v + 1.0)
     kept = ratio <= np.quantile(ratio, keep)
-    if float(m[kept].sum()) <= 0:
+    if float(v[kept].sum()) <= 0:
         return 1.0
-    return float(np.clip(hh2[kept].sum() / m[kept].sum() / (_trim_factor(keep) / keep), 0.05, 4.0))
+    return float(np.clip(hh2[kept].sum() / v[kept].sum() / (_trim_factor(keep) / keep), 0.05, 4.0))
 
 
 def _tile_sum(x: np.ndarray, t: int) -> np.ndarray:
     h, w = x.shape
     th, tw = -(-h // t), -(-w // t)
-    p = np.zeros((th * t, tw * t), dtype=np.float64)
-    p[:h, :w] = x
-    return p.reshape(th, t, tw, t).sum(axis=(1, 3))
+    if h != th * t or w != tw * t:
+        p = np.zeros((th * t, tw * t), dtype=x.dtype)
+        p[:h, :w] = x
+        x = p
+    return x.reshape(th, t, tw, t).sum(axis=(1, 3), dtype=np.float64)
 
 
-def _shifted(img: np.ndarray, dy: int, dx: int, fill: float = np.nan) -> np.ndarray:
-    """``out[y, x] = img[y + dy, x + dx]`` (``fill`` outside)."""
-    h, w = img.shape
-    out = np.full(img.shape, fill, dtype=img.dtype)
-    ys, ye = max(0, -dy), min(h, h - dy)
-    xs, xe = max(0, -dx), min(w, w - dx)
-    if ys < ye and xs < xe:
-        out[ys:ye, xs:xe] = img[ys + dy:ye + dy, xs + dx:xe + dx]
-    return out
-
-
-def _tile_chi(g0: np.ndarray, gk: np.ndarray, pad: int, dy: int, dx: int, tile: int, noise: float) -> np.ndarray:
+def _tile_chi(g0: np.ndarray, gk: np.ndarray, pad: int, dy: int, dx: int, tile: int, noise: float,
+              cap: float, v0: np.ndarray | None = None) -> np.ndarray:
     """Per tile: SSD between ``g0`` and the edge-padded ``gk`` read at ``(y + dy, x + dx)``, over the
-    noise-only SSD ``Σ noise·(g₀ + g_k)``."""
+    noise-only SSD ``Σ noise·(v(g₀) + v(g_k))`` with ``v`` = :func:`_binvar` (``v0``: ``v(g₀)`` precomputed)."""
     h, w = g0.shape
     s = gk[pad + dy:pad + dy + h, pad + dx:pad + dx + w]
-    return _tile_sum((g0 - s) ** 2, tile) / (_tile_sum(noise * (g0 + s), tile) + 1e-6)
+    d = g0 - s
+    v0 = _binvar(g0, cap) if v0 is None else v0
+    return _tile_sum(d * d, tile) / (noise * _tile_sum(v0 + _binvar(s, cap), tile) + 1e-6)
 
 
 def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, kappa: float,
-                    kernel_energy: float, radius: int, max_speed: float = MAX_SPEED) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+                    kernel_energy: float, radius: int, max_speed: float = MAX_SPEED, cap: float = np.inf) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
     """Per tile, one constant velocity ``v`` (guide pixels per window) for all neighbours, by exhaustive search.
 
     Candidates: ``v`` on a grid of step ``1/radius`` within ``±max_speed`` guide pixels per window;
@@ -225,12 +228,13 @@ def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, ka
     pad = int(np.ceil(max_speed * max(abs(k) for k in ks))) + 1
     padded = {k: np.pad(guides[k], pad, mode="edge") for k in ks}
     memo: dict[tuple[int, int, int], np.ndarray] = {}
+    v0 = _binvar(g0, cap)
 
     def chi(k: int, dy: int, dx: int) -> np.ndarray:
         key = (k, dy, dx)
         if key not in memo:
             factor = ADJACENT_DISPERSION if abs(k) == 1 else 1.0
-            memo[key] = _tile_chi(g0, padded[k], pad, dy, dx, tile, factor * kappa * kernel_energy)
+            memo[key] = _tile_chi(g0, padded[k], pad, dy, dx, tile, factor * kappa * kernel_energy, cap, v0)
         return memo[key]
 
     best_cost = best_v = None
@@ -256,6 +260,22 @@ def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, ka
             c[sel] = chi(k, dy, dx)[sel]
         shifts[k], chis[k] = sh, c
     return shifts, chis
+
+
+def match_quality(raw0: np.ndarray, rawk: np.ndarray, shifts: np.ndarray, tile: int, noise: float, cap: float) -> np.ndarray:
+    """Per tile, the SSD of the unsmoothed super-pixel counts at the tile's shift over its noise-only SSD.
+
+    The search ran on smoothed guides (robust, but a tile then has only ~5 independent values); the
+    acceptance uses the raw counts, whose 64 independent values per tile make the test both sharper
+    and less often wrong on a static tile.
+    """
+    pad = int(np.abs(shifts).max(initial=0)) + 1
+    padded = np.pad(rawk, pad, mode="edge")
+    out = np.empty(shifts.shape[:2])
+    for dy, dx in {tuple(v) for v in shifts.reshape(-1, 2).tolist()}:
+        sel = (shifts[..., 0] == dy) & (shifts[..., 1] == dx)
+        out[sel] = _tile_chi(raw0, padded, pad, dy, dx, tile, noise, cap)[sel]
+    return out
 
 
 def _fit_tiles(a: np.ndarray, th: int, tw: int) -> np.ndarray:
@@ -301,14 +321,14 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
         return n0, Pooling(radius, window, kind="unavailable",
                            reason=(f"the capture holds {int(source.n_frames)} ticks: no whole {window}-tick window beside this "
                                    "one to borrow from (own window only)"))
-    f = 1 if cfa is None else 2
+    f = 2  # guide pixels are 2×2 super-pixels: shifts keep the CFA phase, and the search costs a quarter
     tile_g = max(1, TILE // f)
     raw0 = _guide_raw(n0, cfa)
-    kappa = count_dispersion(raw0)
+    cap = 4.0 * window  # a super-pixel holds at most 4 photosites × window spikes
+    kappa = count_dispersion(raw0, cap)
     # variance of a Gaussian-smoothed white-noise image: Σ k² = 1 / (4πσ²) (σ >= ~0.7)
     kernel_energy = 1.0 / (4.0 * np.pi * SMOOTH ** 2)
     g0 = gaussian_filter(raw0, SMOOTH, mode="reflect")
-    box0 = _box_same_colour(n0, cfa)
     h, w = n0.shape
     total = n0.astype(np.float32).copy()
     pooled = np.zeros((h, w), dtype=np.float32)
@@ -319,33 +339,50 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     ty_of, tx_of = np.arange(h) // TILE, np.arange(w) // TILE
     counts = {k: cache.counts(source, a + k * window, b + k * window) for k in offsets}
     guides = {k: gaussian_filter(_guide_raw(counts[k], cfa), SMOOTH, mode="reflect") for k in offsets}
-    motion, chis = estimate_motion(g0, guides, tile_g, kappa, kernel_energy, radius, MAX_SPEED / f)
-    for k in offsets:
-        nk = counts[k]
-        # tiles of the guide are tiles of TILE photosites (an odd last row/column of a Bayer frame
-        # has no super-pixel: it takes its neighbour tile's match)
-        best, chi = _fit_tiles(motion[k], th, tw), _fit_tiles(chis[k], th, tw)
-        factor = ADJACENT_DISPERSION if abs(k) == 1 else 1.0
-        ok_tile = chi <= TILE_CHI
-        shifts[k] = best * f
-        accepted[k] = ok_tile
-        weight = np.zeros((h, w), dtype=bool)
-        aligned = np.zeros((h, w), dtype=np.float32)
-        tile_ok_px = ok_tile[ty_of][:, tx_of]
-        best_px = best[ty_of][:, tx_of]
-        for dy, dx in {tuple(v) for v in best[ok_tile].reshape(-1, 2).tolist()}:
-            sel = tile_ok_px & (best_px[..., 0] == dy) & (best_px[..., 1] == dx)
-            s = _shifted(nk, f * dy, f * dx)
-            inside = ~np.isnan(s)
-            s0 = np.where(inside, s, 0.0).astype(np.float32)
-            boxk = _box_same_colour(s0, cfa)
-            # the 3×3 sums near the frame border read zeros outside: the test rejects them
-            z2 = (box0 - boxk) ** 2 / (factor * kappa * (box0 + boxk) + 1.0)
-            good = sel & inside & (z2 <= PIXEL_Z ** 2)
-            weight |= good
-            aligned = np.where(good, s0, aligned)
-        total += np.where(weight, aligned, 0.0).astype(np.float32)
-        pooled += weight
+    motion, _ = estimate_motion(g0, guides, tile_g, kappa, kernel_energy, radius, MAX_SPEED / f, cap)
+    chis = {k: match_quality(raw0, _guide_raw(counts[k], cfa), motion[k], tile_g,
+                             (ADJACENT_DISPERSION if abs(k) == 1 else 1.0) * kappa, cap) for k in offsets}
+    # nearest windows first; a photosite takes window k only if it took every window between k and the
+    # centre (motion grows with the distance), and window k is compared with what was pooled so far
+    # (the centre and the accepted nearer windows: a less noisy reference than the centre alone)
+    chain = {-1: np.ones((h, w), dtype=bool), 1: np.ones((h, w), dtype=bool)}
+    for d in sorted({abs(k) for k in offsets}):
+        box_total = _box_same_colour(total, cfa)
+        box_n = _box_same_colour(1.0 + pooled, cfa)
+        ref = 9.0 * box_total / box_n  # 3×3 same-colour sum per window of the reference
+        factor = ADJACENT_DISPERSION if d == 1 else 1.0
+        new_total, new_pooled = np.zeros((h, w), np.float32), np.zeros((h, w), np.float32)
+        for k in (-d, d):
+            if k not in counts:
+                continue
+            nk = counts[k]
+            # tiles of the guide are tiles of TILE photosites (an odd last row/column of a Bayer frame
+            # has no super-pixel: it takes its neighbour tile's match)
+            best, chi = _fit_tiles(motion[k], th, tw), _fit_tiles(chis[k], th, tw)
+            ok_tile = chi <= TILE_CHI
+            shifts[k] = best * f
+            accepted[k] = ok_tile
+            # every photosite reads the neighbour at its tile's shift (the 3×3 same-colour sums shift with it)
+            tile_ok_px = ok_tile[ty_of][:, tx_of]
+            best_px = best[ty_of][:, tx_of] * f
+            ys = np.arange(h)[:, None] + best_px[..., 0]
+            xs = np.arange(w)[None, :] + best_px[..., 1]
+            inside = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
+            ys, xs = np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)
+            aligned = nk[ys, xs]
+            boxk = _box_same_colour(nk, cfa)[ys, xs]
+            # a shifted 3×3 sum that reaches past the frame's border (edge-extended there) is not the sum
+            # the centre window's photosite sees: such photosites are left out unless the shift is zero
+            margin = (ys >= 2) & (ys < h - 2) & (xs >= 2) & (xs < w - 2)
+            zero = (best_px[..., 0] == 0) & (best_px[..., 1] == 0)
+            cap9 = 9.0 * window  # a 3×3 same-colour sum holds at most 9 × window spikes per window
+            z2 = (ref - boxk) ** 2 / (factor * kappa * (_binvar(ref, cap9) * 9.0 / box_n + _binvar(boxk, cap9)) + 1.0)
+            weight = chain[1 if k > 0 else -1] & tile_ok_px & inside & (margin | zero) & (z2 <= PIXEL_Z ** 2)
+            chain[1 if k > 0 else -1] = weight
+            new_total += np.where(weight, aligned, 0.0).astype(np.float32)
+            new_pooled += weight
+        total += new_total
+        pooled += new_pooled
     dtau = (window * (1.0 + pooled)).astype(np.float32)
     pool = Pooling(radius, window, offsets, dtau, shifts, accepted)
     pool.kind, pool.reason = describe(pool)
