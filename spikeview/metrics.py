@@ -102,7 +102,8 @@ def align_ground_truth(gt: np.ndarray, y: np.ndarray, cfa: str | None, alpha: np
     if gt.ndim == 2 or cfa is None:
         g = gt if gt.ndim == 2 else gt.mean(axis=-1)
         gain = float((y * g).sum() / max((g * g).sum(), 1e-12))
-        return np.clip(gt * gain, 0, 1).astype(np.float32)
+        # a monochrome reconstruction is one channel: so is the ground truth it is scored against
+        return np.clip((g if cfa is None else gt) * gain, 0, 1).astype(np.float32)
     out = np.empty_like(gt)
     cmap = channel_map(cfa, *y.shape)
     scale = np.ones(3) if alpha is None else np.asarray(alpha, dtype=np.float64) / eta

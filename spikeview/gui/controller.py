@@ -177,6 +177,7 @@ class Controller(QtCore.QObject):
         self.guided_result = None
         self._guided_key = None
         self.alpha, self.alpha_note = None, None
+        self.capture_white: float | None = None  # the sequence's white point (Edit ▸ Reset parameters returns to it)
         self._alpha_hist.clear()
         self.alpha_history.emit((np.zeros(0), np.zeros((0, 3))))
         src = self.session.source
@@ -418,7 +419,8 @@ class Controller(QtCore.QObject):
                 from spikeview.gui.model import SPECS
 
                 spec = SPECS["white"]
-                self.session.set("white", float(min(max(white, spec.minimum or 0.0), spec.maximum or white)), record=False)
+                self.capture_white = float(min(max(white, spec.minimum or 0.0), spec.maximum or white))
+                self.session.set("white", self.capture_white, record=False)
             self.alpha_ready.emit(self.alpha)
             self.request_frames()
             self.request_degradation()

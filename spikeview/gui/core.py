@@ -165,11 +165,44 @@ def open_file(path: str | Path, **kwargs: Any) -> OpenedStream:
             merged["cfa"] = flip_cfa(info.cfa, info.height, info.width, vertical=settings["flip_vertical"] != info.flip_vertical)
         return open_file(path, **merged)
 
-    gt = None
+    gt = _file_ground_truth(path, info, kwargs)
     open_kwargs = {**kwargs, "width": info.width, "height": info.height, "format": info.format,
                    "cfa": info.cfa or "none", "flip_vertical": info.flip_vertical}
     return OpenedStream(source=LockedSource(src), label=path.name, path=path, reopen=reopen, ground_truth=gt,
                         open_kwargs=open_kwargs)
+
+
+#: a stored ground-truth frame scores a window whose centre lies at most this many ticks away
+GT_TICK_TOLERANCE = 5
+
+
+def _file_ground_truth(path: Path, info: Any, kwargs: dict[str, Any]) -> Callable[[int], np.ndarray | None] | None:
+    """``ground_truth(tick)`` from the ``FILE.gt.npz`` beside a capture (``spikeview simulate`` writes it),
+    or ``None`` without one. Only for the orientation it was written in (its sidecar's: no flip or CFA
+    given), and only at ticks within :data:`GT_TICK_TOLERANCE` of a stored frame (else ``None``)."""
+    from spikeview.errors import SpikeviewError
+    from spikeview.sim.write import ground_truth_path, load_ground_truth
+
+    gt_file = ground_truth_path(path)
+    if not gt_file.is_file() or "flip_vertical" in kwargs or "flip_horizontal" in kwargs or not info.extra.get("sidecar"):
+        return None
+    cache: dict[str, Any] = {}
+
+    def gt(tick: int) -> np.ndarray | None:
+        if "gt" not in cache:
+            try:
+                cache["gt"] = load_ground_truth(gt_file)
+            except SpikeviewError:
+                cache["gt"] = None
+        g = cache["gt"]
+        if g is None or not len(g):
+            return None
+        stored, frame = g.nearest(tick)
+        if abs(stored - tick) > GT_TICK_TOLERANCE or frame.shape[:2] != (info.height, info.width):
+            return None
+        return np.asarray(frame, dtype=np.float32)
+
+    return gt
 
 
 def has_sidecar(path: str | Path) -> bool:

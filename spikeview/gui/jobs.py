@@ -219,8 +219,9 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     origin = crop_roi(np.zeros((req.source.height, req.source.width), np.uint8), req.roi)[1][::-1] if req.roi else (0, 0)
     ctx.report(GuidedUpdate("plan", req.run, total=cfg.steps * cfg.chains, text=str(plan), knobs=knob_status(cfg, plan)))
     gt = None
-    if req.ground_truth is not None:
-        g = np.asarray(req.ground_truth(req.tick), dtype=np.float32)
+    g = req.ground_truth(req.tick) if req.ground_truth is not None else None  # None: no frame stored near this tick
+    if g is not None:
+        g = np.asarray(g, dtype=np.float32)
         gt = crop_roi(g, req.roi)[0] if req.roi is not None else g
         gt = metrics.align_ground_truth(gt, obs.y, obs.cfa, obs.alpha, obs.eta) if gt.shape[:2] == obs.y.shape else None
     t0 = time.perf_counter()

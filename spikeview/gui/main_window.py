@@ -539,9 +539,15 @@ class MainWindow(QtWidgets.QMainWindow):
             self.save_preset(path if path.endswith(".toml") else path + ".toml")
 
     def reset_params(self) -> None:
+        """Every parameter back to its default; the exposure back to the capture's own white point
+        (as when it opened), not to the recipe's unset default."""
         from spikeview.gui.model import default_params
 
-        self.session.update_params(default_params(), label="Reset parameters")
+        values = default_params()
+        white = getattr(self.controller, "capture_white", None)
+        if white is not None:
+            values["white"] = white
+        self.session.update_params(values, label="Reset parameters")
 
     # ------------------------------------------------------------------------------ export
     def export_now(self) -> None:

@@ -1,0 +1,77 @@
+"""The app on files it did not make (issue 14): a monochrome capture with ground truth beside it, opened
+from disk, offscreen. Exposure, legend, Reset parameters, PSNR curves and the scene plan."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pytestqt")
+from PySide6 import QtGui
+
+from spikeview.cli.main import main
+
+OFFSCREEN_NOISE = r"This plugin does not support propagateSizeHints"
+pytestmark = [pytest.mark.gui, pytest.mark.qt_log_level_fail("WARNING"), pytest.mark.qt_log_ignore(OFFSCREEN_NOISE)]
+WAIT_MS = 60_000
+
+
+def _simulate(tmp_path, cfa: str):
+    path = tmp_path / f"cap_{cfa}.dat"
+    assert main(["simulate", "--demo", "--size", "32", "--ticks", "120", "--cfa", cfa, "--gt-every", "10",
+                 "--out", str(path)]) == 0
+    return path
+
+
+def _open(window, qtbot, path):
+    window.open_path(path)
+    qtbot.waitUntil(lambda: window.session.stream is not None and window.controller.capture_white is not None,
+                    timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: window.rates_panel.last is not None, timeout=WAIT_MS)
+
+
+def test_a_monochrome_capture_opens_exposed_like_the_command_line(window, qtbot, tmp_path):
+    from spikeview.io import open_source
+    from spikeview.pipeline import prepare_sequence
+    from spikeview.recipe import Recipe
+
+    path = _simulate(tmp_path, "none")
+    _open(window, qtbot, path)
+    s = window.session
+    with open_source(path) as src:
+        cli_white = prepare_sequence(src, Recipe()).white
+    assert s.get("white") == pytest.approx(cli_white, rel=1e-6)  # the same number the CLI prints
+    # no colour channels: no α R/G/B legend or curves
+    rp = window.rates_panel
+    assert not rp.alpha_plot.plotItem.legend.isVisible()
+    assert not any(c.isVisible() for c in rp.alpha_curves)
+    # Edit ▸ Reset parameters: the exposure goes back to the capture's white point, not to 1
+    s.set("white", 1.0)
+    window.reset_params()
+    assert s.get("white") == pytest.approx(cli_white, rel=1e-6)
+
+
+def test_a_colour_capture_keeps_its_alpha_legend_and_reset_white(window, qtbot, tmp_path):
+    path = _simulate(tmp_path, "RGGB")
+    _open(window, qtbot, path)
+    rp = window.rates_panel
+    assert rp.alpha_plot.plotItem.legend.isVisible() and all(c.isVisible() for c in rp.alpha_curves)
+    white = window.controller.capture_white
+    window.session.set("white", white / 2)
+    window.reset_params()
+    assert window.session.get("white") == pytest.approx(white)
+
+
+@pytest.mark.parametrize("cfa", ["none", "RGGB"])
+def test_psnr_curves_for_a_capture_with_ground_truth_beside_it(window, qtbot, tmp_path, cfa):
+    path = _simulate(tmp_path, cfa)
+    _open(window, qtbot, path)
+    s, g = window.session, window.guided_panel
+    assert s.stream.is_simulated and g.metrics_box.isVisibleTo(window)
+    s.set_tick(60)  # a stored ground-truth frame (every 10 ticks)
+    s.set("steps", 2)
+    window.findChild(QtGui.QAction, "act_run").trigger()
+    qtbot.waitUntil(lambda: window.controller.guided_result is not None, timeout=WAIT_MS * 3)
+    r = window.controller.guided_result
+    assert r.psnr is not None and np.isfinite(r.psnr) and 0 < r.ssim <= 1
+    assert "no demosaic" in g.plan.toPlainText() if cfa == "none" else "demosaic" in g.plan.toPlainText()
