@@ -65,3 +65,23 @@ def test_simulate_names_the_users_file_not_its_temporary(tmp_path, capsys, monke
                  "--out", str(out / "s.dat")]) == 1
     err = capsys.readouterr().err
     assert "s.dat" in err and ".tmp" not in err
+
+
+def test_the_scene_plan_prints_the_same_numbers_in_the_cli_and_the_app(tmp_path, capsys):
+    """One unit: the plan of the settings the sampler runs (η at the sequence's exposure) in both."""
+    from spikeview.guided.plan import make_plan
+    from spikeview.gui import jobs
+    from spikeview.io import open_source
+    from spikeview.pipeline import prepare_sequence, sampler_params
+    from spikeview.recipe import Recipe
+
+    cap = _capture(tmp_path)
+    assert main(["reconstruct", str(cap), "--at", "100", "--method", "guided", "--steps", "1",
+                 "--out", str(tmp_path / "g.npy")]) == 0
+    cli = next(ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("plan ("))
+    recipe = Recipe().with_values({"run.method": "guided", "guided.steps": 1})
+    with open_source(cap) as src:
+        state = prepare_sequence(src, recipe)
+        cfg = sampler_params(recipe, state)
+        app = str(make_plan(jobs.window_observation(src, 100, cfg, state.alpha, None), cfg)).splitlines()[0]
+    assert cli == app and "/255 of the image the sampler sees" in cli

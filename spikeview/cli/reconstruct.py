@@ -58,12 +58,14 @@ def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre
         return notes
     from spikeview.guided import Observation, make_plan
     from spikeview.guided.knobs import knob_status
+    from spikeview.pipeline import sampler_params
 
-    obs = Observation.from_source(source, centre, recipe.guided.window, alpha=state.alpha, eta=recipe.guided.eta,
-                                  radius=recipe.guided.temporal_radius)
-    plan = make_plan(obs, recipe.guided)
+    # the plan of the settings the sampler runs (η at the sequence's exposure), as the app shows it
+    cfg = sampler_params(recipe, state)
+    obs = Observation.from_source(source, centre, cfg.window, alpha=state.alpha, eta=cfg.eta, radius=cfg.temporal_radius)
+    plan = make_plan(obs, cfg)
     print(plan, file=sys.stderr)
-    for path, why in knob_status(recipe.guided, plan).items():
+    for path, why in knob_status(cfg, plan).items():
         if why and path in given:
             notes.append(f"{BY_PATH[path].flag} has no effect here: {why}.")
     return notes

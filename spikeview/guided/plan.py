@@ -92,7 +92,7 @@ class Plan:
 
     def __str__(self) -> str:
         sig = ", ".join(f"{255 * s:.1f}" for s in self.sigma)
-        lines = [f"plan (noise σ of the TFP estimate per channel: {sig} /255):"]
+        lines = [f"plan (noise σ of the TFP estimate per channel: {sig} /255 of the image the sampler sees):"]
         values = {
             "mosaic": "on" if self.mosaic else "off",
             "cast": "on" if self.cast else "off",
