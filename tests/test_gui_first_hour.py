@@ -75,3 +75,31 @@ def test_psnr_curves_for_a_capture_with_ground_truth_beside_it(window, qtbot, tm
     r = window.controller.guided_result
     assert r.psnr is not None and np.isfinite(r.psnr) and 0 < r.ssim <= 1
     assert "no demosaic" in g.plan.toPlainText() if cfa == "none" else "demosaic" in g.plan.toPlainText()
+
+
+def test_export_keeps_a_typed_path_and_defaults_to_a_writable_folder(window, qtbot, tmp_path, monkeypatch):
+    import os
+    from pathlib import Path
+
+    path = _simulate(tmp_path, "RGGB")
+    real_access = os.access
+    # the capture's folder is read-only (a mounted card, a shared data set): exports go home, not there
+    monkeypatch.setattr(os, "access", lambda p, mode, *a, **k: False if Path(p) == tmp_path else real_access(p, mode, *a, **k))
+    monkeypatch.setattr(Path, "home", classmethod(lambda cls: tmp_path / "home"))
+    _open(window, qtbot, path)
+    panel, s = window.export_panel, window.session
+    assert Path(panel.path.text()).parent == tmp_path / "home"
+    # a path the user gives (typed or pasted): a format change keeps it and changes only the suffix
+    panel.path.setText(str(tmp_path / "out" / "my clip.png"))
+    s.set("export_format", "exr")
+    assert panel.path.text() == str(tmp_path / "out" / "my clip.exr")
+    s.set("export_format", "mp4")
+    assert panel.path.text() == str(tmp_path / "out" / "my clip.mp4")
+    panel.path.setText(str(tmp_path / "out" / "noext"))
+    s.set("export_format", "png")
+    assert panel.path.text() == str(tmp_path / "out" / "noext.png")
+    # the last export folder is the default for the next capture
+    panel.remember_folder(tmp_path / "exports")
+    window.set_stream(window.session.stream)
+    window.export_panel._on_source()
+    assert Path(panel.path.text()).parent == tmp_path / "exports"

@@ -567,6 +567,7 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         if self.controller.start_export(out, overwrite=bool(existing), cluster=self.export_panel.cluster_address()):
             self.settings.setValue("last_export_dir", str(Path(out).parent))
+            self.export_panel.remember_folder(Path(out).parent)
 
     def ask_overwrite(self, out: Path, existing: list[Path]) -> bool:
         """Ask before replacing files (tests replace this method)."""

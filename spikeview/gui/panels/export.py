@@ -35,7 +35,9 @@ def matching_name(path: str, fmt: str, n_frames: int) -> str:
         return path
     p = Path(path)
     if p.suffix.lower() not in (".png", ".exr", ".mp4"):
-        return path
+        if p.suffix or path.endswith(("/", "\\")):  # another suffix (.zarr, .npy…) or a folder: left alone
+            return path
+        p = p.with_name(p.name + ".png")  # no suffix yet: the format's is added below
     stem = p.stem
     field = strip_frame_field(stem) != stem
     if fmt == "mp4" and field:
@@ -53,6 +55,8 @@ class ExportPanel(QtWidgets.QWidget):
         super().__init__(parent)
         self.session = session
         self.folder = Path.home()
+        self._chosen_folder: Path | None = None  # the last export folder (settings) or one picked in Browse
+        self._suggested = ""  # the last name the panel generated: the field follows the settings while it shows it
         self.fmt = ParamCombo(session, "export_format", FORMAT_TEXT)
         self.range = ParamCombo(session, "export_range", RANGE_TEXT)
         self.method = ParamCombo(session, "export_method", METHOD_TEXT)
@@ -122,11 +126,27 @@ class ExportPanel(QtWidgets.QWidget):
     def _edited(self, _text: str) -> None:
         self._auto_name = False
 
+    def _typed(self) -> bool:
+        """Whether the field holds a path the user gave (typed, pasted or set), not the panel's suggestion."""
+        text = self.path.text().strip()
+        return not self._auto_name or (bool(text) and bool(self._suggested) and text != self._suggested)
+
+    def _set_suggestion(self, text: str) -> None:
+        self._suggested = text
+        self.path.setText(text)
+
     def _on_source(self) -> None:
+        import os
+
         stream = self.session.stream
-        if stream is not None and stream.path is not None:
+        if self._chosen_folder is not None:  # the last export folder wins: it was writable
+            self.folder = self._chosen_folder
+        elif stream is not None and stream.path is not None and os.access(stream.path.parent, os.W_OK):
             self.folder = stream.path.parent
+        else:  # no folder of its own, or a read-only one (a mounted card, a shared data set): the home folder
+            self.folder = Path.home()
         self._auto_name = True
+        self._suggested = ""
         if not self.cancel_btn.isEnabled():  # a finished or failed export of the previous capture: forget it
             self.status.setText("")
             self.status.setStyleSheet("")
@@ -182,14 +202,14 @@ class ExportPanel(QtWidgets.QWidget):
         if self.cluster_address():  # a batch export writes a Zarr store
             self.count.setText(self.count.text() + f" → a Zarr store, on {self.cluster_address()}")
             current = Path(self.path.text().strip() or self.stem())
-            if self._auto_name:
-                self.path.setText(str(self.folder / f"{self.stem()}.zarr"))
+            if not self._typed():
+                self._set_suggestion(str(self.folder / f"{self.stem()}.zarr"))
             elif current.suffix.lower() != ".zarr":
                 stem = strip_frame_field(current.stem)
                 self.path.setText(str(current.with_name(f"{stem}.zarr")))
-        elif self._auto_name:
-            self.path.setText(str(self.folder / suggested_name(self.stem(), fmt, n)))
-        else:
+        elif not self._typed():
+            self._set_suggestion(str(self.folder / suggested_name(self.stem(), fmt, n)))
+        else:  # the user's path: keep it, change only the suffix (and the frame field) to the format's
             adapted = matching_name(self.path.text().strip(), fmt, n)
             if adapted != self.path.text().strip():
                 self.path.setText(adapted)
@@ -208,7 +228,7 @@ class ExportPanel(QtWidgets.QWidget):
             p = Path(path)
             if len(self.ticks()) > 1 and fmt != "mp4" and "%" not in p.name:
                 p = p.with_name(suggested_name(p.stem, fmt, 2))
-            self.folder = p.parent
+            self.folder = self._chosen_folder = p.parent
             self._auto_name = False
             self.path.setText(str(p))
 
@@ -228,7 +248,11 @@ class ExportPanel(QtWidgets.QWidget):
     def folder_for_dialogs(self) -> Path:
         return self.folder
 
+    def remember_folder(self, folder: Path) -> None:
+        """The folder of a started export: the default for the next capture's exports (not the capture's own)."""
+        self._chosen_folder = Path(folder)
+
     def set_folder(self, folder: Any) -> None:
         if folder:
-            self.folder = Path(folder)
+            self.folder = self._chosen_folder = Path(folder)
             self.refresh()
