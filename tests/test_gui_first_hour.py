@@ -103,3 +103,36 @@ def test_export_keeps_a_typed_path_and_defaults_to_a_writable_folder(window, qtb
     window.set_stream(window.session.stream)
     window.export_panel._on_source()
     assert Path(panel.path.text()).parent == tmp_path / "exports"
+
+
+def test_a_disabled_knob_looks_disabled(qapp):
+    """The app's palette greys text and the slider fill of a disabled control (before: the disabled
+    group had the active colours, so a greyed-out k looked like the live s slider)."""
+    from PySide6 import QtGui
+
+    from spikeview.gui.app import apply_style
+
+    before, style = qapp.palette(), qapp.style().name()
+    try:
+        apply_style(qapp)
+        pal = qapp.palette()
+        group, role = QtGui.QPalette.ColorGroup, QtGui.QPalette.ColorRole
+        for r in (role.WindowText, role.Text, role.ButtonText, role.Highlight):
+            on, off = pal.color(group.Active, r), pal.color(group.Disabled, r)
+            assert abs(on.lightness() - off.lightness()) > 40 or abs(on.saturation() - off.saturation()) > 100, r
+    finally:
+        qapp.setPalette(before)
+        qapp.setStyle(style)
+
+
+def test_pane_titles_that_do_not_fit_are_elided_with_the_full_text_in_a_tooltip(qtbot):
+    from spikeview.gui.widgets import ElidedLabel
+
+    label = ElidedLabel("guided run 3: x̂₀ at step 12 of 20, tick 1500, ROI 120x80 at (40, 20)")
+    qtbot.addWidget(label)
+    label.resize(120, 20)
+    label.show()
+    shown = label.shown_text()
+    assert shown.endswith("…") and len(shown) < len(label.text()) and label.toolTip() == label.text()
+    label.resize(2000, 20)
+    assert label.shown_text() == label.text() and label.toolTip() == ""

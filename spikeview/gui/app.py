@@ -17,9 +17,31 @@ def configure_pyqtgraph() -> None:
     pg.setConfigOptions(imageAxisOrder="row-major", antialias=False, background=(24, 24, 24), foreground=(220, 220, 220))
 
 
+def apply_style(app: Any) -> None:
+    """The app's look: Fusion with a dark palette, whose **disabled** group is visibly dimmer (grey text, a
+    grey slider fill): a knob the plan switches off must not look like a live one."""
+    from PySide6 import QtGui
+
+    app.setStyle("Fusion")
+    pal = QtGui.QPalette()
+    dark, mid, text = QtGui.QColor(37, 37, 40), QtGui.QColor(53, 53, 58), QtGui.QColor(225, 225, 225)
+    role = QtGui.QPalette.ColorRole
+    for r, colour in ((role.Window, dark), (role.Base, QtGui.QColor(28, 28, 30)), (role.AlternateBase, mid),
+                      (role.Button, mid), (role.Text, text), (role.WindowText, text), (role.ButtonText, text),
+                      (role.ToolTipBase, mid), (role.ToolTipText, text), (role.Highlight, QtGui.QColor(255, 150, 30)),
+                      (role.HighlightedText, QtGui.QColor(20, 20, 20))):
+        pal.setColor(r, colour)
+    grey, off = QtGui.QColor(115, 115, 120), QtGui.QPalette.ColorGroup.Disabled
+    for r, colour in ((role.Text, grey), (role.WindowText, grey), (role.ButtonText, grey),
+                      (role.Highlight, QtGui.QColor(80, 80, 86)), (role.HighlightedText, grey),
+                      (role.Button, QtGui.QColor(44, 44, 48)), (role.Base, QtGui.QColor(33, 33, 36))):
+        pal.setColor(off, r, colour)
+    app.setPalette(pal)
+
+
 def make_application(argv: list[str] | None = None) -> Any:
     """The QApplication (created once), styled, with pyqtgraph configured."""
-    from PySide6 import QtGui, QtWidgets
+    from PySide6 import QtWidgets
 
     from spikeview.gui.workers import configure_runtime
 
@@ -28,18 +50,7 @@ def make_application(argv: list[str] | None = None) -> Any:
         app = QtWidgets.QApplication(argv if argv is not None else [sys.argv[0]])
         app.setOrganizationName("spikeview")
         app.setApplicationName("spikeview")
-        app.setStyle("Fusion")
-        pal = QtGui.QPalette()
-        dark, mid, text = QtGui.QColor(37, 37, 40), QtGui.QColor(53, 53, 58), QtGui.QColor(225, 225, 225)
-        for role, colour in ((QtGui.QPalette.ColorRole.Window, dark), (QtGui.QPalette.ColorRole.Base, QtGui.QColor(28, 28, 30)),
-                             (QtGui.QPalette.ColorRole.AlternateBase, mid), (QtGui.QPalette.ColorRole.Button, mid),
-                             (QtGui.QPalette.ColorRole.Text, text), (QtGui.QPalette.ColorRole.WindowText, text),
-                             (QtGui.QPalette.ColorRole.ButtonText, text), (QtGui.QPalette.ColorRole.ToolTipBase, mid),
-                             (QtGui.QPalette.ColorRole.ToolTipText, text),
-                             (QtGui.QPalette.ColorRole.Highlight, QtGui.QColor(255, 150, 30)),
-                             (QtGui.QPalette.ColorRole.HighlightedText, QtGui.QColor(20, 20, 20))):
-            pal.setColor(role, colour)
-        app.setPalette(pal)
+        apply_style(app)
     configure_pyqtgraph()
     configure_runtime()
     return app

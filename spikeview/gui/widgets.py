@@ -49,6 +49,38 @@ def app_words(message: str) -> str:
 # ------------------------------------------------------------------------------------- images
 
 
+class ElidedLabel(QtWidgets.QLabel):
+    """A one-line label that shortens its text with "…" when it does not fit (never cut mid-word by the
+    edge) and then shows the full text as its tooltip."""
+
+    def __init__(self, text: str = "", parent: QtWidgets.QWidget | None = None):
+        super().__init__(parent)
+        self._full = ""
+        self.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored, QtWidgets.QSizePolicy.Policy.Fixed)
+        self.setText(text)
+
+    def text(self) -> str:  # the full text (what is drawn may be shortened)
+        return self._full
+
+    def shown_text(self) -> str:
+        """The text as drawn (shortened with "…" when it does not fit)."""
+        return super().text()
+
+    def setText(self, text: str) -> None:  # noqa: N802 - Qt's name
+        self._full = str(text)
+        self._elide()
+
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:  # noqa: N802 - Qt's name
+        super().resizeEvent(event)
+        self._elide()
+
+    def _elide(self) -> None:
+        width = max(self.contentsRect().width(), 0)
+        shown = self.fontMetrics().elidedText(self._full, QtCore.Qt.TextElideMode.ElideRight, width) if width else self._full
+        super().setText(shown)
+        self.setToolTip(self._full if shown != self._full else "")
+
+
 class ImagePane(QtWidgets.QWidget):
     """A titled pyqtgraph view of one uint8 image with fixed levels (0, 255), zoom and pan.
 
@@ -58,7 +90,7 @@ class ImagePane(QtWidgets.QWidget):
 
     def __init__(self, title: str, parent: QtWidgets.QWidget | None = None, *, min_size: int = 120):
         super().__init__(parent)
-        self.title = QtWidgets.QLabel(title)
+        self.title = ElidedLabel(title)
         self.title.setObjectName("paneTitle")
         self.title.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
         # a new title (tick, step…) must not re-layout the panel: its size does not follow the text

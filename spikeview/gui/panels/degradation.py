@@ -16,6 +16,7 @@ from PySide6 import QtCore, QtWidgets
 from spikeview.gui.core import RESIDUAL_RANGE
 from spikeview.gui.model import SPECS, Session
 from spikeview.gui.widgets import (
+    ElidedLabel,
     ImagePane,
     ParamCheck,
     ParamSlider,
@@ -72,7 +73,7 @@ class DegradationPanel(QtWidgets.QWidget):
         self.levels = ParamSlider(session, "levels", label="L")
         self.window = ParamSpin(session, "window")
         self.pyramid = ParamCheck(session, "show_pyramid", "per level")
-        self.info = QtWidgets.QLabel()
+        self.info = ElidedLabel()  # one status line: shortened with "…" (full text in its tooltip) on a small screen
         self.info.setObjectName("degradation_info")
         controls = QtWidgets.QGridLayout()
         controls.addWidget(self.k, 0, 0)
