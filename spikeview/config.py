@@ -3,6 +3,12 @@
 Derive a ``@dataclass`` from :class:`Config`; fields must be TOML-representable (bool, int, float,
 str, lists/tuples of those, nested :class:`Config` dataclasses, or ``None``, which is stored by
 omission). ``Config.from_dict`` rejects unknown keys and wrong types with a sentence naming the key.
+
+**A settable parameter is declared once, on its field**: ``k: float = param(20.0, label=…, help=…,
+lo=0, hi=1000)`` keeps its command-line flag, app control, label, unit, range and help in the field's
+metadata (:class:`ParamMeta`). The recipe's view table (:data:`spikeview.recipe.PARAMS`), the CLI
+flags, the app's controls, the README table and the range check (:meth:`Config.check_params`, the
+one validation path, with :func:`check_value`) are all generated from it.
 """
 
 from __future__ import annotations
@@ -19,6 +25,86 @@ from typing import Any, TypeVar
 from spikeview.errors import InputFileError, ParameterError
 
 C = TypeVar("C", bound="Config")
+
+
+@dataclasses.dataclass(frozen=True)
+class ParamMeta:
+    """What a field declared with :func:`param` knows about itself (its ``metadata["param"]``).
+
+    Attributes:
+        label: the app control's label and the name used in the app's messages.
+        help: one sentence, with the unit.
+        flag: command-line flag (``None``: ``--`` and the field name with dashes; ``""``: no flag).
+        key: the app's control (session parameter name; ``None``: the field name; ``""``: not in the app).
+        unit: unit shown beside numbers (``ticks``, ``fps``…).
+        lo, hi: accepted range (``None`` = unbounded); ``lo_open`` excludes ``lo``.
+        step: slider/spin step in the app.
+        choices: accepted strings.
+    """
+
+    label: str
+    help: str
+    flag: str | None = None
+    key: str | None = None
+    unit: str = ""
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    step: float | None = None
+    choices: tuple[str, ...] = ()
+
+
+def param(default: Any, *, label: str, help: str, flag: str | None = None, key: str | None = None, unit: str = "",
+          lo: float | None = None, hi: float | None = None, lo_open: bool = False, step: float | None = None,
+          choices: tuple[str, ...] = ()) -> Any:
+    """A dataclass field that a person sets (see the module docstring); ``default`` is its default."""
+    meta = ParamMeta(label, help, flag, key, unit, lo, hi, lo_open, step, tuple(choices))
+    return dataclasses.field(default=default, metadata={"param": meta})
+
+
+def param_fields(cls: type) -> list[tuple[str, ParamMeta]]:
+    """``(field name, metadata)`` of every :func:`param` field of a config class, in field order."""
+    return [(f.name, f.metadata["param"]) for f in dataclasses.fields(cls) if "param" in f.metadata]
+
+
+def check_value(name: str, kind: Any, value: Any, lo: float | None = None, hi: float | None = None,
+                choices: tuple[str, ...] = (), *, lo_open: bool = False, unit: str = "") -> Any:
+    """``value`` converted to ``kind`` (bool, str, int or float) and checked against the range or
+    choices; :class:`ParameterError` naming ``name`` (the word the person typed) otherwise."""
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ParameterError(f"{name} must be true or false, got {value!r}.")
+        return value
+    if kind is str:
+        value = str(value)
+        if choices and value not in choices:
+            raise ParameterError(f"{name} = {value!r} is not valid: use one of {', '.join(choices)}.")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
+        raise ParameterError(f"{name} must be a finite number, got {value!r}.")
+    if kind is int:
+        if float(value) != int(value):
+            raise ParameterError(f"{name} must be a whole number, got {value!r}.")
+        value = int(value)
+    else:
+        value = float(value)
+    bad_lo = lo is not None and (value <= lo if lo_open else value < lo)
+    bad_hi = hi is not None and value > hi
+    if bad_lo or bad_hi:
+        lo_s = "" if lo is None else (f"> {lo:g}" if lo_open else f">= {lo:g}")
+        hi_s = "" if hi is None else f"<= {hi:g}"
+        rng = " and ".join(x for x in (lo_s, hi_s) if x)
+        raise ParameterError(f"{name} = {value:g} is out of range: use a value {rng}{' ' + unit if unit else ''}.")
+    return value
+
+
+def field_kind(cls: type, name: str) -> tuple[Any, bool]:
+    """``(type, optional)`` of a config field: ``int | None`` gives ``(int, True)``."""
+    tp = typing.get_type_hints(cls)[name]
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        return (args[0] if len(args) == 1 else tp), type(None) in typing.get_args(tp)
+    return tp, False
 
 
 def _strip_none(value: Any) -> Any:
@@ -82,6 +168,22 @@ def _coerce(name: str, tp: Any, value: Any, where: str) -> Any:
 @dataclasses.dataclass
 class Config:
     """Base class of every settings dataclass (see module docstring)."""
+
+    #: the recipe table this config is (``"guided"``): names parameters in messages (``guided.k``)
+    TABLE: typing.ClassVar[str] = ""
+
+    def check_params(self) -> None:
+        """Check every :func:`param` field against its declared range or choices (the one validation
+        path of the parameters; configs call it from ``__post_init__``)."""
+        for name, meta in param_fields(type(self)):
+            value = getattr(self, name)
+            kind, optional = field_kind(type(self), name)
+            path = f"{self.TABLE}.{name}" if self.TABLE else name
+            if value is None:
+                if optional:
+                    continue
+                raise ParameterError(f"{path} needs a value; see --help for its range.")
+            check_value(path, kind, value, meta.lo, meta.hi, meta.choices, lo_open=meta.lo_open, unit=meta.unit)
 
     def to_dict(self) -> dict[str, Any]:
         """A plain dict (TOML-ready: ``None`` values omitted, tuples as lists)."""

@@ -14,26 +14,28 @@ classical methods (:data:`SHARED`: the window Δτ, the demosaic, the colour-cas
 in ``[classical]`` only; :class:`Recipe` copies them into its ``guided`` config, and a ``[guided]``
 table that repeats one with another value is refused.
 
-**One table of views.** :data:`PARAMS` lists every parameter a person can set, by dotted path
-(``guided.k``), with its command-line flag (``--k``), its app control (the session key ``k``), label,
-unit, range and one-sentence help. The CLI's flags (:func:`add_flags`, :func:`apply_flags`), the
-app's controls (:mod:`spikeview.gui.model`) and the configs' range checks are all generated from
-it; nothing else translates names.
+**Each parameter declared once.** A settable field is declared on its config with
+:func:`~spikeview.config.param` (label, help, unit, range, choices; flag and app key when they differ
+from the field's name). :data:`PARAMS` is generated from those fields: every parameter by dotted
+path (``guided.k``) with its command-line flag (``--k``), its app control (the session key ``k``),
+label, unit, range and one-sentence help. The CLI's flags (:func:`add_flags`, :func:`apply_flags`),
+the app's controls (:mod:`spikeview.gui.model`), the README table (:func:`markdown_table`) and the
+configs' range checks (:meth:`~spikeview.config.Config.check_params`) all come from it; nothing else
+translates names. A new parameter is its field and the code that uses it.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from spikeview.classical_config import ClassicalConfig
-from spikeview.config import Config, load_toml
+from spikeview.classical.config import ClassicalConfig
+from spikeview.config import Config, check_value, load_toml, param, param_fields  # noqa: F401 (check_value: the app's)
 from spikeview.errors import InputFileError, ParameterError
-from spikeview.export.settings import EXR_COMPRESSIONS, TRANSFERS, X264_PRESETS, ExportConfig
-from spikeview.guided.config import PRECISIONS, GuidedConfig
+from spikeview.export.settings import ExportConfig
+from spikeview.guided.config import GuidedConfig
 
 #: ``[classical]`` field → the ``GuidedConfig`` field it sets (the observation both methods share)
 SHARED: dict[str, str] = {"window": "window", "demosaic": "demosaic", "eta": "eta", "alpha": "alpha",
@@ -57,12 +59,16 @@ class RunTable(Config):
         range: ``"A:B[:STEP]"`` in ticks: windows centred on A, A+STEP, … below B.
     """
 
-    method: str = "tfp"
+    TABLE = "run"
+
+    method: str = param("tfp", key="export_method", label="Reconstruction", choices=METHODS,
+                        help="Reconstruction method: tfp (spike count over the window), tfi (inter-spike interval) or "
+                             "guided (SpikeDiff).")
     at: int | None = None
     range: str | None = None
 
     def __post_init__(self) -> None:
-        check("run.method", self.method)
+        self.check_params()
 
 
 def _stream(help: str, **kw: Any) -> Any:
@@ -174,116 +180,19 @@ class Param:
                            unit=self.unit)
 
 
-def check_value(name: str, kind: Any, value: Any, lo: float | None = None, hi: float | None = None,
-                choices: tuple[str, ...] = (), *, lo_open: bool = False, unit: str = "") -> Any:
-    """``value`` converted to ``kind`` (bool, str, int or float) and checked against the range or
-    choices; :class:`ParameterError` naming ``name`` (the word the person typed) otherwise."""
-    if kind is bool:
-        if not isinstance(value, bool):
-            raise ParameterError(f"{name} must be true or false, got {value!r}.")
-        return value
-    if kind is str:
-        value = str(value)
-        if choices and value not in choices:
-            raise ParameterError(f"{name} = {value!r} is not valid: use one of {', '.join(choices)}.")
-        return value
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
-        raise ParameterError(f"{name} must be a finite number, got {value!r}.")
-    if kind is int:
-        if float(value) != int(value):
-            raise ParameterError(f"{name} must be a whole number, got {value!r}.")
-        value = int(value)
-    else:
-        value = float(value)
-    bad_lo = lo is not None and (value <= lo if lo_open else value < lo)
-    bad_hi = hi is not None and value > hi
-    if bad_lo or bad_hi:
-        lo_s = "" if lo is None else (f"> {lo:g}" if lo_open else f">= {lo:g}")
-        hi_s = "" if hi is None else f"<= {hi:g}"
-        rng = " and ".join(x for x in (lo_s, hi_s) if x)
-        raise ParameterError(f"{name} = {value:g} is out of range: use a value {rng}{' ' + unit if unit else ''}.")
-    return value
+def _params() -> tuple[Param, ...]:
+    """One :class:`Param` per field declared with :func:`~spikeview.config.param`, table by table."""
+    out = []
+    for table, cls in (("run", RunTable), ("classical", ClassicalConfig), ("guided", GuidedConfig), ("export", ExportConfig)):
+        for name, m in param_fields(cls):
+            flag = "--" + name.replace("_", "-") if m.flag is None else m.flag
+            out.append(Param(f"{table}.{name}", flag, name if m.key is None else m.key, m.label, m.help, m.unit, m.lo, m.hi,
+                             m.lo_open, m.step, m.choices))
+    return tuple(out)
 
 
-def _p(path: str, flag: str, key: str, label: str, help: str, **kw: Any) -> Param:
-    return Param(path, flag, key, label, help, **kw)
-
-
-_S255 = 75.0 / 255.0
-#: every parameter a person sets: the CLI flags and the app's controls are generated from this table
-PARAMS: tuple[Param, ...] = (
-    # --- run
-    _p("run.method", "--method", "export_method", "Reconstruction",
-       "Reconstruction method: tfp (spike count over the window), tfi (inter-spike interval) or guided (SpikeDiff).",
-       choices=METHODS),
-    # --- observation (shared by the classical methods and the guided sampler)
-    _p("classical.window", "--window", "window", "Window Δτ",
-       "TFP window Δτ in ticks (10 ticks = 0.5 ms at 20 kHz); also the guided sampler's observation.",
-       unit="ticks", lo=1, hi=4096, step=1),
-    _p("classical.tfi_half_window", "--tfi-half-window", "tfi_half_window", "TFI half-window",
-       "TFI searches this many ticks before and after the centre tick.", unit="ticks", lo=1, hi=512, step=1),
-    _p("classical.demosaic", "--demosaic", "demosaic", "Demosaicking",
-       "Demosaicking of TFP/TFI outputs and of the guided start estimate: auto (the plan picks from the measured noise: bilinear where noise dominates, malvar2004 where clean or denoised afterwards), bilinear, malvar2004 or menon2007.",
-       choices=("auto", "bilinear", "malvar2004", "menon2007")),
-    _p("classical.colour_cast", "--colour-cast", "colour_cast", "Correct colour cast",
-       "Undo the sensor's per-channel response with gray-world gains estimated once per sequence (Bayer streams)."),
-    _p("classical.eta", "--eta", "eta", "Colour range η",
-       "Range parameter η of the colour cast: after correction each channel's sequence mean is 1/η (2 → 0.5).",
-       lo=0.0, lo_open=True, hi=8.0, step=0.05),
-    # --- guided sampler
-    _p("guided.guidance", "--guidance", "guidance", "Guidance rule",
-       "How the data steers each step: hqs (a data step on the clean estimate, fast) or dps (gradient through the prior).",
-       choices=("hqs", "dps")),
-    _p("guided.prior", "--prior", "prior", "Prior",
-       "Natural-image prior: ffdnet (embedded) or sd (a local Stable Diffusion 2.x model, optional extra).",
-       choices=("ffdnet", "sd")),
-    _p("guided.model_path", "--model", "model_path", "Model weights",
-       "Weights folder for --prior sd (or an FFDNet .pth replacing the packaged weights); empty = packaged FFDNet."),
-    _p("guided.steps", "--steps", "steps", "Steps", "Number of sampler steps (prior calls) per window.",
-       lo=1, hi=1000, step=1),
-    _p("guided.t_start", "--t-start", "t_start", "Start noise t_s",
-       "Start noise level t_s as a fraction of full scale (0.196 = 50/255; FFDNet is trained up to 75/255 = 0.294).",
-       unit="of full scale", lo=0.0, hi=_S255, step=1.0 / 255.0),
-    _p("guided.s", "--s", "s", "Guidance weight s",
-       "Weight of the data against the prior: the DPS step size, or under HQS the fraction of the data step taken (1 = full, 0 = none).",
-       lo=0.0, hi=10.0, step=0.05),
-    _p("guided.lam", "--lam", "lam", "HQS λ",
-       "HQS prior weight λ in ρ_t = λσ_n²/σ_t² (larger trusts the prior more).", lo=0.0, lo_open=True, hi=100.0, step=0.1),
-    _p("guided.quantise", "--quantise", "quantise", "Soft quantisation Q",
-       "Model the TFP's quantisation to multiples of 1/Δτ in the forward model (unset: the plan decides)."),
-    _p("guided.k", "--k", "k", "Quantiser sharpness k",
-       "Sharpness k of the soft quantiser Q (the paper's best: 50); acts only when Q is on.", lo=0.0, hi=1000.0, step=1.0),
-    _p("guided.levels", "--levels", "levels", "Pyramid levels L",
-       "Band-pass levels L of the multiscale Laplacian loss (0 = plain residual; capped by the frame size).",
-       lo=0, hi=6, step=1),
-    _p("guided.sigma_scale", "--sigma-scale", "sigma_scale", "Prior noise scale",
-       "Factor on the data-derived noise level handed to the prior (1 = as measured).", lo=0.0, lo_open=True, hi=10.0, step=0.05),
-    _p("guided.seed", "--seed", "seed", "Seed", "Random seed (same seed and machine: same result).", lo=0, hi=2**31 - 1, step=1),
-    _p("guided.precision", "--precision", "precision", "Prior precision",
-       "Arithmetic of the FFDNet prior: auto (the fastest path within 0.1 dB / 0.005 SSIM of float32 on the bench, from the CPU's features), float32 (the reference pixels), float32-fast (NNPACK's fast float32 convolution) or bfloat16-mixed (bfloat16 on high-noise steps).",
-       choices=PRECISIONS),
-    _p("guided.warm_start", "--warm-start", "warm_start", "Warm start",
-       "Start each window of a sequence from the previous result re-noised to t_s (faster, may smear motion)."),
-    _p("guided.temporal_radius", "--temporal-radius", "temporal_radius", "Temporal radius",
-       "Neighbouring windows on each side whose spikes a guided frame may borrow, aligned and used only where they match (0 = the window alone).",
-       unit="windows", lo=0, hi=8, step=1),
-    # --- export
-    _p("export.fps", "--fps", "export_fps", "Output fps", "MP4 playback rate in frames per second.",
-       unit="fps", lo=0.01, hi=1000.0, step=1.0),
-    _p("export.compression", "--compression", "", "EXR compression", "EXR compression (all lossless).",
-       choices=EXR_COMPRESSIONS),
-    _p("export.crf", "--crf", "", "MP4 quality", "libx264 constant rate factor, 0 (best) to 51; 18 is visually lossless.",
-       lo=0, hi=51),
-    _p("export.preset", "--x264-preset", "", "x264 preset", "libx264 speed/size preset.", choices=X264_PRESETS),
-    _p("export.black", "--black", "black", "Black level",
-       "Linear value shown as black in PNG/MP4 and the app (fixed, never per frame).", lo=0.0, hi=1.0, step=0.01),
-    _p("export.white", "--white", "white", "White point",
-       "Exposure: the linear value (Y·α/η units) that becomes 1.0 in EXR and full scale in npy/PNG/MP4 and the app; "
-       "unset, the sequence's 99.9th percentile, chosen once and printed.", lo=0.0, lo_open=True, hi=16.0, step=0.01),
-    _p("export.transfer", "--transfer", "transfer", "Display curve",
-       "Display encoding of PNG/MP4 and the app: srgb, gamma (power 1/gamma) or linear.", choices=TRANSFERS),
-    _p("export.gamma", "--gamma", "gamma", "Gamma", "Exponent of the gamma display curve.", lo=0.2, hi=5.0, step=0.05),
-)
+#: every parameter a person sets, generated from the configs' fields: the CLI flags and the app's controls are views of it
+PARAMS: tuple[Param, ...] = _params()
 
 BY_PATH: dict[str, Param] = {p.path: p for p in PARAMS}
 BY_KEY: dict[str, Param] = {p.key: p for p in PARAMS if p.key}
@@ -293,13 +202,6 @@ BY_FLAG: dict[str, Param] = {p.flag: p for p in PARAMS if p.flag}
 def check(path: str, value: Any, name: str | None = None) -> Any:
     """Validate ``value`` for the parameter at ``path`` (see :meth:`Param.check`)."""
     return BY_PATH[path].check(value, name)
-
-
-def check_table(table: str, cfg: Any) -> None:
-    """Range-check every field of ``cfg`` that :data:`PARAMS` lists under ``table`` (config ``__post_init__``)."""
-    for p in PARAMS:
-        if p.table == table:
-            check(p.path, getattr(cfg, p.field))
 
 
 # ------------------------------------------------------------------------------------ the recipe

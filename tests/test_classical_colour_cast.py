@@ -5,8 +5,8 @@ import pytest
 
 from spikeview.cfa import CHANNEL_INDEX, site_masks
 from spikeview.classical import (ColourCastWarning, alpha_from_means, alpha_from_sfr, alpha_with_note, apply_colour_cast,
-                                 apply_colour_cast_mosaic, channel_means, demosaic, estimate_alpha, sequence_channel_means,
-                                 site_rates)
+                                 apply_colour_cast_mosaic, channel_means, estimate_alpha, sequence_channel_means, site_rates)
+from spikeview.classical.demosaic import demosaic
 from spikeview.classical.colour_cast import sample_starts
 from spikeview.errors import ParameterError
 from spikeview.io import ArraySource

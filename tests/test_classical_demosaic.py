@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from skimage import data
 
-from spikeview.classical import demosaic
+from spikeview.classical.demosaic import demosaic
 from spikeview.errors import ParameterError
 
 with warnings.catch_warnings():

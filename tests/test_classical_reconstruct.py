@@ -4,18 +4,11 @@ import numpy as np
 import pytest
 
 import spikeview.classical.reconstruct as rec
-from spikeview.classical import (
-    ClassicalConfig,
-    apply_colour_cast_mosaic,
-    demosaic,
-    estimate_alpha,
-    preview_rgb,
-    reconstruct_frame,
-    reconstruct_frames,
-    tfi,
-    tfp,
-    to_display,
-)
+from spikeview.classical import (ClassicalConfig, apply_colour_cast_mosaic, estimate_alpha, preview_rgb, reconstruct_frame,
+                                 reconstruct_frames, to_display)
+from spikeview.classical.demosaic import demosaic
+from spikeview.classical.tfi import tfi
+from spikeview.classical.tfp import tfp
 from spikeview.errors import ParameterError
 from spikeview.io import ArraySource
 

@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from spikeview.classical import tfi, tfi_array, tfp, tfp_array, window_counts, window_range
+from spikeview.classical import tfi_array, tfp_array, window_counts, window_range
+from spikeview.classical.tfi import tfi
+from spikeview.classical.tfp import tfp
 from spikeview.errors import ParameterError
 from spikeview.io import ArraySource
 

@@ -135,7 +135,7 @@ def test_open_lower_bounds_reject_the_bound_itself(tmp_path, capsys, flag, path)
     with pytest.raises(ParameterError):
         Recipe().with_values({path: 0.0})
     Recipe().with_values({path: 1e-3})  # just above the bound is fine
-    from spikeview.classical_config import ClassicalConfig
+    from spikeview.classical.config import ClassicalConfig
     from spikeview.export import ExportConfig
 
     typed = {"export.white": lambda v: ExportConfig(white=v), "classical.eta": lambda v: ClassicalConfig(eta=v),

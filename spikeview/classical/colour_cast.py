@@ -31,7 +31,7 @@ from spikeview.classical.tfp import window_counts
 from spikeview.errors import ParameterError
 from spikeview.io.source import SpikeSource
 
-from spikeview.classical_config import DEFAULT_ALPHA_WINDOWS, DEFAULT_ETA  # noqa: E402  (one home: the settings)
+from spikeview.classical.config import DEFAULT_ALPHA_WINDOWS, DEFAULT_ETA  # noqa: E402  (one home: the settings)
 
 
 class ColourCastWarning(UserWarning):

@@ -27,12 +27,12 @@ from spikeview.classical.colour_cast import (
 )
 from spikeview.classical.demosaic import DEMOSAIC_METHODS, check_method, demosaic
 from spikeview.classical.demosaic._common import quad_codes
-from spikeview.classical.noise import choose_demosaic, haar_noise_variance
+from spikeview.classical.config import CLASSICAL_METHODS, ClassicalConfig  # noqa: F401 (re-exported)
 from spikeview.classical.display import Gamma, _check_gamma, _check_levels, encode8, to_display, transfer
+from spikeview.classical.noise import choose_demosaic, haar_noise_variance
 from spikeview.classical.tfi import DEFAULT_HALF_WINDOW, tfi
 from spikeview.classical.tfp import counts_to_sfr, tfp, window_counts
 from spikeview.classical.windows import window_range
-from spikeview.classical_config import CLASSICAL_METHODS, ClassicalConfig  # noqa: F401 (re-exported)
 from spikeview.errors import ParameterError
 from spikeview.io.source import SpikeSource
 

@@ -26,7 +26,7 @@ import numpy as np
 from spikeview.errors import ParameterError
 from spikeview.io.source import SpikeSource
 
-from spikeview.classical_config import DEFAULT_HALF_WINDOW  # noqa: E402  (one home: the settings)
+from spikeview.classical.config import DEFAULT_HALF_WINDOW  # noqa: E402  (one home: the settings)
 
 
 @numba.njit(cache=True, nogil=True)

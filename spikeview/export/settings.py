@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from spikeview.config import Config
+from spikeview.config import Config, param
 from spikeview.errors import ParameterError
 
 #: EXR compressions offered (all lossless); OpenImageIO names
@@ -63,15 +63,29 @@ class ExportConfig(Config):
             once (no image content lost, the video is one pixel larger) or ``"crop"`` drops it.
     """
 
-    fps: float = 30.0
-    crf: int = 18
-    preset: str = "medium"
-    compression: str = "zip"
+    # the ranges declared with param() are those of the CLI's flags and the app's controls
+    # (spikeview.recipe.PARAMS); __post_init__ checks what the writers need (a white point may be
+    # recorded as the sequence found it, beyond the controls' range)
+    TABLE = "export"
+
+    fps: float = param(30.0, key="export_fps", label="Output fps", unit="fps", lo=0.01, hi=1000.0, step=1.0,
+                       help="MP4 playback rate in frames per second.")
+    crf: int = param(18, key="", label="MP4 quality", lo=0, hi=51,
+                     help="libx264 constant rate factor, 0 (best) to 51; 18 is visually lossless.")
+    preset: str = param("medium", flag="--x264-preset", key="", label="x264 preset", choices=X264_PRESETS,
+                        help="libx264 speed/size preset.")
+    compression: str = param("zip", key="", label="EXR compression", choices=EXR_COMPRESSIONS,
+                             help="EXR compression (all lossless).")
     png_bits: int = 8
-    black: float = 0.0
-    white: float | None = None
-    transfer: str = "srgb"
-    gamma: float = 2.2
+    black: float = param(0.0, label="Black level", lo=0.0, hi=1.0, step=0.01,
+                         help="Linear value shown as black in PNG/MP4 and the app (fixed, never per frame).")
+    white: float | None = param(None, label="White point", lo=0.0, lo_open=True, hi=16.0, step=0.01,
+                                help="Exposure: the linear value (Y·α/η units) that becomes 1.0 in EXR and full scale in "
+                                     "npy/PNG/MP4 and the app; unset, the sequence's 99.9th percentile, chosen once and "
+                                     "printed.")
+    transfer: str = param("srgb", label="Display curve", choices=TRANSFERS,
+                          help="Display encoding of PNG/MP4 and the app: srgb, gamma (power 1/gamma) or linear.")
+    gamma: float = param(2.2, label="Gamma", lo=0.2, hi=5.0, step=0.05, help="Exponent of the gamma display curve.")
     first_frame: int = 0
     even_size: str = "pad"
 

@@ -168,7 +168,7 @@ def count_dispersion(raw: np.ndarray, cap: float, keep: float = 0.9) -> float:
     (``m`` their mean), leaving out the ``1 − keep`` of blocks with the largest ratio (edges) and
     corrected for that trimming as in :func:`spikeview.guided.observation.haar_noise_variance`.
     """
-    from spikeview.guided.observation import _trim_factor
+    from spikeview.classical.noise import trim_factor as _trim_factor
 
     h2, w2 = (raw.shape[0] // 2) * 2, (raw.shape[1] // 2) * 2
     if h2 < 2 or w2 < 2:

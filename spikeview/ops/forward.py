@@ -30,7 +30,7 @@ class ForwardModel(nn.Module):
         alpha: ``(3,)`` gray-world factors of the sequence (see :meth:`from_observation`);
             ``None`` means ``(1, 1, 1)`` (C is then a plain gain ``η``).
         eta: range parameter ``η`` of the cast.
-        k: sharpness of Q, or ``None`` for no quantisation.
+        k: sharpness of Q (the sampler passes ``GuidedConfig.k``, the one default), or ``None`` (default) for no Q.
         dense_grad: bilinear-spread gradient of M (SpikeDiff) instead of the exact one.
         cast: apply C (ignored for monochrome).
         bands: bands of the Laplacian pyramid in :meth:`loss` (1 = single scale).
@@ -49,7 +49,7 @@ class ForwardModel(nn.Module):
         window: int = 10,
         alpha: torch.Tensor | Sequence[float] | None = None,
         eta: float = 1.0,
-        k: float | None = 50.0,
+        k: float | None = None,
         dense_grad: bool = True,
         cast: bool = True,
         bands: int = 3,

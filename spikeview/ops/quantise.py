@@ -35,7 +35,7 @@ def _check_k(k: float) -> float:
     return k
 
 
-def soft_quantise(x: torch.Tensor, window: int = 10, k: float = 50.0) -> torch.Tensor:
+def soft_quantise(x: torch.Tensor, window: int, k: float) -> torch.Tensor:
     """Q: soft rounding to multiples of ``1/window`` in [0, 1] (see the module docstring).
 
     Args:
@@ -87,7 +87,7 @@ class SoftQuantise(nn.Module):
         any → same.
     """
 
-    def __init__(self, window: int = 10, k: float = 50.0):
+    def __init__(self, window: int, k: float):
         super().__init__()
         self.window = check_positive_int(window, "window")
         self.k = _check_k(k)
