@@ -186,7 +186,11 @@ def test_store_frames_are_linear_and_export_equals_a_plain_npy_run(cap, tmp_path
     assert white != 1.0 and not np.allclose(frames, expected)  # the store is not the bounded output
 
 
-def test_absurd_local_cluster_is_refused_before_any_work(cap, tmp_path, capsys):
+def test_absurd_local_cluster_is_refused_before_any_work(cap, tmp_path, capsys, monkeypatch):
+    def no_workers(*a, **k):
+        raise AssertionError("99999 workers were about to start")
+
+    monkeypatch.setattr("distributed.LocalCluster", no_workers)
     assert main(["reconstruct", *cap, *RUN, "--cluster", "local:99999", "--out", str(tmp_path / "s.zarr")]) == 1
     _err(capsys, "local:99999", "cores")
     assert _names(tmp_path) == ["in"]
