@@ -73,3 +73,111 @@ def test_base_import_does_not_load_the_cluster_extra():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().splitlines()[-1] == "LOADED=", out.stdout[-300:]
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(PKG.parent).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _imports_anywhere(path: Path, module: str) -> list[tuple[str, list[str]]]:
+    """``(imported module, names)`` of every import in the file, at module level or inside functions
+    (lazy imports count: they run too), relative imports resolved; ``if TYPE_CHECKING:`` blocks skipped."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    skip: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            skip.update(id(n) for child in node.body for n in ast.walk(child))
+    package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+    out = []
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Import):
+            out += [(a.name, []) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(package[: len(package) - node.level + 1] + ([base] if base else []))
+            out.append((base, [a.name for a in node.names]))
+    return out
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Module → the package modules it imports (``from a import b`` names the submodule ``a.b`` when it
+    is one; importing ``a.b.c`` also runs the packages ``a`` and ``a.b``)."""
+    modules = {_module_name(p): p for p in PKG.rglob("*.py")}
+    graph: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        deps: set[str] = set()
+        for base, names in _imports_anywhere(path, name):
+            if not base.startswith("spikeview"):
+                continue
+            targets = [f"{base}.{n}" if f"{base}.{n}" in modules else base for n in names] or [base]
+            for t in targets:
+                parts = t.split(".")
+                deps.update(".".join(parts[:i]) for i in range(1, len(parts) + 1))
+        graph[name] = {d for d in deps if d in modules and d != name and not name.startswith(d + ".")}
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected groups of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    groups: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            group = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                group.append(w)
+                if w == v:
+                    break
+            if len(group) > 1:
+                groups.append(sorted(group))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return groups
+
+
+def test_no_import_circles_inside_the_package():
+    """Every import counts, lazy ones too: a circle means two modules that cannot be understood (or moved)
+    apart. Packages count as their ``__init__``: importing ``spikeview.a.b`` runs ``spikeview.a`` first."""
+    graph = _import_graph()
+    assert "spikeview.pipeline" in graph and graph["spikeview.cli.main"], "the scan found no modules"
+    assert _cycles(graph) == [], f"import circles: {_cycles(graph)}"
+
+
+def test_the_cycle_scan_finds_a_planted_circle():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert _cycles(graph) == [["a", "b", "c"]]
+
+
+def test_gui_takes_no_private_names_from_the_library():
+    """The app is display and interaction only: what it needs from the library is public API
+    (no ``from spikeview.x import _name``, no ``spikeview.x._module``)."""
+    offenders = []
+    for path in (PKG / "gui").rglob("*.py"):
+        for base, names in _imports_anywhere(path, _module_name(path)):
+            if not base.startswith("spikeview") or base.startswith("spikeview.gui"):
+                continue
+            private = [n for n in names if n.startswith("_") and not n.startswith("__")]  # __version__ is public
+            if private or any(part.startswith("_") for part in base.split(".")):
+                offenders.append(f"{path.relative_to(PKG)}: {base} {private}")
+    assert offenders == [], f"gui imports private library names: {offenders}"

@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from spikeview.bench.data import GROUPS, SCENES, TUNE_SCENES, Case, make_cases, spikezoo_clips
+from spikeview.bench.score import clipped_fraction, fit_gain, score  # noqa: F401 (fit_gain: also the benchmark's API)
 
 BASELINE_SCALES = (1.5, 2.0, 2.5, 3.0)
 #: the row that runs exactly the CLI's default guided reconstruction
@@ -51,30 +52,6 @@ DEFAULT_ROW = "guided (default)"
 FAST_ROW = "guided fast (3 steps)"
 #: the fast preset: the default with these changes
 FAST_PRESET = dict(steps=3)
-
-
-# ------------------------------------------------------------------------------------ scoring
-def fit_gain(out: np.ndarray, gt: np.ndarray) -> np.ndarray:
-    """Per-channel least-squares gain ``g_c = Σ x_c t_c / Σ x_c²`` of ``out`` to ``gt`` (1 where ``out`` is 0)."""
-    x = out.reshape(-1, out.shape[-1] if out.ndim == 3 else 1).astype(np.float64)
-    t = gt.reshape(x.shape).astype(np.float64)
-    den = (x * x).sum(axis=0)
-    return np.where(den > 0, (x * t).sum(axis=0) / np.maximum(den, 1e-30), 1.0)
-
-
-def score(out: np.ndarray, gt: np.ndarray) -> tuple[float, float]:
-    """PSNR, SSIM of ``out`` (a bounded frame in [0, 1]) after the least-squares gain, against ``gt``."""
-    from spikeview.metrics import psnr, ssim
-
-    g = fit_gain(out, gt)
-    x = (out.astype(np.float64) * (g if out.ndim == 3 else g[0])).astype(np.float32)
-    gt = gt.astype(np.float32)
-    return psnr(x, gt, data_range=1.0), ssim(x, gt, data_range=1.0)
-
-
-def clipped_fraction(out: np.ndarray) -> float:
-    """Fraction of values at or above full scale in a bounded frame."""
-    return float((np.asarray(out) >= 1.0 - 1e-6).mean())
 
 
 # ------------------------------------------------------------------------------- the user path

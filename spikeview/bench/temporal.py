@@ -89,7 +89,7 @@ def ground_truth(cap: Any, tick: int) -> np.ndarray:
 def temporal_error(frames: list[np.ndarray], gts: list[np.ndarray]) -> float:
     """``RMS((x_t − x_{t−1}) − (g_t − g_{t−1}))`` in 1/255 over every frame pair and pixel, after one
     per-channel least-squares gain of the whole sequence to its ground truth."""
-    from spikeview.bench.guided import fit_gain
+    from spikeview.bench.score import fit_gain
 
     x = np.stack(frames).astype(np.float64)
     g = np.stack(gts).astype(np.float64)
@@ -155,7 +155,7 @@ def run_sequences(out_dir: str | os.PathLike[str] | None = "benchmarks/results",
     """Run every sequence (or ``names``); write ``temporal.md`` / ``temporal.json`` to ``out_dir`` (``None``: nothing)."""
     import torch
 
-    from spikeview.bench.guided import score
+    from spikeview.bench.score import score
     from spikeview.guided.config import GuidedConfig
     from spikeview.guided.sampler import load_prior
 
