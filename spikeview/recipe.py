@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from spikeview.classical.config import ClassicalConfig
-from spikeview.config import Config, check_value, load_toml, param, param_fields  # noqa: F401 (check_value: the app's)
+from spikeview.config import Config, ParamMeta, check_value, load_toml, param, param_fields  # noqa: F401 (check_value: the app's)
 from spikeview.errors import InputFileError, ParameterError
 from spikeview.export.settings import ExportConfig
 from spikeview.guided.config import GuidedConfig
@@ -111,32 +111,18 @@ class StreamTable(Config):
 
 
 @dataclass(frozen=True)
-class Param:
-    """One settable parameter: where it lives, how the CLI and the app show it, what it accepts.
+class Param(ParamMeta):
+    """One settable parameter as the views see it: its field's :class:`~spikeview.config.ParamMeta` with
+    the recipe path and the flag and app key resolved.
 
     Attributes:
         path: ``table.field`` in the recipe (``guided.k``).
         flag: command-line flag (``--k``); booleans get ``--flag/--no-flag``; ``""`` = no flag.
         key: the app's control (session parameter name); ``""`` = not in the app.
-        label: the control's label and the name used in the app's messages.
-        help: one sentence, with the unit.
-        unit: unit shown beside numbers (``ticks``, ``/255``…).
-        lo, hi: accepted range (``None`` = unbounded); ``lo_open`` excludes ``lo``.
-        step: slider/spin step in the app.
-        choices: accepted strings.
+        label, help, unit, lo, hi, lo_open, step, choices: as declared (:func:`~spikeview.config.param`).
     """
 
-    path: str
-    flag: str
-    key: str
-    label: str
-    help: str
-    unit: str = ""
-    lo: float | None = None
-    hi: float | None = None
-    lo_open: bool = False
-    step: float | None = None
-    choices: tuple[str, ...] = ()
+    path: str = ""
 
     @property
     def table(self) -> str:
@@ -186,8 +172,8 @@ def _params() -> tuple[Param, ...]:
     for table, cls in (("run", RunTable), ("classical", ClassicalConfig), ("guided", GuidedConfig), ("export", ExportConfig)):
         for name, m in param_fields(cls):
             flag = "--" + name.replace("_", "-") if m.flag is None else m.flag
-            out.append(Param(f"{table}.{name}", flag, name if m.key is None else m.key, m.label, m.help, m.unit, m.lo, m.hi,
-                             m.lo_open, m.step, m.choices))
+            key = name if m.key is None else m.key
+            out.append(Param(**{**dataclasses.asdict(m), "flag": flag, "key": key}, path=f"{table}.{name}"))
     return tuple(out)
 
 
