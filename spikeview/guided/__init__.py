@@ -33,21 +33,16 @@ from __future__ import annotations
 
 from spikeview._lazy import lazy_exports
 
-_EXPORTS = {
-    "GuidedConfig": "spikeview.guided.config",
-    "Observation": "spikeview.guided.observation",
-    "Plan": "spikeview.guided.plan",
-    "make_plan": "spikeview.guided.plan",
-    "VESchedule": "spikeview.guided.schedule",
-    "DataTerm": "spikeview.guided.likelihood",
-    "DPSGuidance": "spikeview.guided.guidance",
-    "HQSGuidance": "spikeview.guided.guidance",
-    "GuidedSampler": "spikeview.guided.sampler",
-    "RunInfo": "spikeview.guided.sampler",
-    "reconstruct_frame": "spikeview.guided.video",
-    "reconstruct_sequence": "spikeview.guided.video",
-    "resolve_alpha": "spikeview.guided.video",
-    "baseline": "spikeview.guided.baseline",
+_EXPORTS = {  # name → module, imported on first use
+    **dict.fromkeys(["GuidedConfig"], "spikeview.guided.config"),
+    **dict.fromkeys(["Observation"], "spikeview.guided.observation"),
+    **dict.fromkeys(["Plan", "make_plan"], "spikeview.guided.plan"),
+    **dict.fromkeys(["VESchedule"], "spikeview.guided.schedule"),
+    **dict.fromkeys(["DataTerm"], "spikeview.guided.likelihood"),
+    **dict.fromkeys(["DPSGuidance", "HQSGuidance"], "spikeview.guided.guidance"),
+    **dict.fromkeys(["GuidedSampler", "RunInfo"], "spikeview.guided.sampler"),
+    **dict.fromkeys(["reconstruct_frame", "reconstruct_sequence", "resolve_alpha"], "spikeview.guided.video"),
+    **dict.fromkeys(["baseline"], "spikeview.guided.baseline"),
 }
 
 __all__ = list(_EXPORTS)

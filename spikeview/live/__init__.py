@@ -26,26 +26,14 @@ from __future__ import annotations
 
 from spikeview._lazy import lazy_exports
 
-_EXPORTS = {
-    "LiveSource": "spikeview.live.source",
-    "LiveStatus": "spikeview.live.source",
-    "close_all": "spikeview.live.source",
-    "FrameRing": "spikeview.live.ring",
-    "RingOverrun": "spikeview.live.ring",
-    "Recorder": "spikeview.live.recorder",
-    "RecordingSummary": "spikeview.live.recorder",
-    "FrameShaper": "spikeview.live.decode",
-    "Raw1MStream": "spikeview.live.decode",
-    "PlainStream": "spikeview.live.decode",
-    "raw1m_to_packed": "spikeview.live.decode",
-    "CameraConfig": "spikeview.live.usb",
-    "UsbCamera": "spikeview.live.usb",
-    "UsbDeviceInfo": "spikeview.live.usb",
-    "list_usb_devices": "spikeview.live.usb",
-    "udev_rule": "spikeview.live.usb",
-    "SimCamera": "spikeview.live.simcam",
-    "MockBackend": "spikeview.live.mockusb",
-    "Fault": "spikeview.live.mockusb",
+_EXPORTS = {  # name → module, imported on first use
+    **dict.fromkeys(["LiveSource", "LiveStatus", "close_all"], "spikeview.live.source"),
+    **dict.fromkeys(["FrameRing", "RingOverrun"], "spikeview.live.ring"),
+    **dict.fromkeys(["Recorder", "RecordingSummary"], "spikeview.live.recorder"),
+    **dict.fromkeys(["FrameShaper", "Raw1MStream", "PlainStream", "raw1m_to_packed"], "spikeview.live.decode"),
+    **dict.fromkeys(["CameraConfig", "UsbCamera", "UsbDeviceInfo", "list_usb_devices", "udev_rule"], "spikeview.live.usb"),
+    **dict.fromkeys(["SimCamera"], "spikeview.live.simcam"),
+    **dict.fromkeys(["MockBackend", "Fault"], "spikeview.live.mockusb"),
 }
 
 __all__ = list(_EXPORTS)

@@ -17,31 +17,14 @@ from __future__ import annotations
 
 from spikeview._lazy import lazy_exports
 
-_EXPORTS = {
-    "SimConfig": "spikeview.sim.config",
-    "NOISE_SWITCHES": "spikeview.sim.config",
-    "Scene": "spikeview.sim.scenes",
-    "ArrayScene": "spikeview.sim.scenes",
-    "StaticScene": "spikeview.sim.scenes",
-    "ImageSequenceScene": "spikeview.sim.scenes",
-    "VideoScene": "spikeview.sim.scenes",
-    "MotionScene": "spikeview.sim.scenes",
-    "Fan": "spikeview.sim.scenes",
-    "ResizedScene": "spikeview.sim.scenes",
-    "open_scene": "spikeview.sim.scenes",
-    "read_image": "spikeview.sim.images",
-    "srgb_to_linear": "spikeview.sim.images",
-    "linear_to_srgb": "spikeview.sim.images",
-    "SensorPattern": "spikeview.sim.simulator",
-    "SpikeSimulator": "spikeview.sim.simulator",
-    "SimulatedCapture": "spikeview.sim.simulator",
-    "simulate": "spikeview.sim.simulator",
-    "simulate_to_file": "spikeview.sim.write",
-    "load_ground_truth": "spikeview.sim.write",
-    "GroundTruth": "spikeview.sim.write",
-    "SimulationFiles": "spikeview.sim.write",
-    "demo_scene": "spikeview.sim.demo",
-    "demo_capture": "spikeview.sim.demo",
+_EXPORTS = {  # name → module, imported on first use
+    **dict.fromkeys(["SimConfig", "NOISE_SWITCHES"], "spikeview.sim.config"),
+    **dict.fromkeys(["Scene", "ArrayScene", "StaticScene", "ImageSequenceScene", "VideoScene", "MotionScene", "Fan",
+                    "ResizedScene", "open_scene"], "spikeview.sim.scenes"),
+    **dict.fromkeys(["read_image", "srgb_to_linear", "linear_to_srgb"], "spikeview.sim.images"),
+    **dict.fromkeys(["SensorPattern", "SpikeSimulator", "SimulatedCapture", "simulate"], "spikeview.sim.simulator"),
+    **dict.fromkeys(["simulate_to_file", "load_ground_truth", "GroundTruth", "SimulationFiles"], "spikeview.sim.write"),
+    **dict.fromkeys(["demo_scene", "demo_capture"], "spikeview.sim.demo"),
 }
 
 __all__ = list(_EXPORTS)
