@@ -276,7 +276,9 @@ def check_store(path: str | os.PathLike[str]) -> StoreCheck:
     except Exception as e:  # noqa: BLE001
         raise InputFileError(f"{p}: its attributes cannot be read ({type(e).__name__}); write the store again.") from None
     source = attrs.get("input") if isinstance(attrs.get("input"), str) and attrs.get("input") else "INPUT"
-    again = f"write it again with spikeview reconstruct {source} --range A:B --out {p} --overwrite"
+    run = attrs.get("settings", {}).get("run", {}) if isinstance(attrs.get("settings"), dict) else {}
+    span = run.get("range") if isinstance(run, dict) and isinstance(run.get("range"), str) else "A:B"
+    again = f"write it again with spikeview reconstruct {source} --range {span} --out {p} --overwrite"
 
     def bad(what: str) -> InputFileError:
         return InputFileError(f"{p}: {what}; {again}.")
