@@ -80,7 +80,7 @@ class ExportConfig(Config):
     black: float = param(0.0, label="Black level", lo=0.0, hi=1.0, step=0.01,
                          help="Linear value shown as black in PNG/MP4 and the app (fixed, never per frame).")
     white: float | None = param(None, label="White point", lo=0.0, lo_open=True, hi=16.0, step=0.01,
-                                help="Exposure: the linear value (Y·α/η units) that becomes 1.0 in EXR and full scale in "
+                                help="Exposure: the linear value (Y·α/η with a colour cast, Y in spikes per tick for monochrome) that becomes 1.0 in EXR and full scale in "
                                      "npy/PNG/MP4 and the app; unset, the sequence's 99.9th percentile, chosen once and "
                                      "printed.")
     transfer: str = param("srgb", label="Display curve", choices=TRANSFERS,
