@@ -17,8 +17,9 @@ import errno
 import io
 import os
 import shutil
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import Any, BinaryIO
 
 from spikeview.errors import OutputFileError
 
@@ -183,9 +184,11 @@ class RawFile(io.RawIOBase):
                 super().close()
 
 
-def write_atomic(path: str | os.PathLike[str], data: str | bytes, what: str = "the file",
+def write_atomic(path: str | os.PathLike[str], data: str | bytes | Callable[[BinaryIO], Any], what: str = "the file",
                  fix: str = "check the folder exists and is writable") -> Path:
     """Write ``data`` to ``path`` so that readers see the old file or the complete new one, never a part.
+
+    ``data`` is text, bytes, or a function that writes the content into the binary file it is given.
 
     This does not check :func:`check_writable`: callers that must not replace a file check first.
 
@@ -197,8 +200,11 @@ def write_atomic(path: str | os.PathLike[str], data: str | bytes, what: str = "t
     try:
         if isinstance(data, bytes):
             tmp.write_bytes(data)
-        else:
+        elif isinstance(data, str):
             tmp.write_text(data, encoding="utf-8")
+        else:
+            with open(tmp, "wb") as f:
+                data(f)
         os.replace(tmp, path)
     except OSError as e:
         try:

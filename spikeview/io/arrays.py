@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from spikeview.cfa import parse_cfa
-from spikeview.errors import GeometryError, InputFileError, OutputFileError, ParameterError
+from spikeview.errors import GeometryError, InputFileError, ParameterError
 from spikeview.io._base import check_dims, check_tick_rate
 from spikeview.io.source import DEFAULT_TICK_RATE, SpikeSource, StreamInfo
 
@@ -222,24 +222,18 @@ def write_array(path: str | os.PathLike[str], spikes: np.ndarray, *, cfa: str | 
     from spikeview.io.plain import check_spikes
     from spikeview.io.sidecar import write_sidecar
 
+    from spikeview._files import write_atomic
+
     arr = check_spikes(spikes).astype(np.uint8, copy=False)
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    try:
-        with open(tmp, "wb") as f:
-            if path.suffix.lower() == ".npz":
-                np.savez_compressed(f, spikes=arr)
-            else:
-                np.save(f, arr)
-        os.replace(tmp, path)
-    except OSError as e:
-        from spikeview._files import os_error_sentence
 
-        try:
-            tmp.unlink(missing_ok=True)
-        except OSError:
-            pass
-        raise OutputFileError(f"{path}: cannot write: {os_error_sentence(e)}.") from None
+    def save(f) -> None:
+        if path.suffix.lower() == ".npz":
+            np.savez_compressed(f, spikes=arr)
+        else:
+            np.save(f, arr)
+
+    write_atomic(path, save, "the spike array")
     if sidecar:
         t, h, w = arr.shape
         write_sidecar(path, StreamInfo(width=w, height=h, n_frames=t, tick_rate=check_tick_rate(tick_rate), cfa=cfa,
