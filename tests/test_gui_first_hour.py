@@ -136,3 +136,16 @@ def test_pane_titles_that_do_not_fit_are_elided_with_the_full_text_in_a_tooltip(
     assert shown.endswith("…") and len(shown) < len(label.text()) and label.toolTip() == label.text()
     label.resize(2000, 20)
     assert label.shown_text() == label.text() and label.toolTip() == ""
+
+
+def test_the_open_dialog_warns_about_a_colour_filter_read_as_monochrome(tmp_path, qapp):
+    from test_geometry_guess import write_capture
+
+    from spikeview.gui import core
+    from spikeview.gui.dialogs import settings_preview
+
+    bayer = write_capture(tmp_path / "b.dat", 128, 96, 200, cfa=True)
+    hint = settings_preview(core.open_file(bayer, width=128, height=96, cfa="none"))[3]
+    assert "read as monochrome (CFA none)" in hint and "choose CFA RGGB" in hint and "--cfa" not in hint
+    mono = write_capture(tmp_path / "m.dat", 128, 96, 200, cfa=False)
+    assert settings_preview(core.open_file(mono, width=128, height=96, cfa="none"))[3] == ""
