@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from spikeview.errors import OutputFileError
+from spikeview.errors import InputFileError, OutputFileError
 
 #: writes at least this large are announced with their size before they start (bytes)
 LARGE_WRITE_BYTES = 100 * 1024 * 1024
@@ -35,6 +35,17 @@ def human_bytes(n: float) -> str:
             return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.3g} {unit}"
         n /= 1000
     return f"{n:.3g} TB"  # pragma: no cover
+
+
+def existing_file(path: str | os.PathLike[str], what: str, folder_fix: str) -> Path:
+    """``path`` as a :class:`Path` if it names a file; :class:`InputFileError` naming ``what`` otherwise
+    (missing: check the path; a folder: ``folder_fix``)."""
+    path = Path(path)
+    if not path.exists():
+        raise InputFileError(f"{path}: {what} not found; check the path.")
+    if path.is_dir():
+        raise InputFileError(f"{path}: is a folder, not a {what}; {folder_fix}.")
+    return path
 
 
 def is_disk_full(e: BaseException) -> bool:

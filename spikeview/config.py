@@ -238,11 +238,9 @@ class Config:
 
 def load_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Read a TOML file with errors that name the file."""
-    path = Path(path)
-    if not path.exists():
-        raise InputFileError(f"{path}: settings file not found; check the path.")
-    if path.is_dir():
-        raise InputFileError(f"{path}: is a folder, not a settings file; give the path of a .toml file.")
+    from spikeview._files import existing_file
+
+    path = existing_file(path, "settings file", "give the path of a .toml file")
     try:
         with open(path, "rb") as f:
             return tomllib.load(f)

@@ -44,11 +44,9 @@ def open_bytes(path: str | os.PathLike[str], what: str) -> tuple[Path, np.ndarra
 
     ``what`` names the expected format in messages (e.g. ``"plain .dat"``).
     """
-    path = Path(path)
-    if not path.exists():
-        raise InputFileError(f"{path}: file not found; check the path.")
-    if path.is_dir():
-        raise InputFileError(f"{path}: is a folder, not a {what} file; point to the spike file inside it.")
+    from spikeview._files import existing_file
+
+    path = existing_file(path, f"{what} file", "point to the spike file inside it")
     try:
         size = path.stat().st_size
         if size == 0:
