@@ -145,3 +145,16 @@ def test_zarr_store_then_export_matches_a_plain_npy_run(tmp_path):
     assert exp.shape == ref.shape
     np.testing.assert_allclose(exp, ref, atol=1e-6)
     assert (exp >= 0.999).mean() <= 0.005
+
+
+def test_guided_and_tfp_agree_on_a_white_balanced_bayer_sensor(tmp_path):
+    """Gains neutral in colour (every site at the same rate scale): the plan dropped C as 'neutral', and with
+    it the exposure the sampler sees, so guided came out at 0.6× TFP; C stays on unless it is the identity."""
+    path = tmp_path / "wb.dat"
+    rates = _rates("none")  # the same scene behind every filter site: gray-world gains all alike
+    write_plain(path, spikes_from_rates(rates, TICKS, seed=3))
+    cap = (path, "RGGB")
+    _run(cap, tmp_path / "t.npy", "--at", "100")
+    _run(cap, tmp_path / "g.npy", "--at", "100", "--method", "guided", "--steps", "2", "--seed", "1")
+    t, g = np.load(tmp_path / "t.npy"), np.load(tmp_path / "g.npy")
+    assert 0.8 < g.mean() / t.mean() < 1.2

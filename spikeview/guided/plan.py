@@ -8,8 +8,9 @@ one-line reason and every one can be overridden by the config (the reason then s
 choice        rule                                                                        override
 ============  ==========================================================================  ==================
 mosaic (M)    on for a Bayer CFA, off for a monochrome stream (nothing to demosaic)        ``use_mosaic``
-cast (C)      off when the gains η/α_c are within ``cast_tolerance`` of their mean            ``use_cast``
-              (the cast is neutral: C would only rescale), on otherwise; off without M
+cast (C)      off when the gains η/α_c are all within ``cast_tolerance`` of 1 (C would      ``use_cast``
+              change nothing; gains neutral in colour but not 1 set the exposure: on);
+              on otherwise; off without M
 levels        ``levels``, capped at what the frame size allows (each level halves the        ``levels_cap``
               size; the coarsest band keeps at least 1 pixel)
 diffusion     skipped when the data-derived noise σ of the corrected TFP estimate is at    ``diffusion``
@@ -172,8 +173,12 @@ def changed_blocks(obs: Observation, alpha: float = 1e-3) -> np.ndarray | None:
 def _cast_neutral(obs: Observation, tol: float) -> tuple[bool, str]:
     g = obs.gains()
     dev = float(np.max(np.abs(g / g.mean() - 1.0)))
-    if dev <= tol:
-        return True, f"gains η/α = {np.round(g, 3).tolist()} are within {100 * tol:.0f}% of neutral ({100 * dev:.1f}%)"
+    scale = abs(float(g.mean()) - 1.0)
+    if dev <= tol and scale <= tol:
+        return True, f"gains η/α = {np.round(g, 3).tolist()} are within {100 * tol:.0f}% of 1: neutral, C would change nothing"
+    if dev <= tol:  # neutral in colour, but C also carries the sequence's exposure (the white point at 0.9)
+        return False, (f"gains η/α = {np.round(g, 3).tolist()} are neutral in colour ({100 * dev:.1f}%) but set the "
+                       f"exposure (×{1 / float(g.mean()):.3g})")
     return False, f"gains η/α = {np.round(g, 3).tolist()} deviate {100 * dev:.0f}% from neutral"
 
 
