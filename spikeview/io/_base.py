@@ -11,12 +11,13 @@ from __future__ import annotations
 import mmap
 import os
 from abc import abstractmethod
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from spikeview.errors import InputFileError, ParameterError
-from spikeview.io.source import SpikeSource, StreamInfo
+from spikeview.io.source import DEFAULT_TICK_RATE, SpikeSource, StreamInfo
 
 
 def check_dims(width: object, height: object, where: str = "") -> tuple[int, int]:
@@ -220,17 +221,27 @@ class PackedFileSource(SpikeSource):
         self._buf = None
 
 
-def write_raw_file(path: str | os.PathLike[str], data: bytes, fmt: str, width: int, height: int, frame_bytes: int, *,
-                   flip_vertical: bool, flip_horizontal: bool, cfa: str | None, tick_rate: float, sidecar: bool) -> Path:
-    """Write an encoded raw stream ``data`` atomically, with its sidecar unless ``sidecar`` is false."""
-    from spikeview._files import write_atomic
-    from spikeview.io.sidecar import write_sidecar
+def raw_writer(fmt: str, encode: Callable[..., bytes], width: int, height: int, frame_bytes: int, *,
+               flip_vertical: bool, doc: str) -> Callable[..., Path]:
+    """The ``write_<fmt>(path, frames, *, flip_vertical, flip_horizontal, cfa, tick_rate, sidecar)`` function of a
+    raw camera format: ``encode`` the frames, write them atomically, and the sidecar unless ``sidecar`` is false."""
 
-    path = Path(path)
-    write_atomic(path, data)
-    if sidecar:
-        info = StreamInfo(width=width, height=height, n_frames=len(data) // frame_bytes,
-                          tick_rate=check_tick_rate(tick_rate), cfa=cfa, format=fmt,
-                          flip_vertical=flip_vertical, flip_horizontal=flip_horizontal, path=path)
-        write_sidecar(path, info)
-    return path
+    def write(path: str | os.PathLike[str], frames: np.ndarray, *, flip_vertical: bool = flip_vertical,
+              flip_horizontal: bool = False, cfa: str | None = None, tick_rate: float = DEFAULT_TICK_RATE,
+              sidecar: bool = True) -> Path:
+        from spikeview._files import write_atomic
+        from spikeview.io.sidecar import write_sidecar
+
+        data = encode(frames, flip_vertical=flip_vertical, flip_horizontal=flip_horizontal)
+        path = Path(path)
+        write_atomic(path, data)
+        if sidecar:
+            info = StreamInfo(width=width, height=height, n_frames=len(data) // frame_bytes,
+                              tick_rate=check_tick_rate(tick_rate), cfa=cfa, format=fmt,
+                              flip_vertical=flip_vertical, flip_horizontal=flip_horizontal, path=path)
+            write_sidecar(path, info)
+        return path
+
+    write.__name__ = write.__qualname__ = f"write_{fmt}"
+    write.__doc__ = doc
+    return write

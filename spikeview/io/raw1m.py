@@ -20,13 +20,12 @@ from __future__ import annotations
 
 import os
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
 import numpy as np
 
 from spikeview.cfa import parse_cfa
 from spikeview.errors import GeometryError, InputFileError, ParameterError
-from spikeview.io._base import PackedFileSource, check_tick_rate, open_bytes, write_raw_file
+from spikeview.io._base import PackedFileSource, check_tick_rate, open_bytes, raw_writer
 from spikeview.io.plain import check_frames
 from spikeview.io.source import DEFAULT_TICK_RATE, StreamInfo
 
@@ -490,10 +489,6 @@ class Raw1MDecoder:
         return self.stats
 
 
-def write_raw1m(path: str | os.PathLike[str], frames: np.ndarray, *, flip_vertical: bool = False,
-                flip_horizontal: bool = False, cfa: str | None = None, tick_rate: float = DEFAULT_TICK_RATE,
-                sidecar: bool = True) -> Path:
-    """Write ``(T, 1000, 1000)`` frames as a raw 1000×1000 file (with its sidecar); mainly for tests and mocks."""
-    return write_raw_file(path, encode_raw1m(frames, flip_vertical=flip_vertical, flip_horizontal=flip_horizontal),
-                          "raw1m", RAW1M_WIDTH, RAW1M_HEIGHT, RAW1M_FRAME_BYTES, flip_vertical=flip_vertical,
-                          flip_horizontal=flip_horizontal, cfa=cfa, tick_rate=tick_rate, sidecar=sidecar)
+#: ``write_raw1m(path, frames, *, flip_vertical=False, flip_horizontal=False, cfa=None, tick_rate, sidecar=True)``
+write_raw1m = raw_writer("raw1m", encode_raw1m, RAW1M_WIDTH, RAW1M_HEIGHT, RAW1M_FRAME_BYTES, flip_vertical=False,
+                         doc="Write ``(T, 1000, 1000)`` frames as a raw 1000×1000 file (with its sidecar); mainly for tests and mocks.")

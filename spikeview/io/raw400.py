@@ -8,13 +8,12 @@ pixels. Decoded at width 416, columns 400–415 dropped. Stored upside down like
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import numpy as np
 
 from spikeview.cfa import parse_cfa
 from spikeview.errors import GeometryError
-from spikeview.io._base import PackedFileSource, check_tick_rate, open_bytes, write_raw_file
+from spikeview.io._base import PackedFileSource, check_tick_rate, open_bytes, raw_writer
 from spikeview.io.plain import check_frames
 from spikeview.io.source import DEFAULT_TICK_RATE, StreamInfo
 
@@ -78,10 +77,6 @@ def encode_raw400(frames: np.ndarray, *, flip_vertical: bool = True, flip_horizo
     return np.packbits(rows.reshape(arr.shape[0], -1), axis=1, bitorder="little").tobytes()
 
 
-def write_raw400(path: str | os.PathLike[str], frames: np.ndarray, *, flip_vertical: bool = True,
-                 flip_horizontal: bool = False, cfa: str | None = None, tick_rate: float = DEFAULT_TICK_RATE,
-                 sidecar: bool = True) -> Path:
-    """Write ``(T, 250, 400)`` frames as a raw 400×250 file (with its sidecar); mainly for tests and mocks."""
-    return write_raw_file(path, encode_raw400(frames, flip_vertical=flip_vertical, flip_horizontal=flip_horizontal),
-                          "raw400", RAW400_WIDTH, RAW400_HEIGHT, RAW400_FRAME_BYTES, flip_vertical=flip_vertical,
-                          flip_horizontal=flip_horizontal, cfa=cfa, tick_rate=tick_rate, sidecar=sidecar)
+#: ``write_raw400(path, frames, *, flip_vertical=True, flip_horizontal=False, cfa=None, tick_rate, sidecar=True)``
+write_raw400 = raw_writer("raw400", encode_raw400, RAW400_WIDTH, RAW400_HEIGHT, RAW400_FRAME_BYTES, flip_vertical=True,
+                          doc="Write ``(T, 250, 400)`` frames as a raw 400×250 file (with its sidecar); mainly for tests and mocks.")
