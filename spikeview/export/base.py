@@ -25,7 +25,8 @@ from __future__ import annotations
 import os
 import re
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
 from typing import Any, ClassVar
@@ -86,6 +87,19 @@ def existing_frame_files(out: str | os.PathLike[str]) -> list[Path]:
         return sorted(p for p in out.parent.iterdir() if rx.match(p.name))
     except OSError:
         return []
+
+
+@contextmanager
+def finishing(path: Path, undo: Callable[[], Any]) -> Iterator[None]:
+    """Finish an output: on any failure ``undo()`` runs first; an ``OSError`` becomes one sentence naming ``path``."""
+    try:
+        yield
+    except OSError as e:
+        undo()
+        raise OutputFileError(f"{path}: finishing the file failed: {os_error_sentence(e)}.") from None
+    except BaseException:
+        undo()
+        raise
 
 
 def check_output_folder(path: Path) -> None:
@@ -400,14 +414,8 @@ class Exporter(ABC):
         if self.frames_written == 0 and not self.sequence:
             self.abort()
             return []
-        try:
+        with finishing(self.path, self.abort):
             self._finish()
-        except OSError as e:
-            self.abort()
-            raise OutputFileError(f"{self.path}: finishing the file failed: {os_error_sentence(e)}.") from None
-        except BaseException:
-            self.abort()
-            raise
         self._state = "closed"
         return list(self.paths)
 

@@ -28,7 +28,7 @@ import numpy as np
 from spikeview._files import os_error_sentence
 from spikeview.errors import InputFileError, OutputFileError
 from spikeview.export.atomic import AtomicFile
-from spikeview.export.base import Exporter
+from spikeview.export.base import Exporter, finishing
 
 
 def sidecar_path(path: str | os.PathLike[str]) -> Path:
@@ -123,7 +123,7 @@ class NpyExporter(Exporter):
 
         k = self.frames_written
         side = AtomicFile(sidecar_path(self.path))
-        try:
+        with finishing(self.path, side.discard):
             if k < self.n_frames:
                 head = _header((k, *self.frame_shape))
                 if len(head) != len(self._head):  # pragma: no cover - numpy always pads the shape
@@ -146,12 +146,6 @@ class NpyExporter(Exporter):
             except BaseException:
                 os.remove(side.path)  # no sidecar without its array
                 raise
-        except OSError as e:
-            side.discard()
-            raise OutputFileError(f"{self.path}: finishing the file failed: {os_error_sentence(e)}.") from None
-        except BaseException:
-            side.discard()
-            raise
         self.paths += [self.path, side.path]
 
     def _discard(self) -> None:
