@@ -139,19 +139,8 @@ def test_sequence_frames_do_not_depend_on_the_chunking(cfa):
     starting at a keyframe) and the single-frame path; neighbours are read across chunk borders."""
     from spikeview.cluster._compute import compute_chunk, prepare_state
     from spikeview.guided.sampler import GuidedSampler
-    from spikeview.guided.priors.base import DenoiserPrior
     from spikeview.pipeline import KEYFRAME, reconstruct_windows
     from spikeview.recipe import Recipe
-
-    class Blur(DenoiserPrior):  # a quick, deterministic stand-in prior
-        def __init__(self, channels):
-            self.channels = channels
-            self.sigma_max = 75 / 255
-
-        def denoise(self, x, sigma):
-            import torch.nn.functional as F
-
-            return F.avg_pool2d(F.pad(x, (1, 1, 1, 1), mode="replicate"), 3, stride=1)
 
     rates = _moving(200, 0.05, 32, 32)
     src = ArraySource(_spikes(rates), cfa=cfa)
@@ -159,7 +148,7 @@ def test_sequence_frames_do_not_depend_on_the_chunking(cfa):
     data = recipe.to_dict()
     centres = list(range(35, 165, 10))[:KEYFRAME] + []
     state = prepare_state(src, data)
-    smp = GuidedSampler(recipe.guided, prior=Blur(1 if cfa is None else 3))
+    smp = GuidedSampler(recipe.guided, prior=_blur_prior(1 if cfa is None else 3))
     whole = np.stack(list(reconstruct_windows(src, centres, recipe, state, sampler=smp)))
     # chunks of 4 windows, each the start of its own chain (as the batch path splits at keyframes)
     parts = [compute_chunk(src, centres[i:i + 4], data, state, sampler=smp) for i in range(0, len(centres), 4)]
@@ -174,6 +163,47 @@ def test_sequence_frames_do_not_depend_on_the_chunking(cfa):
     # and the pooling did use windows outside each chunk
     obs = Observation.from_source(src, centres[4], 10, radius=2)
     assert obs.pooling.offsets == (-1, 1, -2, 2) and obs.dtau is not None and obs.dtau.max() > 10
+
+
+def _blur_prior(channels):
+    """A quick, deterministic stand-in prior (3×3 mean)."""
+    from spikeview.guided.priors.base import DenoiserPrior
+
+    class Blur(DenoiserPrior):
+        def __init__(self):
+            self.channels = channels
+            self.sigma_max = 75 / 255
+
+        def denoise(self, x, sigma):
+            import torch.nn.functional as F
+
+            return F.avg_pool2d(F.pad(x, (1, 1, 1, 1), mode="replicate"), 3, stride=1)
+
+    return Blur()
+
+
+@pytest.mark.parametrize("cfa", CFAS)
+def test_region_of_interest_crops_the_pooled_observation(cfa):
+    """The ROI path (the app's Run on a region) crops Δτ_eff with the counts; the plan still says what was pooled."""
+    from spikeview.guided.sampler import GuidedSampler
+    from spikeview.guided.video import _crop_to_roi
+    from spikeview.pipeline import prepare_sequence, reconstruct_windows
+    from spikeview.recipe import Recipe
+
+    src = ArraySource(_spikes(np.repeat(_texture(32, 32)[None, 8:40, 8:40] * 0.5, 80, axis=0)), cfa=cfa)
+    obs = Observation.from_source(src, 45, 10, radius=3)
+    sub = _crop_to_roi(obs, (5, 7, 16, 12))
+    assert sub.shape == (13, 17) and sub.dtau.shape == (13, 17)  # origin rounded down to even pixels: (6, 4)
+    np.testing.assert_array_equal(sub.dtau, obs.dtau[6:19, 4:21])
+    np.testing.assert_array_equal(sub.y, obs.y[6:19, 4:21])
+    whole = make_plan(obs, GuidedConfig(temporal_radius=3))
+    assert whole.temporal != "off" and make_plan(sub, GuidedConfig(temporal_radius=3)).temporal == whole.temporal
+    recipe = Recipe().with_values({"run.method": "guided", "guided.steps": 1})
+    assert recipe.guided.temporal_radius == 3  # the default pools
+    state = prepare_sequence(src, recipe)
+    smp = GuidedSampler(recipe.guided, prior=_blur_prior(1 if cfa is None else 3))
+    frames = list(reconstruct_windows(src, [45, 55], recipe, state, roi=(4, 6, 16, 16), sampler=smp))
+    assert frames[0].shape[:2] == (16, 16) and np.isfinite(frames[1]).all()
 
 
 def test_temporal_error_measures_flicker():
