@@ -199,12 +199,17 @@ def child_time(reader: str, path: str, frames: int, baseline_frames: int, window
         window = max(windows)
         a, b = window_range(n // 2, window, n)
         stub = _Counts(src.count(a, b))
-        stages = []
-        for c in _positions(n, window, frames, seed=3):
-            t0 = time.perf_counter()
-            preview_rgb(stub, c, window, alpha=alpha, eta=ETA, gamma=GAMMA)
-            stages.append(time.perf_counter() - t0)
-        res["stages"] = stages
+
+        def preview_times(source, seed: int) -> list[float]:
+            """Seconds of one preview frame at each of ``frames`` random positions."""
+            out = []
+            for c in _positions(n, window, frames, seed=seed):
+                t0 = time.perf_counter()
+                preview_rgb(source, c, window, alpha=alpha, eta=ETA, gamma=GAMMA)
+                out.append(time.perf_counter() - t0)
+            return out
+
+        res["stages"] = preview_times(stub, 3)
         base, fast, diffs = [], [], []
         for c in _positions(n, window, baseline_frames, seed=1234):
             a, b = window_range(c, window, n)
@@ -224,12 +229,7 @@ def child_time(reader: str, path: str, frames: int, baseline_frames: int, window
             os.posix_fadvise(fd, 0, 0, os.POSIX_FADV_DONTNEED)
         finally:
             os.close(fd)
-        cold = []
-        for c in _positions(n, window, frames, seed=777):
-            t0 = time.perf_counter()
-            preview_rgb(src, c, window, alpha=alpha, eta=ETA, gamma=GAMMA)
-            cold.append(time.perf_counter() - t0)
-        res["cold"] = cold
+        res["cold"] = preview_times(src, 777)
     return res
 
 
