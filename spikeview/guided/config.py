@@ -136,6 +136,9 @@ class GuidedConfig(Config):
             (the fastest path within 0.1 dB / 0.005 SSIM of float32 on the bench, from the CPU's
             features), ``"float32"`` (the reference pixels), ``"float32-fast"`` (NNPACK's fast
             float32 convolution) or ``"bfloat16-mixed"`` (bfloat16 hidden layers on high-noise steps).
+        tile: per-tile plan and sampling (:mod:`spikeview.guided.tiles`): tiles of about this many
+            pixels (>= 64), each skipped, shortened or fully sampled by its own noise; 0 = the whole
+            frame at once.
         device, dtype: where and in what precision the sd prior runs (``"auto"`` = CUDA when
             available; ``float16``/``bfloat16`` need CUDA).
     """
@@ -200,6 +203,9 @@ class GuidedConfig(Config):
                                 "float32 on the bench, from the CPU's features), float32 (the reference pixels), "
                                 "float32-fast (NNPACK's fast float32 convolution) or bfloat16-mixed (bfloat16 on high-noise "
                                 "steps).")
+    tile: int = param(0, label="Tile size", unit="px", lo=0, hi=8192, step=64,
+                      help="Per-tile plan: split frames into tiles of about this many pixels, each skipped, shortened or "
+                           "fully sampled by its own noise (0 = the whole frame at once).")
     temporal_radius: int = param(3, label="Temporal radius", unit="windows", lo=0, hi=8, step=1,
                                  help="Neighbouring windows on each side whose spikes a guided frame may borrow, aligned and "
                                       "used only where they match (0 = the window alone).")
@@ -212,7 +218,7 @@ class GuidedConfig(Config):
         _check_choice("demosaic", self.demosaic, DEMOSAICS)
         if self.fallback is not None:
             _check_choice("fallback", self.fallback, FALLBACKS)
-        for name in ("steps", "window", "levels", "data_steps", "seed", "alpha_max_windows", "chains", "temporal_radius"):
+        for name in ("steps", "window", "levels", "data_steps", "seed", "alpha_max_windows", "chains", "temporal_radius", "tile"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int):
                 raise ParameterError(f"guided.{name} = {v!r} must be a whole number.")
@@ -223,6 +229,8 @@ class GuidedConfig(Config):
             raise ParameterError(f"guided.chains = {self.chains} is out of range: use 1 to 16 chains.")
         if self.alpha_max_windows < 1:
             raise ParameterError(f"guided.alpha_max_windows = {self.alpha_max_windows} is out of range: use at least 1.")
+        if self.tile != 0 and self.tile < 64:
+            raise ParameterError(f"guided.tile = {self.tile} is out of range: use 0 (whole frame) or tiles of at least 64 pixels.")
         if self.window < 1:
             raise ParameterError(f"guided.window = {self.window} is out of range: use a window of at least 1 tick.")
         if self.data_steps < 0:

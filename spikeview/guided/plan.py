@@ -74,6 +74,8 @@ class Plan:
         demosaic: the demosaic of the start estimate / TFP fallback; ``"none"`` without M.
         precision: the prior's arithmetic (``guided.precision`` resolved for this CPU; ``""`` for
             the sd prior, which runs in ``guided.dtype``).
+        tile_map: the per-tile plan (:class:`spikeview.guided.tiles.TileMap`) when ``guided.tile``
+            splits the frame, else ``None``.
     """
 
     mosaic: bool
@@ -90,6 +92,7 @@ class Plan:
     temporal: str = "off"
     precision: str = ""
     pooling: object = field(default=None, repr=False)
+    tile_map: object = field(default=None, repr=False)
 
     def __str__(self) -> str:
         sig = ", ".join(f"{255 * s:.1f}" for s in self.sigma)
@@ -104,6 +107,7 @@ class Plan:
             "reuse": "yes" if self.reuse else "no",
             "temporal": self.temporal,
             "precision": self.precision or "-",
+            "tiles": "off" if self.tile_map is None else f"{len(self.tile_map.tiles)}",
         }
         for key, val in values.items():
             lines.append(f"  {key:<9} {val:<16} {self.reasons.get(key, '')}")
@@ -282,6 +286,17 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     pool = obs.pooling
     temporal = "off" if pool is None or pool.kind in ("off", "unavailable") else pool.kind
     r["temporal"] = pool.reason if pool is not None else "off (temporal_radius = 0): the window alone, as in the paper"
+    # --- per-tile plan (spikeview.guided.tiles): only for a frame larger than one tile that needs diffusion
+    tile_map = None
+    if p.tile and max(obs.shape) > p.tile and diffusion and p.prior != "sd":
+        from spikeview.guided.tiles import plan_tiles
+
+        probe = Plan(mosaic, cast, levels, diffusion, fallback, False, None, sigma, {}, quantise, demosaic)
+        tile_map = plan_tiles(obs, probe, p)
+        r["tiles"] = tile_map.summary()
+    else:
+        r["tiles"] = ("off (guided.tile = 0): the whole frame at once" if not p.tile else
+                      f"off: {'the frame fits in one tile' if max(obs.shape) <= p.tile else 'no diffusion to tile'}")
     # --- arithmetic of the prior (spikeview.guided.precision: resolved from the CPU's features)
     if p.prior == "sd":
         precision, r["precision"] = "", f"the sd prior runs in guided.dtype = {p.dtype}"
@@ -290,4 +305,4 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
 
         precision, r["precision"] = resolve_precision(p.precision)
     return Plan(mosaic, cast, levels, diffusion, fallback, reuse, changed, sigma, r, quantise, demosaic, temporal,
-                pooling=pool, precision=precision)
+                pooling=pool, precision=precision, tile_map=tile_map)

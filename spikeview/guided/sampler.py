@@ -185,7 +185,7 @@ class GuidedSampler:
     # ---------------------------------------------------------------------------------- run
     def run(self, observation: Observation, params: GuidedConfig | None = None, callback: Callback | None = None,
             cancel: Any = None, *, init: np.ndarray | None = None, previous: np.ndarray | None = None,
-            plan: Plan | None = None) -> np.ndarray:
+            plan: Plan | None = None, noise: torch.Tensor | None = None) -> np.ndarray:
         """Reconstruct the frame of one window.
 
         Args:
@@ -199,6 +199,8 @@ class GuidedSampler:
             previous: the previous window's result, returned as is when the plan finds that the
                 counts did not change.
             plan: a precomputed plan (default: :func:`make_plan`).
+            noise: the start noise ``(1, C, H, W)`` (default: drawn from the seed); a tile of a tiled
+                run gets its cut of the whole frame's field (:mod:`spikeview.guided.tiles`).
 
         Returns:
             ``(H, W, 3)`` float32 RGB in [0, 1] for a Bayer stream (``(H, W)`` when M is off).
@@ -234,12 +236,20 @@ class GuidedSampler:
             if callback is not None:
                 callback(1, 1, out)
             return out
-        out = self._sample(observation, p, plan, channels, callback, cancel, init)
+        if getattr(plan, "tile_map", None) is not None and init is None and not (p.prior == "sd" or is_latent(self._prior)):
+            from spikeview.guided.tiles import run_tiled
+
+            out = run_tiled(self, observation, p, plan, callback, cancel)
+            self.info = info
+            info.mode, info.seconds, info.steps = "tiled", time.perf_counter() - t0, plan.tile_map.steps()
+            info.precision = plan.precision
+            return out
+        out = self._sample(observation, p, plan, channels, callback, cancel, init, noise)
         info.mode, info.seconds = "diffusion", time.perf_counter() - t0
         return out
 
     def _sample(self, obs: Observation, p: GuidedConfig, plan: Plan, channels: int, callback: Callback | None,
-                cancel: Any, init: np.ndarray | None) -> np.ndarray:
+                cancel: Any, init: np.ndarray | None, noise: torch.Tensor | None = None) -> np.ndarray:
         """The one sampling loop, for a pixel-space denoiser (VE schedule) and a latent model (DDIM) alike."""
         prior = self.prior_for(channels, p)
         latent = is_latent(prior)
@@ -286,7 +296,12 @@ class GuidedSampler:
         acc = torch.zeros_like(start)
         for chain in range(p.chains):
             # chains differ in their start noise and in the order of the dihedral transforms
-            x = space.start(start, schedule, gen) if latent else schedule.add_noise(start, add, gen)
+            if latent:
+                x = space.start(start, schedule, gen)
+            elif noise is not None and chain == 0:
+                x = start + add * noise.to(start.dtype)
+            else:
+                x = schedule.add_noise(start, add, gen)
             for i in range(p.steps):
                 done = chain * p.steps + i
                 if is_cancelled(cancel):
