@@ -504,25 +504,22 @@ class MainWindow(QtWidgets.QMainWindow):
     def load_preset(self, path: str | os.PathLike[str]) -> bool:
         from spikeview.gui.presets import load_preset
 
-        try:
-            load_preset(self.session, path)
-        except SpikeviewError as e:
-            self.show_error(str(e), dialog_title="Cannot load the preset")
-            return False
-        self.settings.setValue("last_preset_dir", str(Path(path).parent))
-        self.statusBar().showMessage(f"Loaded preset {Path(path).name} (Ctrl+Z undoes it).", 8000)
-        return True
+        return self._preset_file(load_preset, path, "load", f"Loaded preset {Path(path).name} (Ctrl+Z undoes it).")
 
     def save_preset(self, path: str | os.PathLike[str]) -> bool:
         from spikeview.gui.presets import save_preset
 
+        return self._preset_file(save_preset, path, "save", f"Saved preset {path}.")
+
+    def _preset_file(self, action: Any, path: str | os.PathLike[str], verb: str, done: str) -> bool:
+        """Load or save a preset: an error is shown (nothing changes), success remembers the folder."""
         try:
-            save_preset(self.session, path)
+            action(self.session, path)
         except SpikeviewError as e:
-            self.show_error(str(e), dialog_title="Cannot save the preset")
+            self.show_error(str(e), dialog_title=f"Cannot {verb} the preset")
             return False
         self.settings.setValue("last_preset_dir", str(Path(path).parent))
-        self.statusBar().showMessage(f"Saved preset {path}.", 8000)
+        self.statusBar().showMessage(done, 8000)
         return True
 
     def load_preset_dialog(self) -> None:
