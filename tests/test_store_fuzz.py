@@ -80,6 +80,10 @@ def _file(rel: str, how: str):
             p.write_bytes(np.random.default_rng(5).integers(0, 256, 300, dtype=np.uint8).tobytes())
         elif how == "delete":
             p.unlink() if p.is_file() else shutil.rmtree(p)
+        elif how == "flip":  # one bit in the middle: decodes without a checksum, so the store keeps one
+            data = bytearray(p.read_bytes())
+            data[len(data) // 2] ^= 0x10
+            p.write_bytes(bytes(data))
     return damage
 
 
@@ -118,6 +122,7 @@ RECOMPUTED = {
     "empty chunk": (_file("frames/c/1/0/0/0", "empty"), "chunk 1 (windows 4-7)"),
     "garbage chunk": (_file("frames/c/1/0/0/0", "garbage"), "chunk 1 (windows 4-7)"),
     "deleted chunk": (_file("frames/c/1/0/0/0", "delete"), "chunk 1 (windows 4-7)"),
+    "one bit flipped in a chunk": (_file("frames/c/1/0/0/0", "flip"), "chunk 1 (windows 4-7)"),
     "missing done array": (_file("done", "delete"), "completion markers"),
     "garbage done metadata": (_file("done/zarr.json", "garbage"), "completion markers"),
     "garbage done marker": (_file("done/c/1", "garbage"), "completion markers of chunk(s) 1"),

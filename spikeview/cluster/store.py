@@ -8,7 +8,8 @@ array               shape, dtype         meaning
 ==================  ===================  ================================================================
 ``frames``          (N, H, W, C) f4      linear frames (``Y·α/η``, not divided by the white point:
                                          ``spikeview export`` maps them as ``reconstruct`` does);
-                                         C = 3 (Bayer) or 1 (monochrome);
+                                         C = 3 (Bayer) or 1 (monochrome); zstd with its content
+                                         checksum (a chunk damaged on disk fails to decode);
                                          chunks of ``chunk`` windows (one Zarr chunk = one work chunk);
                                          NaN where no chunk has been written yet
 ``centre_tick``     (N,) i8              centre tick of each window
@@ -65,7 +66,12 @@ def create_store(path: str | os.PathLike[str], *, centres: np.ndarray, windows: 
     n = len(centres)
     n_chunks = -(-n // chunk)
     g = zarr.open_group(str(path), mode="w")
-    g.create_array("frames", shape=(n, *frame_shape), chunks=(chunk, *frame_shape), dtype="float32", fill_value=np.nan)
+    from zarr.codecs import ZstdCodec
+
+    # zstd with its content checksum: a chunk damaged on disk fails to decode (and is named) instead of
+    # being exported with wrong values
+    g.create_array("frames", shape=(n, *frame_shape), chunks=(chunk, *frame_shape), dtype="float32", fill_value=np.nan,
+                   compressors=ZstdCodec(level=0, checksum=True))
     g.create_array("centre_tick", shape=(n,), chunks=(n,), dtype="int64")[:] = np.asarray(centres, dtype=np.int64)
     g.create_array("window", shape=(n, 2), chunks=(n, 2), dtype="int64")[:] = np.asarray(windows, dtype=np.int64)
     g.create_array("done", shape=(n_chunks,), chunks=(1,), dtype="uint8", fill_value=0)
