@@ -52,6 +52,8 @@ class SequenceState:
 
     alpha: np.ndarray | None = None
     white: float | None = None
+    #: the sentence when a channel had no spikes and its gain was filled in (the app shows it)
+    note: str | None = None
 
     def attrs(self) -> dict[str, Any]:
         """Plain values for metadata (Zarr attributes, logs)."""
@@ -93,21 +95,30 @@ def parse_range(text: str, default_step: int) -> tuple[int, int, int]:
     return a, b, step
 
 
-def prepare_sequence(source: Any, recipe: Recipe) -> SequenceState:
-    """The sequence-wide state: α from ``[classical] alpha`` or one gray-world estimate of the stream."""
-    from spikeview.classical.colour_cast import estimate_alpha, estimate_white
+def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> SequenceState:
+    """The sequence-wide state: α from ``[classical] alpha`` or one gray-world estimate of the stream, and
+    the white point. A channel without spikes gets the others' mean gain: a
+    :class:`~spikeview.classical.colour_cast.ColourCastWarning` says so (``warn=False``: only
+    :attr:`SequenceState.note`, for the app's worker threads, where warnings are unreliable)."""
+    import warnings
+
+    from spikeview.classical.colour_cast import ColourCastWarning, alpha_with_note, estimate_white, sequence_channel_means
 
     c = recipe.classical
+    note = None
     if source.cfa is None or not c.colour_cast:
         a = None
     elif c.alpha is not None:
         a = np.asarray(c.alpha, dtype=np.float64)
     else:
-        a = np.asarray(estimate_alpha(source, window=min(c.alpha_window, source.n_frames), max_windows=c.alpha_max_windows),
-                       dtype=np.float64)
+        means = sequence_channel_means(source, window=min(c.alpha_window, source.n_frames), max_windows=c.alpha_max_windows)
+        gains, note = alpha_with_note(means)
+        if note is not None and warn:
+            warnings.warn(note, ColourCastWarning, stacklevel=2)
+        a = np.asarray(gains, dtype=np.float64)
     # the exposure, once per sequence, on the windows the frames are made of
     white = estimate_white(source, a, window=min(c.window, source.n_frames), max_windows=c.alpha_max_windows, eta=c.eta)
-    return SequenceState(a, white)
+    return SequenceState(a, white, note)
 
 
 def recipe_for_state(recipe: Recipe, state: SequenceState) -> Recipe:

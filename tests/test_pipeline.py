@@ -135,3 +135,18 @@ def test_write_sequence_writes_the_exposed_frames(tmp_path, cfa):
     want = np.stack([expose(f) for f in reconstruct_windows(src, [40, 80, 120], recipe, state)])
     got = np.load(out)
     assert got.shape == want.shape and np.array_equal(got, want)
+
+
+def test_a_channel_without_spikes_is_said_once_as_a_warning_or_a_note():
+    from spikeview.classical.colour_cast import ColourCastWarning
+
+    rng = np.random.default_rng(2)
+    spikes = rng.random((T, H, W)) < 0.3
+    spikes[:, 0::2, 0::2] = False  # the red sites of RGGB never fire
+    src = ArraySource(spikes, cfa="RGGB")
+    with pytest.warns(ColourCastWarning, match="R"):
+        loud = prepare_sequence(src, _recipe())
+    quiet = prepare_sequence(src, _recipe(), warn=False)  # the app's worker: the sentence, no warning
+    assert quiet.note == loud.note and "R" in quiet.note
+    assert np.array_equal(quiet.alpha, loud.alpha) and quiet.white == loud.white
+    assert prepare_sequence(_source("RGGB"), _recipe()).note is None

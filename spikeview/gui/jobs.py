@@ -53,23 +53,12 @@ def rates_job(req: PreviewRequest, mosaic: np.ndarray, ctx: Any) -> core.RatesRe
 
 
 def alpha_job(source: Any, recipe: Recipe, ctx: Any) -> tuple[np.ndarray | None, str | None, float | None]:
-    """The sequence's gains α and white point, exactly as :func:`spikeview.pipeline.prepare_sequence`
-    finds them, with the sentence for a channel without spikes (no warning: warnings are process-global
-    in threads)."""
-    from spikeview.classical.colour_cast import alpha_with_note, estimate_white, sequence_channel_means
+    """The sequence's gains α and white point from :func:`spikeview.pipeline.prepare_sequence`, with the
+    sentence for a channel without spikes (no warning: warnings are process-global in threads)."""
+    from spikeview.pipeline import prepare_sequence
 
-    c = recipe.classical
-    note = None
-    if source.cfa is None or not c.colour_cast:
-        alpha = None
-    elif c.alpha is not None:
-        alpha = np.asarray(c.alpha, dtype=np.float64)
-    else:
-        means = sequence_channel_means(source, window=min(c.alpha_window, source.n_frames), max_windows=c.alpha_max_windows)
-        a, note = alpha_with_note(means)
-        alpha = np.asarray(a, dtype=np.float32).astype(np.float64)
-    white = estimate_white(source, alpha, window=min(c.window, source.n_frames), max_windows=c.alpha_max_windows, eta=c.eta)
-    return alpha, note, white
+    state = prepare_sequence(source, recipe, warn=False)
+    return state.alpha, state.note, state.white
 
 
 def sequence_state(source: Any, recipe: Recipe, alpha: np.ndarray | None, ctx: Any) -> Any:
