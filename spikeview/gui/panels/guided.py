@@ -44,6 +44,8 @@ class GuidedPanel(QtWidgets.QWidget):
         self.t_note = QtWidgets.QLabel()
         self.steps = ParamSpin(session, "steps")
         self.seed = ParamSpin(session, "seed")
+        self.temporal = ParamSpin(session, "temporal_radius")
+        self.temporal.setToolTip(SPECS["temporal_radius"].help)
         self.prior = ParamCombo(session, "prior", {"ffdnet": "FFDNet (embedded)", "sd": "Stable Diffusion (folder)"})
         self.guidance = ParamCombo(session, "guidance", {"hqs": "HQS (DiffPIR, fast)", "dps": "DPS (backprop)"})
         self.quantise = ParamCombo(session, "quantise", {"auto": "auto (the plan decides)", "on": "on", "off": "off"})
@@ -78,10 +80,11 @@ class GuidedPanel(QtWidgets.QWidget):
         tw = QtWidgets.QWidget()
         tw.setLayout(tline)
         settings = form([self.s, self.k, self.levels, tw, ("", smallw), ("Prior", self.prior), ("Weights", mpw),
-                         ("Guidance", self.guidance), ("Q", self.quantise), ("Precision", self.precision)])
+                         ("Guidance", self.guidance), ("Q", self.quantise), ("Precision", self.precision),
+                         ("Neighbours ±", self.temporal)])
         #: recipe path → the control of that knob (disabled with the plan's reason when it cannot act)
         self.knob_controls = {"guided.s": self.s, "guided.k": self.k, "guided.levels": self.levels,
-                              "guided.t_start": self.t_start}
+                              "guided.t_start": self.t_start, "guided.temporal_radius": self.temporal}
 
         self.run_btn = QtWidgets.QPushButton("Run")
         self.run_btn.setObjectName("guided_run")
