@@ -31,7 +31,8 @@ def start_estimate(obs: Observation, use_mosaic: bool = True, use_cast: bool = T
     from spikeview.classical.demosaic import demosaic as _demosaic
 
     if demosaic == "auto":
-        from spikeview.guided.plan import choose_demosaic, estimate_sigma
+        from spikeview.classical.noise import choose_demosaic
+        from spikeview.guided.observation import estimate_sigma
 
         demosaic = choose_demosaic(float(estimate_sigma(obs, True, use_cast).max()), "auto", denoised=denoised,
                                    mean_count=obs.mean_count(), shape=obs.shape)[0]
@@ -78,7 +79,7 @@ def baseline(obs: Observation, prior: DenoiserPrior, *, sigma_scale: float = 1.0
     Returns:
         ``(H, W, 3)`` (or ``(H, W)``) float32 in [0, 1].
     """
-    from spikeview.guided.plan import estimate_sigma
+    from spikeview.guided.observation import estimate_sigma
 
     y0 = start_estimate(obs, use_mosaic, use_cast, demosaic)
     sigma = estimate_sigma(obs, use_mosaic, use_cast) * float(sigma_scale)

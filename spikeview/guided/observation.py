@@ -28,7 +28,6 @@ import numpy as np
 
 from spikeview.cfa import channel_map, parse_cfa
 from spikeview.classical.noise import haar_noise_variance
-from spikeview.classical.noise import trim_factor as _trim_factor  # noqa: F401 (old name)
 from spikeview.classical.tfp import counts_to_sfr, window_counts
 from spikeview.classical.windows import window_range
 from spikeview.errors import ParameterError
@@ -268,3 +267,27 @@ class Observation:
         at the :meth:`local_rate`."""
         kappa = self.noise_scale()
         return (binomial_variance(self.local_rate(), self.effective_window) * kappa[self.channel_map()]).astype(np.float32)
+
+
+def estimate_sigma(obs: Observation, use_mosaic: bool = True, use_cast: bool = True) -> np.ndarray:
+    """Per-channel noise σ of the bilinear-demosaicked, colour-corrected TFP estimate Y₀.
+
+    Propagates :meth:`Observation.variance` (binomial model scaled to the data) through bilinear
+    demosaicking (:func:`spikeview.ops.noise.demosaic_variance`) and the correction gains α_c/η,
+    then takes the RMS over pixels. Monochrome (or ``use_mosaic=False``): RMS of the photosite σ.
+
+    Returns:
+        ``(3,)`` (or ``(1,)``) float64 σ in [0, 1] image units.
+    """
+    import math
+
+    import torch
+
+    from spikeview.ops.noise import demosaic_variance
+
+    var = obs.variance()
+    if obs.cfa is None or not use_mosaic:
+        return np.array([math.sqrt(float(var.mean()))])
+    v = demosaic_variance(torch.from_numpy(var)[None, None], obs.cfa)[0].numpy()
+    gain = (obs.alpha / obs.eta) if (use_cast and obs.alpha is not None) else np.ones(3)
+    return np.sqrt(v.reshape(3, -1).mean(axis=1)) * gain

@@ -40,7 +40,6 @@ precision     the prior's arithmetic: ``auto`` = the fastest path within 0.1 dB 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -49,8 +48,8 @@ from scipy.stats import chi2
 from spikeview.classical.noise import DEMOSAIC_CLEAN_SIGMA, SPARSE_COUNT, choose_demosaic  # noqa: F401 (the plan's rule)
 from spikeview.errors import ParameterError
 from spikeview.guided.config import GuidedConfig
-from spikeview.guided.observation import Observation
-from spikeview.ops.pyramid import max_pyramid_bands
+from spikeview.guided.observation import Observation, estimate_sigma  # noqa: F401 (the plan's noise)
+from spikeview.ops.pyramid import max_levels
 
 #: block size (pixels) of the region-level change test
 BLOCK = 16
@@ -119,33 +118,6 @@ class Plan:
 #: PSNR and +0.04 to +0.08 SSIM at 0.16–0.95 spikes, lost 0.22–0.34 dB at 1.3–2.1 spikes; the
 #: threshold sits between (benchmarks/results/guided.md)
 Q_COUNT = 1.1
-
-
-def max_levels(height: int, width: int) -> int:
-    """Largest number of band-pass pyramid levels an ``H × W`` frame allows (ops' bands minus 1)."""
-    return max_pyramid_bands(height, width) - 1
-
-
-def estimate_sigma(obs: Observation, use_mosaic: bool = True, use_cast: bool = True) -> np.ndarray:
-    """Per-channel noise σ of the bilinear-demosaicked, colour-corrected TFP estimate Y₀.
-
-    Propagates :meth:`Observation.variance` (binomial model scaled to the data) through bilinear
-    demosaicking (:func:`spikeview.ops.noise.demosaic_variance`) and the correction gains α_c/η,
-    then takes the RMS over pixels. Monochrome (or ``use_mosaic=False``): RMS of the photosite σ.
-
-    Returns:
-        ``(3,)`` (or ``(1,)``) float64 σ in [0, 1] image units.
-    """
-    import torch
-
-    from spikeview.ops.noise import demosaic_variance
-
-    var = obs.variance()
-    if obs.cfa is None or not use_mosaic:
-        return np.array([math.sqrt(float(var.mean()))])
-    v = demosaic_variance(torch.from_numpy(var)[None, None], obs.cfa)[0].numpy()
-    gain = (obs.alpha / obs.eta) if (use_cast and obs.alpha is not None) else np.ones(3)
-    return np.sqrt(v.reshape(3, -1).mean(axis=1)) * gain
 
 
 def changed_blocks(obs: Observation, alpha: float = 1e-3) -> np.ndarray | None:

@@ -95,7 +95,7 @@ def tile_spans(n: int, size: int, overlap: int = OVERLAP) -> list[tuple[int, int
 
 def plan_tiles(obs: Any, plan: Any, p: Any, size: int | None = None) -> TileMap:
     """The per-tile decisions for ``obs`` under the frame's ``plan`` and settings ``p`` (see the module docstring)."""
-    from spikeview.guided.plan import estimate_sigma
+    from spikeview.guided.observation import estimate_sigma
 
     size = int(size or p.tile)
     h, w = obs.shape
@@ -158,7 +158,7 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
     import torch
 
     from spikeview.guided.baseline import baseline, start_estimate
-    from spikeview.guided.plan import max_levels
+    from spikeview.ops.pyramid import max_levels
 
     tm = plan.tile_map if getattr(plan, "tile_map", None) is not None else plan_tiles(obs, plan, p)
     h, w = obs.shape

@@ -42,6 +42,11 @@ def max_pyramid_bands(height: int, width: int) -> int:
     return n
 
 
+def max_levels(height: int, width: int) -> int:
+    """Largest number of band-pass pyramid levels an ``H × W`` frame allows (the bands minus 1)."""
+    return max_pyramid_bands(height, width) - 1
+
+
 def _check_bands_count(bands: int, height: int, width: int) -> int:
     if isinstance(bands, bool) or not isinstance(bands, int) or bands < 1:
         raise ParameterError(f"bands must be an integer >= 1, got {bands!r}; use 1 for a single-scale loss.")
