@@ -3,7 +3,7 @@
 Everything the views show is computed here from the core (:mod:`spikeview.io`,
 :mod:`spikeview.classical`, :mod:`spikeview.sim`, :mod:`spikeview.ops`, :mod:`spikeview.guided`,
 :mod:`spikeview.export`), so the Qt side only moves arrays to the screen. Functions are pure and
-thread-safe given a thread-safe source (:class:`LockedSource`); workers call them off the GUI
+thread-safe given a thread-safe source (:class:`spikeview.io.views.LockedSource`); workers call them off the GUI
 thread.
 
 Array conventions: frames are row-major ``(H, W)`` or ``(H, W, 3)``; SFR and reconstructions are
@@ -13,7 +13,6 @@ levels ``(0, 255)``); ticks are stream readout indices.
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +24,7 @@ from spikeview.cfa import flip_cfa, parse_cfa, site_offsets
 from spikeview.errors import ParameterError
 from spikeview.gui.model import OpenedStream
 from spikeview.io.source import ArraySource, SpikeSource, StreamInfo
+from spikeview.io.views import LockedSource, ViewSource
 
 # ------------------------------------------------------------------------------------ imports
 
@@ -59,55 +59,6 @@ def preload() -> None:
 
 
 # ------------------------------------------------------------------------------------ sources
-
-
-class LockedSource(SpikeSource):
-    """A :class:`SpikeSource` whose reads are serialised by a lock.
-
-    The preview worker, the guided worker and the exporter read the same source from different
-    threads; file readers keep a file position, so reads must not interleave.
-    """
-
-    def __init__(self, inner: SpikeSource):
-        self.inner = inner
-        self.info = inner.info
-        self._lock = threading.Lock()
-
-    def _read(self, a: int, b: int) -> np.ndarray:
-        with self._lock:
-            return self.inner.read(a, b)
-
-    def count(self, a: int, b: int) -> np.ndarray:
-        with self._lock:
-            return self.inner.count(a, b)
-
-    def close(self) -> None:
-        with self._lock:
-            self.inner.close()
-
-
-class ViewSource(SpikeSource):
-    """Another reading of a source: its frames flipped vertically and/or a different CFA name.
-
-    Used to re-interpret a stream that cannot be re-opened from a file (the simulated demo). The
-    CFA names the top-left 2×2 of what :meth:`read` returns, as everywhere.
-    """
-
-    def __init__(self, inner: SpikeSource, cfa: str | None, flip_vertical: bool):
-        self.inner = inner
-        self.flip = bool(flip_vertical)
-        self.info = inner.info.replace(cfa=parse_cfa(cfa), flip_vertical=self.flip)
-
-    def _read(self, a: int, b: int) -> np.ndarray:
-        out = self.inner.read(a, b)
-        return np.ascontiguousarray(out[:, ::-1]) if self.flip else out
-
-    def count(self, a: int, b: int) -> np.ndarray:
-        out = self.inner.count(a, b)
-        return np.ascontiguousarray(out[::-1]) if self.flip else out
-
-    def close(self) -> None:
-        self.inner.close()
 
 
 def memory_stream(base: SpikeSource, label: str, ground_truth: Callable[[int], np.ndarray] | None = None,
