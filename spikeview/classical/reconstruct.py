@@ -12,28 +12,20 @@ raw-processing order.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Iterable, Iterator
 
 import numba
 import numpy as np
 
-from spikeview.classical.colour_cast import (
-    DEFAULT_ALPHA_WINDOWS,
-    DEFAULT_ETA,
-    apply_colour_cast_mosaic,
-    colour_gains,
-    estimate_alpha,
-)
+from spikeview.classical.colour_cast import DEFAULT_ETA, apply_colour_cast_mosaic, colour_gains, estimate_alpha
 from spikeview.classical.demosaic import DEMOSAIC_METHODS, check_method, demosaic
 from spikeview.classical.demosaic._common import quad_codes
 from spikeview.classical.config import CLASSICAL_METHODS, ClassicalConfig  # noqa: F401 (re-exported)
 from spikeview.classical.display import Gamma, _check_gamma, _check_levels, encode8, to_display, transfer
 from spikeview.classical.noise import choose_demosaic, haar_noise_variance
-from spikeview.classical.tfi import DEFAULT_HALF_WINDOW, tfi
+from spikeview.classical.tfi import tfi
 from spikeview.classical.tfp import counts_to_sfr, tfp, window_counts
 from spikeview.classical.windows import window_range
-from spikeview.errors import ParameterError
 from spikeview.io.source import SpikeSource
 
 def resolve_alpha(source: SpikeSource, config: ClassicalConfig, alpha: np.ndarray | list[float] | None = None) -> np.ndarray | None:
@@ -183,6 +175,21 @@ def _bilinear_lut_kernel(cnt: np.ndarray, quad: np.ndarray, luts: np.ndarray, ou
             _lut_row(out[y], cnt[y], cnt[ym], cnt[yp], w, g_even, lg, luts[0], luts[2], 0, 2)
         else:
             _lut_row(out[y], cnt[y], cnt[ym], cnt[yp], w, g_even, lg, luts[2], luts[0], 2, 0)
+
+
+def mosaic_display(mosaic: np.ndarray, cfa: str | None, *, alpha: np.ndarray | list[float] | None = None,
+                   eta: float = DEFAULT_ETA, demosaic_method: str = "auto", black: float = 0.0, white: float = 1.0,
+                   gamma: Gamma = "srgb") -> np.ndarray:
+    """A mosaicked rate frame (a TFP or TFI SFR) as display RGB, uint8 ``(H, W, 3)``: the colour cast on
+    the mosaic (with ``alpha``; ``None`` = none), the demosaic (``"auto"``: :func:`auto_demosaic`) and
+    the fixed display levels (:func:`~spikeview.classical.display.to_display`). Monochrome frames get
+    the levels only, repeated into three channels."""
+    if cfa is None:
+        return np.repeat(to_display(mosaic, black, white, gamma)[..., None], 3, axis=-1)
+    method = auto_demosaic(mosaic, cfa, demosaic_method)[0]
+    if alpha is not None:
+        mosaic = apply_colour_cast_mosaic(mosaic, cfa, alpha, eta)
+    return to_display(demosaic(mosaic, cfa, method), black, white, gamma)
 
 
 def preview_rgb(source: SpikeSource, center: int, window: int = 32, *, alpha: np.ndarray | list[float] | None = None,

@@ -355,17 +355,13 @@ def _channel_means(block: np.ndarray, cfa: str | None) -> np.ndarray:
 
 
 def _colour_frame(mosaic: np.ndarray, cfa: str | None, params: dict[str, Any], alpha: np.ndarray | None) -> np.ndarray:
-    """Mosaicked rate → corrected, demosaicked uint8 RGB (the pipeline of ``reconstruct_frame``)."""
-    from spikeview.classical.colour_cast import apply_colour_cast_mosaic
-    from spikeview.classical.demosaic import demosaic
+    """Mosaicked rate → corrected, demosaicked uint8 RGB with the session's levels
+    (:func:`spikeview.classical.reconstruct.mosaic_display`, the classical colour path)."""
+    from spikeview.classical.reconstruct import mosaic_display
 
-    if cfa is None:
-        img = show(mosaic, params)
-        return np.repeat(img[..., None], 3, axis=-1)
-    method = demosaic_for(mosaic, cfa, params["demosaic"])
-    if alpha is not None:
-        mosaic = apply_colour_cast_mosaic(mosaic, cfa, alpha, params["eta"])
-    return show(demosaic(mosaic, cfa, method), params)
+    return mosaic_display(mosaic, cfa, alpha=alpha, eta=params["eta"], demosaic_method=params["demosaic"],
+                          black=params["black"], white=max(params["white"], params["black"] + 1e-3),
+                          gamma=display_gamma(params))
 
 
 def demosaic_for(mosaic: np.ndarray, cfa: str | None, requested: str) -> str:
