@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from spikeview.cfa import cfa_to_str, site_masks
+from spikeview.cfa import cfa_to_str
 from spikeview.io.source import SpikeSource
 
 #: the command reads a spike file: the geometry flags are added (:func:`spikeview.cli._common.add_geometry_flags`)
@@ -42,10 +42,9 @@ def firing_rates(src: SpikeSource, sample_windows: int = 64, window: int = 64) -
     for a in starts:
         total += src.count(int(a), int(a) + window)
     rate = total / (k * window)
-    out: dict[str, float] = {}
-    if src.cfa is not None:
-        for name, mask in site_masks(src.cfa, src.height, src.width).items():
-            out[name] = float(rate[mask].mean()) if mask.any() else float("nan")
+    from spikeview.classical.colour_cast import site_rates  # the library's per-site statistics
+
+    out: dict[str, float] = site_rates(rate, src.cfa) if src.cfa is not None else {}
     out["all"] = float(rate.mean())
     return out
 
