@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from spikeview.classical.config import ClassicalConfig
-from spikeview.config import Config, ParamMeta, check_value, load_toml, param, param_fields  # noqa: F401 (check_value: the app's)
+from spikeview.config import Config, ParamMeta, check_value, load_toml, param, param_fields
 from spikeview.errors import InputFileError, ParameterError
 from spikeview.export.settings import ExportConfig
 from spikeview.guided.config import GuidedConfig

@@ -125,7 +125,7 @@ def test_haar_estimator_on_gaussian_noise():
 
 # ------------------------------------------------------------------------------------ demosaic
 def test_demosaic_auto_bilinear_where_noise_dominates_malvar_where_clean_or_denoised():
-    from spikeview.guided.plan import DEMOSAIC_CLEAN_SIGMA, choose_demosaic
+    from spikeview.classical.noise import DEMOSAIC_CLEAN_SIGMA, choose_demosaic
 
     assert choose_demosaic(2 * DEMOSAIC_CLEAN_SIGMA)[0] == "bilinear"
     assert choose_demosaic(DEMOSAIC_CLEAN_SIGMA / 2)[0] == "malvar2004"
@@ -155,7 +155,7 @@ def test_classical_auto_demosaic_measures_the_noise_of_the_mosaic():
 
 
 def test_demosaic_auto_starts_sparse_counts_bilinearly():
-    from spikeview.guided.plan import SPARSE_COUNT, choose_demosaic
+    from spikeview.classical.noise import SPARSE_COUNT, choose_demosaic
 
     assert choose_demosaic(0.2, denoised=True, mean_count=SPARSE_COUNT / 2)[0] == "bilinear"
     assert choose_demosaic(0.2, denoised=True, mean_count=2 * SPARSE_COUNT)[0] == "malvar2004"

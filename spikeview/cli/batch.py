@@ -36,10 +36,6 @@ def wants_zarr(args: argparse.Namespace) -> bool:
     return False
 
 
-#: kept for callers of the old private name (the export command); :func:`spikeview.cli._common.require_extra`
-_require_extra = require_extra
-
-
 class _Progress:
     """tqdm on a terminal (windows, windows/s, time left); otherwise a plain line every 10 % or 30 s."""
 

@@ -27,7 +27,8 @@ from pathlib import Path
 from typing import Any
 
 from spikeview.errors import ParameterError
-from spikeview.recipe import BY_KEY, PARAMS, Param, Recipe, check_value
+from spikeview.config import check_value
+from spikeview.recipe import BY_KEY, PARAMS, Param, Recipe
 
 # ------------------------------------------------------------------------------------------ events
 

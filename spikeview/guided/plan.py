@@ -45,10 +45,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
-from spikeview.classical.noise import DEMOSAIC_CLEAN_SIGMA, SPARSE_COUNT, choose_demosaic  # noqa: F401 (the plan's rule)
+from spikeview.classical.noise import choose_demosaic
 from spikeview.errors import ParameterError
 from spikeview.guided.config import GuidedConfig
-from spikeview.guided.observation import Observation, estimate_sigma  # noqa: F401 (the plan's noise)
+from spikeview.guided.observation import Observation, estimate_sigma
 from spikeview.ops.pyramid import max_levels
 
 #: block size (pixels) of the region-level change test
