@@ -99,6 +99,28 @@ def display_problem(environ: dict[str, str] | None = None, platform: str | None 
     return None
 
 
+def _stdout_closed() -> bool:
+    """True when standard output is a pipe whose reader has gone (a BrokenPipeError from a worker's socket is
+    not); stdout then points at os.devnull so that Python's flush at exit does not print "Exception ignored …"."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, ValueError, OSError):
+        return False
+    try:
+        import select
+
+        poller = select.poll()
+        poller.register(fd, select.POLLOUT)
+        gone = any(events & select.POLLERR for _, events in poller.poll(0))  # a pipe without reader: POLLERR
+    except (AttributeError, OSError):  # no poll() (Windows): take the broken pipe to be stdout's
+        gone = True
+    if gone:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, fd)
+        os.close(devnull)
+    return gone
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the process exit status (0 ok, 1 failed, 2 bad usage, 130 interrupted)."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -131,6 +153,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         _print_error("out of memory; reconstruct a shorter range or a smaller region.")
         return 1
     except Exception as e:  # last resort: one line, never a traceback (set SPIKEVIEW_DEBUG=1 to see it)
+        if isinstance(e, BrokenPipeError) and _stdout_closed():
+            return 1  # the reader of our output went away (`spikeview info FILE | head`): stop quietly, like cat
         if os.environ.get("SPIKEVIEW_DEBUG"):
             raise
         _print_error(f"unexpected {type(e).__name__}: {e} (this is a bug; rerun with SPIKEVIEW_DEBUG=1 and report the traceback).")
