@@ -22,7 +22,10 @@ def add_args(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from spikeview.cli._common import open_source_from_args
+    from spikeview.errors import ParameterError
 
+    if args.sample_windows < 1:
+        raise ParameterError(f"--sample-windows {args.sample_windows} is not valid: use at least 1 (default 64).")
     with open_source_from_args(args, show_warnings=False) as src:  # `info` lists the warnings itself
         print(describe(src, sample_windows=args.sample_windows))
     return 0

@@ -60,7 +60,10 @@ def _in_user_words(e: ParameterError, args: argparse.Namespace, given: dict[str,
         return e
     key, value, fix = m.groups()
     if key in given and key in FLAG_OF:
-        return ParameterError(f"{FLAG_OF[key]} {given[key]} is not valid: {fix}")
+        flag = FLAG_OF[key]
+        if key in ("width", "height") and getattr(args, "size", None) is not None and getattr(args, key, None) is None:
+            flag = "--size"  # the user typed --size N, not --width/--height
+        return ParameterError(f"{flag} {given[key]} is not valid: {fix}")
     if args.config:
         return ParameterError(f"{args.config}: '{key}' = {value} is not valid: {fix}")
     return e

@@ -1,0 +1,30 @@
+"""Bad flag values found by trying the CLI as a newcomer: one sentence naming the flag the user typed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from spikeview.cli.main import main
+
+
+def test_simulate_size_zero_names_size(tmp_path, capsys):
+    assert main(["simulate", "--demo", "--size", "0", "--out", str(tmp_path / "x.dat")]) == 1
+    err = capsys.readouterr().err
+    assert "--size 0 is not valid" in err and "--width" not in err and "\n" not in err.strip(), err
+    assert not list(tmp_path.iterdir())
+
+
+def test_simulate_width_zero_still_names_width(tmp_path, capsys):
+    assert main(["simulate", "--demo", "--width", "0", "--height", "8", "--out", str(tmp_path / "x.dat")]) == 1
+    assert "--width 0 is not valid" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("n", ["0", "-4"])
+def test_info_sample_windows_below_one_is_refused(tmp_path, capsys, n):
+    path = tmp_path / "s.npy"
+    np.save(path, (np.random.default_rng(0).random((40, 8, 8)) < 0.3).astype(np.uint8))
+    assert main(["info", str(path), "--cfa", "none", "--sample-windows", n]) == 1
+    captured = capsys.readouterr()
+    assert f"--sample-windows {n} is not valid" in captured.err and captured.out == "", captured
+    assert main(["info", str(path), "--cfa", "none", "--sample-windows", "1"]) == 0
