@@ -444,7 +444,8 @@ class DegradationResult:
 RESIDUAL_RANGE = 0.5
 
 
-def stage_images(x_img: np.ndarray, stages: dict[str, Any], display: dict[str, Any], show_pyramid: bool) -> DegradationResult:
+def stage_images(x_img: np.ndarray, stages: dict[str, Any], display: dict[str, Any], show_pyramid: bool,
+                 scene_scale: float = 1.0) -> DegradationResult:
     """Display images of the sampler's data-term stages (:meth:`spikeview.guided.likelihood.DataTerm.stages`).
 
     Args:
@@ -453,6 +454,8 @@ def stage_images(x_img: np.ndarray, stages: dict[str, Any], display: dict[str, A
             ``√w̃ (A X − Y)``) and ``bands`` (its pyramid), as tensors.
         display: the session's display parameters for the scene-side images.
         show_pyramid: include the residual's bands (when the data term has more than one).
+        scene_scale: factor from the sampler's exposure back to X's units
+            (:func:`spikeview.pipeline.guided_scale`), so M X is shown like X.
 
     Sensor-side images (C M X onwards, Y, residual) are shown in gray, linear 0..1 through the sRGB
     curve, so the checkerboard of the mosaic stays visible; the residual is shown as ``√w̃ (Y − A X)``
@@ -466,7 +469,7 @@ def stage_images(x_img: np.ndarray, stages: dict[str, Any], display: dict[str, A
     sensor = {"black": 0.0, "white": 1.0, "gamma": "srgb"}
     images = {
         "x": show(x_img, display),
-        "mx": show(arr(stages["mx"]), display),
+        "mx": show(arr(stages["mx"]) * np.float32(scene_scale), display),
         "cmx": to_display(arr(stages["cmx"]), **sensor),
         "qcmx": to_display(arr(stages["a"]), **sensor),
         "y": to_display(arr(stages["y"]), **sensor),

@@ -119,7 +119,7 @@ def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
     from spikeview.guided.knobs import knob_status
     from spikeview.guided.plan import make_plan
     from spikeview.guided.sampler import GuidedSampler
-    from spikeview.pipeline import reconstruct_windows, sampler_params
+    from spikeview.pipeline import guided_scale, reconstruct_windows, sampler_params
 
     recipe = req.recipe if req.recipe is not None else Recipe()
     src = req.source
@@ -137,9 +137,12 @@ def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
             x = x.mean(axis=-1)
         label = "TFP (classical)"
     data = GuidedSampler.data_term(obs, plan, cfg)
+    # X is in the outputs' linear units (Y·α/η); the data term works at the sampler's exposure, as in
+    # pipeline.reconstruct_windows (without this, A X of a Bayer capture was ~2.7x brighter than Y)
+    scale = np.float32(guided_scale(state))
     with torch.no_grad():
-        st = data.stages(to_tensor(np.clip(x, 0.0, 1.0)))
-    res = core.stage_images(x, st, req.params, bool(req.params.get("show_pyramid")))
+        st = data.stages(to_tensor(np.clip(x / scale, 0.0, 1.0)))
+    res = core.stage_images(x, st, req.params, bool(req.params.get("show_pyramid")), scene_scale=float(scale))
     return DegradationView(res, label, req.tick, obs.shape, str(plan), knob_status(cfg, plan), plan.quantise)
 
 
