@@ -159,3 +159,39 @@ def test_a_size_that_fits_both_sensors_names_the_one_the_spikes_match(tmp_path):
                                             "first, 400x250 with 40 ticks") as e:
         open_source(path)
     assert e.value.candidates == [(400, 250), (1000, 1000)]
+
+
+# ------------------------------------------------------------------ flat scenes, few ticks (issue 14)
+def _flat_capture(tmp_path, w: int, h: int, ticks: int, cfa: str, seed: int = 7):
+    """A uniform grey through the simulator: only the pixels themselves (fixed pattern, integrate-and-fire) tell
+    the frame size."""
+    from spikeview.sim import MotionScene, SimConfig, simulate_to_file
+
+    scene = MotionScene(np.full((h, w, 3), 0.7, dtype=np.float32), (h, w))
+    files = simulate_to_file(scene, SimConfig(n_ticks=ticks, width=w, height=h, cfa=cfa, seed=seed),
+                             tmp_path / "flat.dat")
+    files.sidecar.unlink()
+    return files.dat
+
+
+def test_integrate_and_fire_pixels_mark_the_frame_size_from_tick_to_tick(tmp_path):
+    from spikeview.io.geometry import TICK_EVIDENCE, tick_correlation, tick_frame_size
+
+    buf = np.fromfile(_flat_capture(tmp_path, 64, 64, 50, "none"), dtype=np.uint8)
+    fb = 64 * 64 // 8
+    assert tick_correlation(buf, fb) < -0.3  # one pixel on consecutive ticks rarely fires twice
+    for other in (fb // 2, fb + 8, 3 * fb // 4):  # different pixels: independent phases
+        assert abs(tick_correlation(buf, other)) < TICK_EVIDENCE / 2, other
+    assert tick_frame_size(buf, [8, fb // 2, fb, 2 * fb])[0] == fb
+    # Bernoulli spikes carry no such signature: no frame size is claimed
+    bern = np.fromfile(write_capture(tmp_path / "b.dat", 64, 64, 50, cfa=False), dtype=np.uint8)
+    assert tick_correlation(bern, fb) > -TICK_EVIDENCE / 2  # (slightly positive: a pixel keeps its rate)
+    assert tick_frame_size(bern, [8, fb // 2, fb, 2 * fb])[0] is None
+
+
+@pytest.mark.parametrize("w, h, ticks, cfa", [(128, 128, 50, "none"), (64, 64, 100, "RGGB"), (256, 128, 50, "RGGB")])
+def test_flat_grey_captures_with_few_ticks_rank_first(tmp_path, w, h, ticks, cfa):
+    """A uniform grey: the frame size from tick to tick, the width from the colour filter's 2x2 pattern (RGGB)
+    or, monochrome, from the shape prior alone (a flat monochrome scene has no rows to line up)."""
+    guesses = rank_plain_geometries(_flat_capture(tmp_path, w, h, ticks, cfa))
+    assert guesses[0].size == (w, h), [g.describe() for g in guesses]

@@ -18,6 +18,15 @@ The file's own bits say which one is right, from two facts about real captures:
    rows side by side, so half a row along matches as well and the score falls to about 0; at
    half the width, every other "row" below is half a real row along and matches little.
 
+Integrate-and-fire pixels mark the frame size more directly, flat scenes included: a pixel whose
+voltage resets by a threshold after each spike fires on two consecutive ticks less often than
+chance, so at the true frame size a bit and the bit one frame later co-fire clearly less often than
+their neighbours do (:func:`tick_correlation`, about −0.2 … −0.75 on simulator and Spike-Zoo
+captures, about 0 at other sizes). When a frame size shows it, the smallest such size goes first
+(:func:`tick_frame_size`; Bernoulli spikes show nothing and keep the ranking above). With a colour
+filter, the rows are scored at every width with the filter's 2×2 pattern taken out where it is
+sharpest, so the filter's own row pattern does not line up the rows at twice the width.
+
 Ties fall back on known sensor sizes (1000×1000, 400×250), then square and common aspect ratios;
 when the file shows no scene at all (black, uniform or random) the order is known sizes, common
 shapes, then more ticks. Only a sample is read (a 2 MB block, then up to 8 MB of frames), so
@@ -239,6 +248,55 @@ def bayer_contrast(rates: np.ndarray, width: int) -> float:
 BAYER_CONTRAST = 0.08
 #: frame sizes whose parts repeat at or above this ratio (:func:`repeats_within`) are a period of the file
 REPEAT_TOLERANCE = 0.8
+#: a tick-to-tick correlation (:func:`tick_correlation`) below minus this is a pixel's own refractory
+#: signature (chance stays within about ±0.03 at sizes that are not the frame size)
+TICK_EVIDENCE = 0.08
+#: bytes compared per frame size for :func:`tick_correlation`: chunks spread over the file
+TICK_CHUNK, TICK_CHUNKS = 8192, 8
+
+
+def tick_correlation(buf: np.ndarray, frame_bytes: int) -> float:
+    """Correlation of a bit with the bit ``frame_bytes`` later, less that of its neighbours 8 pixels along.
+
+    Spike pixels integrate and fire: the voltage resets by one threshold after a spike, so a pixel
+    firing ``r`` spikes per tick fires on two consecutive ticks with probability ``max(0, 2r − 1)``,
+    always below the ``r²`` of independent ticks (its lag-1 correlation is ``−min(r, 1−r) / max(r,
+    1−r)``, whatever the scene, also a flat one). At the true frame size a bit and the bit one frame
+    later are one pixel on consecutive ticks, so they co-fire clearly less often than chance; at any
+    other size that is not a multiple they are two different pixels, with independent phases, which
+    co-fire as often as the same bit and the bits one byte (8 pixels) before and after (the control,
+    which keeps the scene's rates in both terms). Returns about −0.2 … −0.75 at the frame size of an
+    integrate-and-fire capture (a multiple: the lag-k correlation, any sign), about 0 elsewhere, and
+    about 0 or a little above at the frame size of Bernoulli spikes, which carry no such signature
+    (a pixel keeps its rate, its neighbours 8 pixels along have slightly different ones).
+    """
+    n = int(buf.size)
+    length = min(TICK_CHUNK, n - frame_bytes - 2)
+    if frame_bytes < 1 or length < 64:
+        return 0.0
+    both = ctrl = ones = 0.0
+    for o in np.unique(np.linspace(1, n - frame_bytes - length - 1, TICK_CHUNKS).astype(np.int64)):
+        a = np.asarray(buf[o:o + length])
+        b = np.asarray(buf[o + frame_bytes - 1:o + frame_bytes + length + 1])
+        both += float(_POPCOUNT[a & b[1:-1]].sum())
+        ctrl += 0.5 * float(_POPCOUNT[a & b[:-2]].sum() + _POPCOUNT[a & b[2:]].sum())
+        ones += 0.5 * float(_POPCOUNT[a].sum() + _POPCOUNT[b[1:-1]].sum())
+    return (both - ctrl) / (ones - ctrl) if ones > ctrl else 0.0
+
+
+def tick_frame_size(buf: np.ndarray, frame_sizes) -> tuple[int | None, dict[int, float]]:
+    """The frame size an integrate-and-fire capture shows from tick to tick (:func:`tick_correlation`),
+    or ``None`` when no size shows it (Bernoulli spikes, a dark or saturated file, a single tick).
+
+    The smallest frame size whose correlation is below −:data:`TICK_EVIDENCE` and at least half the
+    strongest: multiples of the frame size compare a pixel with itself a few ticks later and can
+    read as low as the frame size itself, other sizes read about 0.
+    """
+    rho = {fb: tick_correlation(buf, fb) for fb in frame_sizes if buf.size // fb >= 2}
+    low = min(rho.values(), default=0.0)
+    if low >= -TICK_EVIDENCE:
+        return None, rho
+    return min(fb for fb, v in rho.items() if v < -TICK_EVIDENCE and v <= 0.5 * low), rho
 
 
 def rate_vector(buf: np.ndarray, frame_bytes: int, budget: int = SAMPLE_BYTES, runs: int = 4) -> np.ndarray:
@@ -384,6 +442,12 @@ def rank_geometries(buf: np.ndarray, *, limit: int | None = 8) -> list[GeometryG
         if periods:
             consistent = periods + [fb for fb in consistent if fb not in periods]
     frame_order = consistent + sorted((fb for fb in by_fb if fb not in consistent), key=lambda fb: (-t_rel[fb], fb))
+    # an integrate-and-fire capture names its frame size from tick to tick, flat scenes included: it goes first
+    tick_fb, _ = tick_frame_size(buf, by_fb)
+    if tick_fb is not None:
+        frame_order = [tick_fb] + [fb for fb in frame_order if fb != tick_fb]
+        signal = True
+        t_rel[tick_fb] = 1.0
 
     # 2. width from the spatial smoothness, for the most plausible frame sizes
     guesses: list[GeometryGuess] = []
@@ -400,21 +464,23 @@ def rank_geometries(buf: np.ndarray, *, limit: int | None = 8) -> list[GeometryG
             wt = max(contrast, key=contrast.get)
             if guess_cfa(raw.reshape(-1, wt)) is None:
                 top = 0.0
+        if top > BAYER_CONTRAST:
+            img = raw.reshape(-1, wt).astype(np.float64)
+            for py in (0, 1):
+                for px in (0, 1):
+                    m = float(img[py::2, px::2].mean())
+                    img[py::2, px::2] /= m if m > 0 else 1.0
+            unfiltered = pair_sums(img.ravel())
+            unfiltered_lags = _Lags(unfiltered)
         for w, h in by_fb[fb]:
             g = GeometryGuess(w, h, size // fb, temporal=round(t_rel[fb], 4), known=(w, h) in KNOWN_SIZES)
             if rates is not None:
                 g.spatial = round(spatial_score(rates.reshape(h, w), lags=lags), 4)
             if top > BAYER_CONTRAST:  # a colour filter: its 2x2 pattern is sharpest at the true width
                 g.pattern = round(contrast[w] / top, 4)
-                if w % 2 == 0 and h % 2 == 0:
-                    # the filter's row pattern (R+G rows, G+B rows) also lines up rows at twice the width:
-                    # score the rows with each site divided by its mean at this width (the scene alone)
-                    img = raw.reshape(h, w).astype(np.float64)
-                    for py in (0, 1):
-                        for px in (0, 1):
-                            m = float(img[py::2, px::2].mean())
-                            img[py::2, px::2] /= m if m > 0 else 1.0
-                    g.spatial = round(max(g.spatial, spatial_score(pair_sums(img.ravel()).reshape(h, w))), 4)
+                # the filter's row pattern (R+G rows, G+B rows) also lines up rows at twice the width: score
+                # the rows with the filter taken out where it is sharpest (each site over its mean at that width)
+                g.spatial = round(spatial_score(unfiltered.reshape(h, w), lags=unfiltered_lags), 4)
             group.append(g)
         group.sort(key=lambda g: (-(g.spatial + 0.5 * g.pattern + _prior(g.width, g.height)), -g.width))
         guesses += group
