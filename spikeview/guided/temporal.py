@@ -67,6 +67,11 @@ ADJACENT_DISPERSION = 1.4
 TILE_CHI = 1.5
 #: per-photosite test: 3×3 same-colour sums must agree within this many standard deviations
 PIXEL_Z = 2.5
+#: largest displacement (photosites, either axis) at which a neighbour is still pooled: farther, a
+#: tile's single shift no longer fits rotating or deforming content (chosen on the tuning sequences of
+#: spikeview.bench.temporal, 6 frames: fast pan −0.15 dB, fans +0.34 dB against no limit; 6 px: −0.01, +0.10)
+MAX_SHIFT = 4
+
 #: largest radius accepted by the config
 MAX_RADIUS = 8
 
@@ -359,7 +364,7 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
             # tiles of the guide are tiles of TILE photosites (an odd last row/column of a Bayer frame
             # has no super-pixel: it takes its neighbour tile's match)
             best, chi = _fit_tiles(motion[k], th, tw), _fit_tiles(chis[k], th, tw)
-            ok_tile = chi <= TILE_CHI
+            ok_tile = (chi <= TILE_CHI) & (np.abs(best * f).max(axis=-1) <= MAX_SHIFT)
             shifts[k] = best * f
             accepted[k] = ok_tile
             # every photosite reads the neighbour at its tile's shift (the 3×3 same-colour sums shift with it)
