@@ -11,7 +11,7 @@ What it measures (one process, ``torch.set_num_threads(2)``; the machine is shar
 2. **one guided frame** (the CLI's default recipe on a simulated demo capture of that size: gray-world
    α, white point, exposure, plan; ``GuidedSampler.run`` only, no start-up) for today's float32
    path, ``--precision float32`` and ``--precision auto`` (what this CPU resolves it to);
-3. **quality** (``--quality``, on by default): the held-out scenes of ``spikeview bench``
+3. **quality** (``--quality``; ``--quality-json FILE`` reuses earlier rows): the held-out scenes of ``spikeview bench``
    (:mod:`spikeview.bench.data`, 256×256, 2 windows each) reconstructed with the default recipe under
    each mixed-precision candidate (which layers in bf16, how many final steps float32), PSNR/SSIM
    (gain-fitted, data_range 1, :func:`spikeview.bench.guided.score`) minus float32's on the same
@@ -26,8 +26,9 @@ seconds (wall ≫ CPU/2 means other processes took the cores).
 
 Usage::
 
-    python benchmarks/bench_prior.py            # full run (~5 min), writes benchmarks/results/prior.{md,json}
-    python benchmarks/bench_prior.py --quick    # 256² and one 1000² pass, fewer repeats, small quality set (~1.5 min)
+    python benchmarks/bench_prior.py              # speed and memory (~5 min quiet), writes benchmarks/results/prior.{md,json}
+    python benchmarks/bench_prior.py --quality    # plus the PSNR/SSIM cost of each candidate (+ several minutes)
+    python benchmarks/bench_prior.py --quick      # 256² frames, 1000² pass, 2–3 repeats, no writing (~1.5 min quiet)
 """
 
 from __future__ import annotations
@@ -318,12 +319,26 @@ def write_report(res: dict, out: Path) -> None:
     if q:
         L += [f"## Quality of the mixed-precision candidates (held-out bench scenes, {q['size']}×{q['size']}, {q['frames']} windows each)", "",
               f"Scenes: {', '.join(q['scenes'])}. Δ = candidate − float32 on the same windows (gain-fitted PSNR/SSIM, data_range 1). "
-              "Budget: ≥ −0.1 dB and ≥ −0.005 SSIM.", "",
+              f"Budget: ≥ −0.1 dB and ≥ −0.005 SSIM on every scene (worst scene shown).{' ' + q['note'] + '.' if q.get('note') else ''}", "",
               "| candidate | ΔPSNR mean | ΔSSIM mean | ΔPSNR worst scene | ΔSSIM worst | worst scene | within budget |", "|---|---|---|---|---|---|---|"]
         for k, v in q["rows"].items():
             ok = v["dpsnr_worst"] >= -0.1 and v["dssim_worst"] >= -0.005
             L.append(f"| {k} | {v['dpsnr_mean']:+.3f} | {v['dssim_mean']:+.4f} | {v['dpsnr_worst']:+.3f} | {v['dssim_worst']:+.4f} | "
                      f"{v['worst_scene']} | {'yes' if ok else 'no'} |")
+        L.append("")
+    big = [f for f in res["frames"] if f["size"] >= 1000]
+    if big:
+        f = big[0]
+        L += ["## Worked estimate: 1 s of 1000×1000 capture (2,000 windows of 10 ticks)", "",
+              "One 2-core machine runs a window with 2 threads (median wall s above); a Dask worker is a single-threaded "
+              "process, so its cost per window is taken as the process CPU seconds of the same run (2 threads' CPU time ≈ one "
+              "thread's work; Dask's own overhead, 0.4 ms a window (BENCHMARKS.md, Dask section), is negligible). Every window "
+              "pays the full sampler (no reuse), the CLI's defaults otherwise.", "",
+              "| path | s per window (2 threads) | CPU s per window | one 2-core machine | 1 worker | 8 workers | 64 workers |",
+              "|---|---|---|---|---|---|---|"]
+        for k, v in f["rows"].items():
+            w, c = v["wall"], v["cpu"]
+            L.append(f"| {k} | {w:.2f} | {c:.2f} | {_hours(2000 * w)} | {_hours(2000 * c)} | {_hours(2000 * c / 8)} | {_hours(2000 * c / 64)} |")
         L.append("")
     mem = res.get("memory") or []
     if mem:
@@ -335,17 +350,29 @@ def write_report(res: dict, out: Path) -> None:
     out.write_text("\n".join(L), encoding="utf-8")
 
 
+def _hours(seconds: float) -> str:
+    return f"{seconds / 3600:.1f} h" if seconds >= 3600 else f"{seconds / 60:.0f} min"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="256² frames, one 1000² pass, 3 repeats, 3 held-out scenes x 1 window")
     ap.add_argument("--repeats", type=int, default=None)
-    ap.add_argument("--no-quality", dest="quality", action="store_false")
+    ap.add_argument("--quality", action="store_true", help="also the PSNR/SSIM cost of each candidate on the held-out bench "
+                    "scenes (256², 2 windows each: ~20 model runs per scene, several minutes)")
+    ap.add_argument("--quality-json", type=Path, default=None, help="include quality rows measured before (prior.json or "
+                    "the JSON of bench_quality) instead of measuring them")
     ap.add_argument("--no-memory", dest="memory", action="store_false")
     ap.add_argument("--no-compile", dest="compile", action="store_false")
     ap.add_argument("--big", action="store_true", help="also the peak memory of a 2000x2000 frame")
     ap.add_argument("--out", type=Path, default=None, help="folder for prior.md/prior.json (default benchmarks/results; "
                     "--quick writes nothing unless given)")
+    ap.add_argument("--report-only", type=Path, default=None, help="re-write prior.md from a prior.json")
     a = ap.parse_args(argv)
+    if a.report_only is not None:
+        write_report(json.loads(a.report_only.read_text(encoding="utf-8")), a.report_only.with_suffix(".md"))
+        print(f"wrote {a.report_only.with_suffix('.md')}")
+        return 0
     import torch
 
     torch.set_num_threads(2)
@@ -366,9 +393,14 @@ def main(argv: list[str] | None = None) -> int:
             r = bench_frame(simulate(size, work), rep)
             res["frames"].append(r)
             print(f"frame {size}: " + ", ".join(f"{k} {v['wall']:.2f}s" for k, v in r["rows"].items()), flush=True)
-        if a.quality:
+        if a.quality_json is not None:
+            q = json.loads(a.quality_json.read_text(encoding="utf-8"))
+            res["quality"] = q.get("quality", q)
+            res["quality"]["note"] = f"measured earlier, read from {a.quality_json.name}"
+        elif a.quality:
             res["quality"] = bench_quality(1 if a.quick else 2, 128 if a.quick else 256,
                                            ["rocket", "colorwheel", "page_bright"] if a.quick else None)
+        if res.get("quality"):
             for k, v in res["quality"]["rows"].items():
                 print(f"quality {k}: ΔPSNR mean {v['dpsnr_mean']:+.3f} worst {v['dpsnr_worst']:+.3f} ({v['worst_scene']}), "
                       f"ΔSSIM mean {v['dssim_mean']:+.4f} worst {v['dssim_worst']:+.4f}", flush=True)
