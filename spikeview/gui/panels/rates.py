@@ -78,6 +78,8 @@ class RatesPanel(QtWidgets.QWidget):
         for curve in self.alpha_curves:
             curve.setVisible(colour)
         self.alpha_plot.plotItem.legend.setVisible(colour)
+        # …and no α plot at all: an empty plot whose axis title did not fit at 1366×768 told nothing
+        self.alpha_plot.setVisible(colour)
         self.alpha_plot.setLabel("left", "gray-world α" if colour else "gray-world α (none: monochrome)")
 
     def _on_tick(self, tick: int) -> None:
@@ -101,7 +103,9 @@ class RatesPanel(QtWidgets.QWidget):
         means = "  ".join(f"{k} {v:.3f}" for k, v in r.means.items())
         alpha = ", ".join(f"{a:.2f}" for a in r.alpha)
         note = " (refreshed 4×/s while playing)" if s.playing else ""
-        self.summary.setText(f"Mean SFR ({where}, tick {r.tick}{note}): {means}   ·   window α = ({alpha})")
+        colour = getattr(s.source, "cfa", None) is not None
+        alpha_text = f"   ·   window α = ({alpha})" if colour else ""  # monochrome: no colour cast, no α
+        self.summary.setText(f"Mean SFR ({where}, tick {r.tick}{note}): {means}{alpha_text}")
         self.hint.setText(cfa_hint(r.means))
 
     def show_alpha_history(self, data: tuple[np.ndarray, np.ndarray]) -> None:
