@@ -1,4 +1,4 @@
-"""Rates panel on a monochrome capture (found trying a Spike-Zoo clip at 1366×768): no α plot and no
+"""Rates panel and open dialog on a monochrome capture (found trying a Spike-Zoo clip at 1366×768): no α plot and no
 "window α = (3.46)" for a capture without colour channels; a Bayer capture keeps both."""
 
 from __future__ import annotations
@@ -20,3 +20,16 @@ def test_alpha_shown_only_for_colour_captures(window, qtbot, tmp_path, cfa):
     assert rp.alpha_plot.isVisibleTo(window) == colour
     assert ("window α" in rp.summary.text()) == colour, rp.summary.text()
     assert "Mean SFR" in rp.summary.text()
+
+
+@pytest.mark.parametrize("cfa", ["none", "RGGB"])
+def test_open_dialog_hint_fits_the_cfa(qtbot, tmp_path, cfa):
+    from spikeview.gui import core
+    from spikeview.gui.dialogs import StreamSettingsDialog
+
+    path = _simulate(tmp_path, cfa)
+    dlg = StreamSettingsDialog("Open", lambda **kw: core.open_file(path, **kw), {"cfa": cfa, "flip_vertical": True})
+    qtbot.addWidget(dlg)
+    dlg.update_preview()
+    hint = dlg.hint.text()
+    assert hint and ("greens" in hint) == (cfa != "none"), hint

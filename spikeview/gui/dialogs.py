@@ -194,7 +194,10 @@ class StreamSettingsDialog(QtWidgets.QDialog):
         self.preview.set_image(rgb)
         self.mosaic.set_image(mosaic)
         self.desc.setText(desc)
-        self.hint.setText(hint or "Check: colours natural, the two greens equal, text and horizons the right way up.")
+        default = ("Check: text and horizons the right way up, edges not slanted (a wrong width shears the rows)."
+                   if settings.get("cfa") == "none" else  # monochrome: no colours or greens to compare
+                   "Check: colours natural, the two greens equal, text and horizons the right way up.")
+        self.hint.setText(hint or default)
         ok.setEnabled(True)
 
     def reject(self) -> None:
