@@ -28,3 +28,15 @@ def test_info_sample_windows_below_one_is_refused(tmp_path, capsys, n):
     captured = capsys.readouterr()
     assert f"--sample-windows {n} is not valid" in captured.err and captured.out == "", captured
     assert main(["info", str(path), "--cfa", "none", "--sample-windows", "1"]) == 0
+
+
+@pytest.mark.parametrize("out", ["nofolder/x.png", "nofolder/f_%04d.png", "nofolder/x.mp4", "nofolder/x.npy"])
+def test_missing_output_folder_is_named_before_any_other_line(tmp_path, capsys, out):
+    path = tmp_path / "s.npy"
+    np.save(path, (np.random.default_rng(0).random((40, 8, 8)) < 0.3).astype(np.uint8))
+    argv = ["reconstruct", str(path), "--cfa", "none", "--out", str(tmp_path / out)]
+    argv += ["--range", "5:30:10"] if "%" in out or out.endswith(".mp4") else ["--at", "20"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("spikeview: error:") and "does not exist" in err and "white point" not in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.npy"]

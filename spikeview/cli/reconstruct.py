@@ -130,6 +130,9 @@ def _check_output_first(out: Path, args: argparse.Namespace) -> None:
     if out.suffix.lower() not in SUFFIXES:
         raise ParameterError(f"{out}: unknown export format {out.suffix or '(no suffix)'!r}; end the name with "
                              f"{', '.join(SUFFIXES[:-1])} or {SUFFIXES[-1]}.")
+    from spikeview.export.base import check_output_folder
+
+    check_output_folder(out)  # a missing or unwritable folder, before the white point is printed
     overwrite = bool(getattr(args, "overwrite", False))
     inputs = [getattr(args, "input", None), getattr(args, "preset", None)]
     if "%" not in out.name:
