@@ -137,22 +137,18 @@ def _lut_row(o, row, rowm, rowp, w, g_even, lg, lc, lv, ci, vi):  # type: ignore
             _g_site(o, x, lg, lc, lv, ci, vi, row, rowm, rowp, xm, xp)
         else:
             _c_site(o, x, lg, lc, lv, ci, vi, row, rowm, rowp, xm, xp)
-    # interior, two photosites per step so that the site type is fixed in each branch
+    # interior, two photosites per step so that the site type is fixed in the loop: a green first
+    # photosite is done on its own, and the rest of the row starts at a colour site
     x = 1
-    if g_even:
-        while x + 1 < w - 1:
-            _c_site(o, x, lg, lc, lv, ci, vi, row, rowm, rowp, x - 1, x + 1)
-            _g_site(o, x + 1, lg, lc, lv, ci, vi, row, rowm, rowp, x, x + 2)
-            x += 2
-        if x < w - 1:
-            _c_site(o, x, lg, lc, lv, ci, vi, row, rowm, rowp, x - 1, x + 1)
-    else:
-        while x + 1 < w - 1:
-            _g_site(o, x, lg, lc, lv, ci, vi, row, rowm, rowp, x - 1, x + 1)
-            _c_site(o, x + 1, lg, lc, lv, ci, vi, row, rowm, rowp, x, x + 2)
-            x += 2
-        if x < w - 1:
-            _g_site(o, x, lg, lc, lv, ci, vi, row, rowm, rowp, x - 1, x + 1)
+    if not g_even and x < w - 1:
+        _g_site(o, x, lg, lc, lv, ci, vi, row, rowm, rowp, x - 1, x + 1)
+        x = 2
+    while x + 1 < w - 1:
+        _c_site(o, x, lg, lc, lv, ci, vi, row, rowm, rowp, x - 1, x + 1)
+        _g_site(o, x + 1, lg, lc, lv, ci, vi, row, rowm, rowp, x, x + 2)
+        x += 2
+    if x < w - 1:
+        _c_site(o, x, lg, lc, lv, ci, vi, row, rowm, rowp, x - 1, x + 1)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -47,21 +47,18 @@ def _c_site(o, x, ci, vi, r0, r1, r2, r3, r4):  # type: ignore[no-untyped-def]  
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _row(o, w, g_even, ci, vi, r0, r1, r2, r3, r4):  # type: ignore[no-untyped-def]  # pragma: no cover
+    # two photosites per step so that the site type is fixed in the loop: a green first photosite is
+    # done on its own, and the rest of the row starts at a colour site
     x = 0
-    if g_even:
-        while x + 1 < w:
-            _g_site(o, x, ci, vi, r0, r1, r2, r3, r4)
-            _c_site(o, x + 1, ci, vi, r0, r1, r2, r3, r4)
-            x += 2
-        if x < w:
-            _g_site(o, x, ci, vi, r0, r1, r2, r3, r4)
-    else:
-        while x + 1 < w:
-            _c_site(o, x, ci, vi, r0, r1, r2, r3, r4)
-            _g_site(o, x + 1, ci, vi, r0, r1, r2, r3, r4)
-            x += 2
-        if x < w:
-            _c_site(o, x, ci, vi, r0, r1, r2, r3, r4)
+    if g_even and x < w:
+        _g_site(o, x, ci, vi, r0, r1, r2, r3, r4)
+        x = 1
+    while x + 1 < w:
+        _c_site(o, x, ci, vi, r0, r1, r2, r3, r4)
+        _g_site(o, x + 1, ci, vi, r0, r1, r2, r3, r4)
+        x += 2
+    if x < w:
+        _c_site(o, x, ci, vi, r0, r1, r2, r3, r4)
 
 
 @numba.njit(cache=True, nogil=True)
