@@ -455,9 +455,7 @@ def rank_geometries(buf: np.ndarray, *, limit: int | None = 8) -> list[GeometryG
         group = []
         # the best frame size is measured; the next two only when small (they order the rest of the list)
         measure = (rank == 0 and fb <= SAMPLE_BYTES) or (0 < rank < 3 and signal and fb <= SAMPLE_BYTES // 8)
-        rates = pair_sums(rate_vector(buf, fb, SAMPLE_BYTES if rank == 0 else SAMPLE_BYTES // 8)) if measure else None
-        lags = _Lags(rates) if rates is not None else None
-        raw = rate_vector(buf, fb, SAMPLE_BYTES // 8) if rates is not None else None
+        raw = rate_vector(buf, fb, SAMPLE_BYTES if rank == 0 else SAMPLE_BYTES // 8) if measure else None
         contrast = {w: bayer_contrast(raw, w) for w, _ in by_fb[fb]} if raw is not None else {}
         top = max(contrast.values(), default=0.0)
         if top > BAYER_CONTRAST:  # only a colour filter's signature counts: one diagonal alike (the greens)
@@ -465,22 +463,23 @@ def rank_geometries(buf: np.ndarray, *, limit: int | None = 8) -> list[GeometryG
             if guess_cfa(raw.reshape(-1, wt)) is None:
                 top = 0.0
         if top > BAYER_CONTRAST:
+            # the filter's row pattern (R+G rows, G+B rows) also lines up rows at twice the width: score the
+            # rows at every width with the filter taken out where it is sharpest (each site over its mean there)
             img = raw.reshape(-1, wt).astype(np.float64)
             for py in (0, 1):
                 for px in (0, 1):
                     m = float(img[py::2, px::2].mean())
                     img[py::2, px::2] /= m if m > 0 else 1.0
-            unfiltered = pair_sums(img.ravel())
-            unfiltered_lags = _Lags(unfiltered)
+            rates = pair_sums(img.ravel())
+        else:
+            rates = pair_sums(raw) if raw is not None else None
+        lags = _Lags(rates) if rates is not None else None
         for w, h in by_fb[fb]:
             g = GeometryGuess(w, h, size // fb, temporal=round(t_rel[fb], 4), known=(w, h) in KNOWN_SIZES)
             if rates is not None:
                 g.spatial = round(spatial_score(rates.reshape(h, w), lags=lags), 4)
             if top > BAYER_CONTRAST:  # a colour filter: its 2x2 pattern is sharpest at the true width
                 g.pattern = round(contrast[w] / top, 4)
-                # the filter's row pattern (R+G rows, G+B rows) also lines up rows at twice the width: score
-                # the rows with the filter taken out where it is sharpest (each site over its mean at that width)
-                g.spatial = round(spatial_score(unfiltered.reshape(h, w), lags=unfiltered_lags), 4)
             group.append(g)
         group.sort(key=lambda g: (-(g.spatial + 0.5 * g.pattern + _prior(g.width, g.height)), -g.width))
         guesses += group
