@@ -40,3 +40,19 @@ def test_missing_output_folder_is_named_before_any_other_line(tmp_path, capsys, 
     err = capsys.readouterr().err
     assert err.startswith("spikeview: error:") and "does not exist" in err and "white point" not in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.npy"]
+
+
+def test_ground_truth_npz_points_to_its_capture(tmp_path, capsys):
+    gt = tmp_path / "cap.gt.npz"
+    np.savez(gt, frames=np.zeros((2, 4, 4, 3), np.float16), ticks=np.array([0, 50]), tick_rate=20000.0)
+    assert main(["info", str(gt)]) == 1
+    err = capsys.readouterr().err
+    assert "ground-truth frames" in err and "cap.dat" in err and "key=" not in err, err
+
+
+def test_npz_without_a_spike_name_gets_a_fix_the_cli_user_can_apply(tmp_path, capsys):
+    path = tmp_path / "x.npz"
+    np.savez(path, a=np.zeros((4, 4, 4), np.uint8), b=np.zeros(3))
+    assert main(["info", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert "numpy.savez(file, spikes=a)" in err and "\n" not in err.strip(), err

@@ -64,10 +64,15 @@ def _load_array(path: Path, key: str | None) -> tuple[np.ndarray, str | None]:
                     key = names[0]
                 else:
                     key = next((k for k in NPZ_KEYS if k in names), None)
+                    if key is None and {"frames", "ticks"} <= set(names):  # spikeview simulate's OUT.gt.npz
+                        raise InputFileError(
+                            f"{path}: holds ground-truth frames (arrays {', '.join(names)}), not spikes; open the "
+                            f"capture it belongs to (the .dat beside it, e.g. {path.name.removesuffix('.gt.npz')}.dat).")
                     if key is None:
                         raise InputFileError(
                             f"{path}: holds arrays {', '.join(names) or '(none)'}, none of them named "
-                            f"{'/'.join(NPZ_KEYS)}; say which one holds the spikes (key=...).")
+                            f"{'/'.join(NPZ_KEYS)}; save the spike array under one of those names "
+                            f"(numpy.savez(file, spikes=a)), or in Python pass key=... to open_source.")
             elif key not in names:
                 raise InputFileError(f"{path}: has no array named {key!r}; it holds {', '.join(names) or 'none'}.")
             return np.asarray(npz[key]), key
