@@ -23,14 +23,20 @@ from spikeview.recipe import Recipe
 
 
 @dataclass(frozen=True)
-class PreviewRequest:
-    """What the Stream, Rates and Degradation panels need for one window."""
+class WindowRequest:
+    """A job on the window around ``tick`` of ``source``: the session's parameters, the sequence's α, the ROI if one is set."""
 
     source: Any
     tick: int
     params: dict[str, Any]
     alpha: np.ndarray | None
     roi: tuple[int, int, int, int] | None = None
+
+
+@dataclass(frozen=True)
+class PreviewRequest(WindowRequest):
+    """What the Stream, Rates and Degradation panels need for one window."""
+
     want_tfi: bool = True
     factor: int = 1  # display downsampling of the stream images
     x_override: np.ndarray | None = None  # the guided result for this window, if any (ROI-cropped)
@@ -150,14 +156,9 @@ def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
 
 
 @dataclass(frozen=True)
-class GuidedRequest:
+class GuidedRequest(WindowRequest):
     """One guided reconstruction of the window around ``tick`` (on the ROI when one is set)."""
 
-    source: Any
-    tick: int
-    params: dict[str, Any]
-    alpha: np.ndarray | None
-    roi: tuple[int, int, int, int] | None
     ground_truth: Callable[[int], np.ndarray] | None = None
     run: int = 0
     recipe: Recipe = field(default_factory=Recipe)

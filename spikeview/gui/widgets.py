@@ -403,6 +403,42 @@ def form(rows: list[tuple[str, QtWidgets.QWidget] | QtWidgets.QWidget]) -> QtWid
     return w
 
 
+def hbox(*items: QtWidgets.QWidget | tuple[QtWidgets.QWidget, int]) -> QtWidgets.QWidget:
+    """A widget holding ``items`` in one row without margins; ``(widget, stretch)`` gives one a stretch factor."""
+    w = QtWidgets.QWidget()
+    lay = QtWidgets.QHBoxLayout(w)
+    lay.setContentsMargins(0, 0, 0, 0)
+    for item in items:
+        widget, stretch = item if isinstance(item, tuple) else (item, 0)
+        lay.addWidget(widget, stretch)
+    return w
+
+
+def job_controls(name: str, run_text: str, run_tip: str, on_run: Any, on_cancel: Any, unit: str,
+                 idle: str = "") -> tuple[QtWidgets.QPushButton, QtWidgets.QPushButton, QtWidgets.QProgressBar, QtWidgets.QLabel]:
+    """The controls of a panel's background job: run and cancel buttons, a progress bar counting ``unit``, a status line.
+
+    Their object names are ``{name}_run``, ``{name}_cancel``, ``{name}_progress`` and ``{name}_status``;
+    cancel starts disabled and the status line shows ``idle``.
+    """
+    run = QtWidgets.QPushButton(run_text)
+    run.setObjectName(f"{name}_run")
+    run.setToolTip(run_tip)
+    run.clicked.connect(on_run)
+    cancel = QtWidgets.QPushButton("Cancel")
+    cancel.setObjectName(f"{name}_cancel")
+    cancel.setEnabled(False)
+    cancel.clicked.connect(on_cancel)
+    progress = QtWidgets.QProgressBar()
+    progress.setObjectName(f"{name}_progress")
+    progress.setFormat(f"%v / %m {unit}")
+    progress.setValue(0)
+    status = QtWidgets.QLabel(idle)
+    status.setObjectName(f"{name}_status")
+    status.setWordWrap(True)
+    return run, cancel, progress, status
+
+
 def tool_button(text: str, tip: str, slot: Any, *, icon: QtGui.QIcon | None = None, checkable: bool = False,
                 name: str | None = None) -> QtWidgets.QToolButton:
     b = QtWidgets.QToolButton()

@@ -11,7 +11,7 @@ from spikeview.errors import SpikeviewError
 from spikeview.export.base import strip_frame_field
 from spikeview.gui import jobs
 from spikeview.gui.model import Session
-from spikeview.gui.widgets import ParamCombo, ParamSpin, form, subscribe
+from spikeview.gui.widgets import ParamCombo, ParamSpin, form, hbox, job_controls, subscribe
 
 FORMAT_TEXT = {"png": "PNG (8-bit, display)", "exr": "EXR (half float, linear)", "mp4": "MP4 (H.264)"}
 RANGE_TEXT = {"frame": "Current frame", "marked": "Marked range (one frame per Δτ)"}
@@ -81,27 +81,10 @@ class ExportPanel(QtWidgets.QWidget):
         browse = QtWidgets.QToolButton(text="…")
         browse.setToolTip("Choose where to write")
         browse.clicked.connect(self._browse)
-        pl = QtWidgets.QHBoxLayout()
-        pl.setContentsMargins(0, 0, 0, 0)
-        pl.addWidget(self.path, 1)
-        pl.addWidget(browse)
-        pw = QtWidgets.QWidget()
-        pw.setLayout(pl)
-        self.export_btn = QtWidgets.QPushButton("Export")
-        self.export_btn.setObjectName("export_run")
-        self.export_btn.setToolTip("Write the files in the background (Ctrl+E)")
-        self.export_btn.clicked.connect(lambda: self.export_requested.emit(self.path.text().strip()))
-        self.cancel_btn = QtWidgets.QPushButton("Cancel")
-        self.cancel_btn.setObjectName("export_cancel")
-        self.cancel_btn.setEnabled(False)
-        self.cancel_btn.clicked.connect(self.cancel_requested)
-        self.progress = QtWidgets.QProgressBar()
-        self.progress.setObjectName("export_progress")
-        self.progress.setFormat("%v / %m frames")
-        self.progress.setValue(0)
-        self.status = QtWidgets.QLabel("")
-        self.status.setObjectName("export_status")
-        self.status.setWordWrap(True)
+        pw = hbox((self.path, 1), browse)
+        self.export_btn, self.cancel_btn, self.progress, self.status = job_controls(
+            "export", "Export", "Write the files in the background (Ctrl+E)",
+            lambda: self.export_requested.emit(self.path.text().strip()), self.cancel_requested, "frames")
         buttons = QtWidgets.QHBoxLayout()
         buttons.addWidget(self.export_btn)
         buttons.addWidget(self.cancel_btn)

@@ -16,6 +16,8 @@ from spikeview.gui.widgets import (
     ParamSlider,
     ParamSpin,
     form,
+    hbox,
+    job_controls,
     subscribe,
 )
 
@@ -60,25 +62,9 @@ class GuidedPanel(QtWidgets.QWidget):
         browse = QtWidgets.QToolButton(text="…")
         browse.setToolTip("Choose a weights folder or .pth file")
         browse.clicked.connect(self._browse_model)
-        mp = QtWidgets.QHBoxLayout()
-        mp.setContentsMargins(0, 0, 0, 0)
-        mp.addWidget(self.model_path, 1)
-        mp.addWidget(browse)
-        mpw = QtWidgets.QWidget()
-        mpw.setLayout(mp)
-        small = QtWidgets.QHBoxLayout()
-        small.setContentsMargins(0, 0, 0, 0)
-        for label, w in (("steps", self.steps), ("seed", self.seed)):
-            small.addWidget(QtWidgets.QLabel(label))
-            small.addWidget(w)
-        smallw = QtWidgets.QWidget()
-        smallw.setLayout(small)
-        tline = QtWidgets.QHBoxLayout()
-        tline.setContentsMargins(0, 0, 0, 0)
-        tline.addWidget(self.t_start, 1)
-        tline.addWidget(self.t_note)
-        tw = QtWidgets.QWidget()
-        tw.setLayout(tline)
+        mpw = hbox((self.model_path, 1), browse)
+        smallw = hbox(QtWidgets.QLabel("steps"), self.steps, QtWidgets.QLabel("seed"), self.seed)
+        tw = hbox((self.t_start, 1), self.t_note)
         settings = form([self.s, self.k, self.levels, tw, ("", smallw), ("Prior", self.prior), ("Weights", mpw),
                          ("Guidance", self.guidance), ("Q", self.quantise), ("Precision", self.precision),
                          ("Neighbours ±", self.temporal)])
@@ -86,28 +72,16 @@ class GuidedPanel(QtWidgets.QWidget):
         self.knob_controls = {"guided.s": self.s, "guided.k": self.k, "guided.levels": self.levels,
                               "guided.t_start": self.t_start, "guided.temporal_radius": self.temporal}
 
-        self.run_btn = QtWidgets.QPushButton("Run")
-        self.run_btn.setObjectName("guided_run")
-        self.run_btn.setToolTip("Reconstruct the current window (the ROI when one is drawn)")
-        self.run_btn.clicked.connect(self.run_requested)
-        self.cancel_btn = QtWidgets.QPushButton("Cancel")
-        self.cancel_btn.setObjectName("guided_cancel")
-        self.cancel_btn.setEnabled(False)
-        self.cancel_btn.clicked.connect(self.cancel_requested)
+        self.run_btn, self.cancel_btn, self.progress, self.status = job_controls(
+            "guided", "Run", "Reconstruct the current window (the ROI when one is drawn)", self.run_requested,
+            self.cancel_requested, "steps", idle="Idle.")
         self.live = QtWidgets.QCheckBox("Restart on change")
         self.live.setToolTip("Re-run automatically (after a short pause) whenever a setting changes")
         self.live.toggled.connect(self.live_toggled)
-        self.progress = QtWidgets.QProgressBar()
-        self.progress.setObjectName("guided_progress")
-        self.progress.setFormat("%v / %m steps")
         # not the widths of their texts: the panel must fit beside the others on a 1366-pixel screen
         self.progress.setMinimumWidth(90)
         for b in (self.run_btn, self.cancel_btn):
             b.setMinimumWidth(56)
-        self.progress.setValue(0)
-        self.status = QtWidgets.QLabel("Idle.")
-        self.status.setObjectName("guided_status")
-        self.status.setWordWrap(True)
         buttons = QtWidgets.QHBoxLayout()
         buttons.addWidget(self.run_btn)
         buttons.addWidget(self.cancel_btn)
