@@ -28,25 +28,14 @@ from spikeview.guided.latent import DDIMLadder, LatentDPSGuidance, make_ladder, 
 from spikeview.guided.observation import Observation
 from spikeview.guided.plan import make_plan
 from spikeview.guided.priors.base import PriorUnavailableError
+from spikeview.guided.priors import sd_arch
 from spikeview.guided.sampler import GuidedSampler, load_prior
 
 HAS_DIFFUSERS = importlib.util.find_spec("diffusers") is not None
 needs_diffusers = pytest.mark.skipif(not HAS_DIFFUSERS, reason='needs the optional extra: pip install "spikeview[sd]"')
 
-TINY_UNET = dict(
-    sample_size=8, in_channels=4, out_channels=4, block_out_channels=(32, 64), layers_per_block=1,
-    down_block_types=("DownBlock2D", "CrossAttnDownBlock2D"), up_block_types=("CrossAttnUpBlock2D", "UpBlock2D"),
-    cross_attention_dim=32, attention_head_dim=(2, 4), use_linear_projection=True, norm_num_groups=32,
-)
-TINY_VAE = dict(
-    in_channels=3, out_channels=3, down_block_types=("DownEncoderBlock2D",) * 4, up_block_types=("UpDecoderBlock2D",) * 4,
-    block_out_channels=(32, 32, 32, 32), layers_per_block=1, latent_channels=4, norm_num_groups=32, sample_size=32,
-)
-# SD 2.1's schedule (scheduler/scheduler_config.json of stabilityai/stable-diffusion-2-1)
-SD21_SCHEDULER = dict(
-    num_train_timesteps=1000, beta_start=0.00085, beta_end=0.012, beta_schedule="scaled_linear", clip_sample=False,
-    set_alpha_to_one=False, steps_offset=1, prediction_type="v_prediction",
-)
+# the library's tiny architectures, the VAE narrower still
+TINY_VAE = sd_arch.TINY_VAE | dict(block_out_channels=(32, 32, 32, 32), sample_size=32)
 H, W = 13, 22  # not multiples of 8: padded to 16 x 24, latent 2 x 3
 # the sd path of the guided sampler: 3 DDIM steps from the pixel noise level 60/255; diffusion always
 # (the plan could otherwise skip a clean window)
@@ -58,12 +47,7 @@ def _cfg(**changes) -> GuidedConfig:
 
 
 def _tiny_modules(seed: int = 0, **unet_changes):
-    import diffusers
-
-    torch.manual_seed(seed)
-    unet = diffusers.UNet2DConditionModel(**(TINY_UNET | unet_changes))
-    vae = diffusers.AutoencoderKL(**TINY_VAE)
-    return unet, vae, diffusers.DDIMScheduler(**SD21_SCHEDULER)
+    return sd_arch.random_modules(sd_arch.TINY_UNET | unet_changes, TINY_VAE, seed=seed)
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -202,7 +186,7 @@ def test_half_precision_needs_cuda(prior):
 def test_tweedie_split_inverts_the_forward_process(prior, prediction_type):
     from spikeview.guided.priors.sd import LatentDiffusionPrior
 
-    p = LatentDiffusionPrior(prior.unet, prior.vae, SD21_SCHEDULER | {"prediction_type": prediction_type}, device="cpu")
+    p = LatentDiffusionPrior(prior.unet, prior.vae, sd_arch.SD21_SCHEDULER | {"prediction_type": prediction_type}, device="cpu")
     g = torch.Generator().manual_seed(0)
     z0, eps = torch.randn(1, 4, 3, 5, generator=g), torch.randn(1, 4, 3, 5, generator=g)
     t = 600
