@@ -56,3 +56,13 @@ def test_npz_without_a_spike_name_gets_a_fix_the_cli_user_can_apply(tmp_path, ca
     assert main(["info", str(path)]) == 1
     err = capsys.readouterr().err
     assert "numpy.savez(file, spikes=a)" in err and "\n" not in err.strip(), err
+
+
+def test_window_longer_than_the_stream_is_said_before_the_white_point(tmp_path, capsys):
+    path = tmp_path / "s.npy"
+    np.save(path, (np.random.default_rng(0).random((8, 8, 8)) < 0.3).astype(np.uint8))
+    assert main(["reconstruct", str(path), "--cfa", "none", "--at", "1", "--out", str(tmp_path / "r.png")]) == 1
+    err = "\n".join(ln for ln in capsys.readouterr().err.splitlines() if "--layout" not in ln)  # (8, 8, 8): order hint
+    assert err.startswith("spikeview: error: window of 10 ticks is longer than the stream's 8 ticks"), err
+    assert "white point" not in err
+    assert main(["reconstruct", str(path), "--cfa", "none", "--at", "1", "--window", "8", "--out", str(tmp_path / "r.png")]) == 0

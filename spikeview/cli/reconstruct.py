@@ -84,6 +84,9 @@ def run(args: argparse.Namespace) -> int:
     with src:
         recipe = recipe.with_values({f"stream.{k}": v for k, v in StreamTable.from_info(src.info, getattr(args, "layout", None)).to_dict().items()})
         centres, step = window_centres(recipe, src.n_frames)
+        from spikeview.classical.windows import window_range
+
+        window_range(centres[0], recipe.classical.window, src.n_frames)  # a window the stream cannot hold: said first
         if recipe.run.range is not None:
             a, b, _ = _parse(recipe.run.range, step)
             if b > src.n_frames:
