@@ -93,23 +93,17 @@ def test_full_disk_while_the_store_is_created_leaves_nothing(cap, tmp_path, caps
     assert _names(tmp_path) == ["in"]
 
 
-def test_interrupt_before_a_chunk_is_done_leaves_nothing(cap, tmp_path, capsys, monkeypatch):
-    def interrupted(*a, **k):
-        raise KeyboardInterrupt
+@pytest.mark.parametrize(("exc", "code"), [(KeyboardInterrupt, 130), (MemoryError, 1)], ids=["interrupt", "out_of_memory"])
+def test_a_chunk_stopped_before_it_is_done_leaves_nothing(cap, tmp_path, capsys, monkeypatch, exc, code):
+    def stopped(*a, **k):
+        raise exc
 
-    monkeypatch.setattr("spikeview.cluster.run.compute_chunk", interrupted)
-    assert main(["reconstruct", *cap, *RUN, "--out", str(tmp_path / "s.zarr")]) == 130
-    assert "interrupted" in capsys.readouterr().err
-    assert _names(tmp_path) == ["in"]
-
-
-def test_out_of_memory_in_a_chunk_leaves_nothing(cap, tmp_path, capsys, monkeypatch):
-    def oom(*a, **k):
-        raise MemoryError
-
-    monkeypatch.setattr("spikeview.cluster.run.compute_chunk", oom)
-    assert main(["reconstruct", *cap, *RUN, "--out", str(tmp_path / "s.zarr")]) == 1
-    _err(capsys, "out of memory")
+    monkeypatch.setattr("spikeview.cluster.run.compute_chunk", stopped)
+    assert main(["reconstruct", *cap, *RUN, "--out", str(tmp_path / "s.zarr")]) == code
+    if exc is KeyboardInterrupt:
+        assert "interrupted" in capsys.readouterr().err
+    else:
+        _err(capsys, "out of memory")
     assert _names(tmp_path) == ["in"]
 
 

@@ -256,16 +256,21 @@ class Controller(QtCore.QObject):
         """The TFI pane: at once when paused, at most every TFI_INTERVAL_MS during playback."""
         if self.session.source is None or not self.enabled["tfi"]:
             return
-        if not self.session.playing:
-            self._submit_tfi()
-            return
-        if self.tfi.is_active("tfi"):
+        if self.session.playing and self.tfi.is_active("tfi"):
             return  # still busy with the last one: playback moves on without it
-        wait = TFI_INTERVAL_MS - (time.perf_counter() - self._last_tfi) * 1000
+        self._throttled(self._submit_tfi, self._last_tfi, TFI_INTERVAL_MS, self.tfi_timer)
+
+    def _throttled(self, submit: Any, last: float, interval_ms: float, timer: QtCore.QTimer) -> None:
+        """``submit()`` now when paused or when ``interval_ms`` have passed since ``last`` (a perf_counter time);
+        otherwise once, by ``timer``, when they have."""
+        if not self.session.playing:
+            submit()
+            return
+        wait = interval_ms - (time.perf_counter() - last) * 1000
         if wait <= 0:
-            self._submit_tfi()
-        elif not self.tfi_timer.isActive():
-            self.tfi_timer.start(int(wait))
+            submit()
+        elif not timer.isActive():
+            timer.start(int(wait))
 
     def _submit_tfi(self) -> None:
         if self.session.source is None:
@@ -277,14 +282,7 @@ class Controller(QtCore.QObject):
     def request_rates(self) -> None:
         if self.last_frames is None or not self.enabled["rates"]:
             return
-        if not self.session.playing:
-            self._submit_rates()
-            return
-        wait = RATES_INTERVAL_MS - (time.perf_counter() - self._last_rates) * 1000
-        if wait <= 0:
-            self._submit_rates()
-        elif not self.rates_timer.isActive():
-            self.rates_timer.start(int(wait))
+        self._throttled(self._submit_rates, self._last_rates, RATES_INTERVAL_MS, self.rates_timer)
 
     def _submit_rates(self) -> None:
         f = self.last_frames
