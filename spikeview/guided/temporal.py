@@ -23,7 +23,9 @@ adjacent windows' counts anti-correlate, :data:`ADJACENT_DISPERSION`). Inside an
 every photosite is checked too: the 3×3 sum of same-colour photosites of the aligned neighbour must
 agree within :data:`PIXEL_Z` standard deviations with what was pooled so far (the centre window and
 the accepted nearer windows), and a photosite takes window ``k`` only if it took every window
-between ``k`` and the centre. Weights are 0 or 1: a photosite takes a neighbour's whole window or
+between ``k`` and the centre. No neighbour is pooled where its displacement exceeds
+:data:`MAX_SHIFT` photosites (a rotating or deforming object is only roughly a translation per
+tile). Weights are 0 or 1: a photosite takes a neighbour's whole window or
 none of it, and falls back to its own window where nothing matches (occlusions, fast or
 non-rigid motion, a flash).
 
