@@ -57,7 +57,7 @@ SEQUENCES: dict[str, tuple[str, bool, str, tuple[float, float], float, bool, str
 }
 MOTIONS = ("static", "slow", "fast")
 WINDOW = 10
-#: radii compared (the tuning sequences choose the default among them)
+#: radii compared on the tuning sequences to choose the default (``run_sequences(radii=(0,) + RADII)``)
 RADII = (1, 2, 3)
 #: neighbouring windows kept on each side of the first and last frame (so every frame has its ±R)
 MARGIN = 4
@@ -162,7 +162,11 @@ def run_sequences(out_dir: str | os.PathLike[str] | None = "benchmarks/results",
     torch.set_num_threads(2)
     t_start = time.time()
     steps = dict(steps=2) if quick else {}
-    radii = tuple(radii) if radii is not None else (0,) + RADII
+    if radii is None:
+        from spikeview.guided.config import GuidedConfig as _G
+
+        radii = (0, _G().temporal_radius)
+    radii = tuple(radii)
     rows = []
     for name in (names or list(SEQUENCES)):
         motion, tuning, _, pan, rot, fans, cfa = SEQUENCES[name]
