@@ -100,22 +100,10 @@ def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> Seque
     the white point. A channel without spikes gets the others' mean gain: a
     :class:`~spikeview.classical.colour_cast.ColourCastWarning` says so (``warn=False``: only
     :attr:`SequenceState.note`, for the app's worker threads, where warnings are unreliable)."""
-    import warnings
-
-    from spikeview.classical.colour_cast import ColourCastWarning, alpha_with_note, estimate_white, sequence_channel_means
+    from spikeview.classical.colour_cast import estimate_white, sequence_alpha
 
     c = recipe.classical
-    note = None
-    if source.cfa is None or not c.colour_cast:
-        a = None
-    elif c.alpha is not None:
-        a = np.asarray(c.alpha, dtype=np.float64)
-    else:
-        means = sequence_channel_means(source, window=min(c.alpha_window, source.n_frames), max_windows=c.alpha_max_windows)
-        gains, note = alpha_with_note(means)
-        if note is not None and warn:
-            warnings.warn(note, ColourCastWarning, stacklevel=2)
-        a = np.asarray(gains, dtype=np.float64)
+    a, note = sequence_alpha(source, c, warn=warn)
     # the exposure, once per sequence, on the windows the frames are made of
     white = estimate_white(source, a, window=min(c.window, source.n_frames), max_windows=c.alpha_max_windows, eta=c.eta)
     return SequenceState(a, white, note)

@@ -6,6 +6,7 @@ import pytest
 import spikeview.classical.reconstruct as rec
 from spikeview.classical import (ClassicalConfig, apply_colour_cast_mosaic, estimate_alpha, preview_rgb, reconstruct_frame,
                                  reconstruct_frames, to_display)
+from spikeview.classical.colour_cast import sequence_alpha
 from spikeview.classical.demosaic import demosaic
 from spikeview.classical.tfi import tfi
 from spikeview.classical.tfp import tfp
@@ -74,9 +75,9 @@ def test_sequence_uses_one_alpha(monkeypatch):
 
     def counting_estimate(*args, **kwargs):
         calls.append(args)
-        return estimate_alpha(*args, **kwargs)
+        return sequence_alpha(*args, **kwargs)
 
-    monkeypatch.setattr(rec, "estimate_alpha", counting_estimate)
+    monkeypatch.setattr(rec, "sequence_alpha", counting_estimate)
     cfg = ClassicalConfig(window=8)
     frames = list(reconstruct_frames(src, [5, 20, 40, 59], cfg))
     assert len(calls) == 1 and len(frames) == 4

@@ -92,9 +92,14 @@ class Sequence:
 
 
 def _white_for(seq: Sequence, window: int) -> float:
-    from spikeview.classical.colour_cast import estimate_white
+    """The white point of ``window``-tick frames of the sequence: prepare_sequence's, with the sequence's α."""
+    from spikeview.pipeline import prepare_sequence
+    from spikeview.recipe import Recipe
 
-    return estimate_white(seq.source, seq.alpha, window=min(window, seq.source.n_frames), eta=seq.eta)
+    values = {"classical.window": window, "classical.eta": seq.eta}
+    if seq.alpha is not None:
+        values["classical.alpha"] = [float(v) for v in seq.alpha]
+    return prepare_sequence(seq.source, Recipe().with_values(values)).white
 
 
 def _methods(prior, quick: bool) -> list[tuple[str, str, Callable]]:

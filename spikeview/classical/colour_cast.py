@@ -23,6 +23,7 @@ brightness gain.
 from __future__ import annotations
 
 import warnings
+from typing import Any
 
 import numpy as np
 
@@ -192,6 +193,27 @@ def sequence_channel_means(source: SpikeSource, window: int = 10, max_windows: i
     cfa = source.cfa
     sums = {k: (v / ticks, n) for k, (v, n) in _site_sums(total, cfa).items()}
     return _channel_means_from_sums(sums, cfa)
+
+
+def sequence_alpha(source: SpikeSource, config: Any, *, warn: bool = True) -> tuple[np.ndarray | None, str | None]:
+    """The sequence's gains α by the one rule, and the note for a channel without spikes (else ``None``).
+
+    ``config`` is a :class:`~spikeview.classical.config.ClassicalConfig` (its ``colour_cast``, ``alpha``,
+    ``alpha_window`` and ``alpha_max_windows``). No α (``None``) for a monochrome stream or with the
+    colour cast off; ``config.alpha`` when set; else one gray-world estimate of the stream from
+    ``alpha_window``-tick windows (:func:`sequence_channel_means`, :func:`alpha_with_note`). α is
+    float64 ``(3,)``. A channel without spikes gets the others' mean gain; with ``warn`` the note is
+    also issued as a :class:`ColourCastWarning`.
+    """
+    if source.cfa is None or not config.colour_cast:
+        return None, None
+    if config.alpha is not None:
+        return np.asarray(config.alpha, dtype=np.float64), None
+    means = sequence_channel_means(source, window=min(config.alpha_window, source.n_frames), max_windows=config.alpha_max_windows)
+    gains, note = alpha_with_note(means)
+    if note is not None and warn:
+        warnings.warn(note, ColourCastWarning, stacklevel=3)
+    return np.asarray(gains, dtype=np.float64), note
 
 
 def estimate_alpha(source: SpikeSource, window: int = 10, max_windows: int = DEFAULT_ALPHA_WINDOWS) -> np.ndarray:

@@ -17,7 +17,7 @@ from collections.abc import Iterable, Iterator
 import numba
 import numpy as np
 
-from spikeview.classical.colour_cast import DEFAULT_ETA, apply_colour_cast_mosaic, colour_gains, estimate_alpha
+from spikeview.classical.colour_cast import DEFAULT_ETA, apply_colour_cast_mosaic, colour_gains, sequence_alpha
 from spikeview.classical.demosaic import DEMOSAIC_METHODS, check_method, demosaic
 from spikeview.classical.demosaic._common import quad_codes
 from spikeview.classical.config import CLASSICAL_METHODS, ClassicalConfig  # noqa: F401 (re-exported)
@@ -29,16 +29,15 @@ from spikeview.classical.windows import window_range
 from spikeview.io.source import SpikeSource
 
 def resolve_alpha(source: SpikeSource, config: ClassicalConfig, alpha: np.ndarray | list[float] | None = None) -> np.ndarray | None:
-    """The α a reconstruction of ``source`` uses: ``alpha`` if given, else ``config.alpha``, else
-    :func:`estimate_alpha`. ``None`` when no colour correction applies (monochrome stream or
+    """The α a reconstruction of ``source`` uses: ``alpha`` if given, else ``config.alpha``, else the
+    gray-world estimate (:func:`~spikeview.classical.colour_cast.sequence_alpha`, the rule of
+    :func:`spikeview.pipeline.prepare_sequence`). ``None`` when no colour correction applies (monochrome stream or
     ``config.colour_cast`` off)."""
     if source.cfa is None or not config.colour_cast:
         return None
-    if alpha is not None:
-        return colour_gains(alpha, 1.0, 3)
-    if config.alpha is not None:
-        return np.asarray(config.alpha, dtype=np.float32)
-    return estimate_alpha(source, window=min(config.alpha_window, source.n_frames), max_windows=config.alpha_max_windows)
+    if alpha is None:
+        alpha = sequence_alpha(source, config)[0]  # config.alpha, else the estimate: pipeline.prepare_sequence's rule
+    return colour_gains(alpha, 1.0, 3)
 
 
 def reconstruct_frame(source: SpikeSource, center: int, config: ClassicalConfig | None = None,
@@ -226,7 +225,7 @@ def preview_rgb(source: SpikeSource, center: int, window: int = 32, *, alpha: np
         return np.repeat(lut[counts][..., None], 3, axis=-1)
     if colour_cast:
         if alpha is None:
-            alpha = estimate_alpha(source, window=min(10, source.n_frames))
+            alpha = sequence_alpha(source, ClassicalConfig())[0]
         gains = colour_gains(alpha, eta, 3).astype(np.float64)
     else:
         gains = np.ones(3)
