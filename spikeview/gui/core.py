@@ -251,13 +251,6 @@ def alpha_note(means: np.ndarray) -> tuple[np.ndarray, str | None]:
     return alpha_with_note(means)
 
 
-def sequence_alpha(source: SpikeSource, window: int = 10, max_windows: int = 64) -> tuple[np.ndarray, str | None]:
-    """Gray-world α of the whole sequence (:func:`spikeview.classical.colour_cast.sequence_channel_means`)."""
-    from spikeview.classical.colour_cast import sequence_channel_means
-
-    return alpha_note(sequence_channel_means(source, max(1, min(int(window), source.n_frames)), max_windows))
-
-
 # ----------------------------------------------------------------------------- stream frames
 
 

@@ -25,6 +25,8 @@ def settings_preview(stream: OpenedStream) -> tuple[np.ndarray, np.ndarray, str,
     flip shows as wrong colours), the raw mosaic (uint8 gray), a one-line description and a hint
     that names a likely wrong setting (or ``""``).
     """
+    from spikeview.classical.colour_cast import sequence_alpha
+    from spikeview.classical.config import ClassicalConfig
     from spikeview.classical.reconstruct import preview_rgb
     from spikeview.gui import core
 
@@ -32,7 +34,7 @@ def settings_preview(stream: OpenedStream) -> tuple[np.ndarray, np.ndarray, str,
     n = src.n_frames
     window = max(1, min(32, n))
     centre = n // 2
-    alpha = core.sequence_alpha(src, min(10, n), max_windows=16)[0] if src.cfa is not None else None
+    alpha = sequence_alpha(src, ClassicalConfig(alpha_max_windows=16), warn=False)[0]  # a quick look: 16 windows
     rgb = preview_rgb(src, centre, window, alpha=alpha, colour_cast=src.cfa is not None, eta=2.0)
     a, b = core.window_range(centre, window, n)
     sfr = src.count(a, b).astype(np.float32) / np.float32(b - a)
