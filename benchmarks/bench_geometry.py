@@ -118,8 +118,9 @@ def wide_scene(kind: str, w: int, h: int, tmp: Path):
     return MotionScene(img, (h, w))
 
 
-def wide_set(tmp: Path) -> tuple[list[str], dict[str, tuple[int, int]]]:
-    """Rank of the true size on the wider set; returns table rows and (hits, total) per CFA."""
+def wide_set(tmp: Path, seed: int = 1) -> tuple[list[str], dict[str, tuple[int, int]]]:
+    """Rank of the true size on the wider set (simulator seed ``seed``: fixed pattern, phases, noise); returns
+    table rows and (hits, total) per CFA."""
     from spikeview.io.geometry import rank_plain_geometries
     from spikeview.sim import SimConfig, simulate_to_file
 
@@ -128,7 +129,7 @@ def wide_set(tmp: Path) -> tuple[list[str], dict[str, tuple[int, int]]]:
         for ticks in WIDE_TICKS:
             for cfa in ("RGGB", "none"):
                 for kind in WIDE_SCENES:
-                    cfg = SimConfig(n_ticks=ticks, width=w, height=h, cfa=cfa, seed=1)
+                    cfg = SimConfig(n_ticks=ticks, width=w, height=h, cfa=cfa, seed=seed)
                     files = simulate_to_file(wide_scene(kind, w, h, tmp), cfg, tmp / "wide.dat", overwrite=True)
                     files.dat.with_name(files.dat.name + ".toml").unlink(missing_ok=True)
                     ranked = [g.size for g in rank_plain_geometries(files.dat, limit=None)]
@@ -154,6 +155,37 @@ def make_gb_file(path: Path, blocks: int = 8, ticks: int = 1000) -> int:
     return path.stat().st_size
 
 
+def make_gb_iaf_file(path: Path, ticks: int = 8000) -> int:
+    """1 GB of integrate-and-fire spikes (1000x1000 RGGB, the same rate image): each pixel accumulates its rate
+    from a random initial voltage and fires when it crosses a threshold (reset by subtraction), as the simulator
+    and real cameras do; the ranking takes its tick-to-tick path on such files."""
+    from test_geometry_guess import smooth_rates
+
+    from spikeview.io import pack_frames
+
+    rate = smooth_rates(1000, 1000, 5, True).astype(np.float64).ravel()
+    v0 = np.random.default_rng(0).random(rate.size)
+    with open(path, "wb") as f:
+        for a in range(0, ticks, 20):
+            t = np.arange(a, a + 20, dtype=np.float64)[:, None]
+            fired = np.floor(rate * (t + 1) + v0) > np.floor(rate * t + v0)
+            f.write(pack_frames(fired.reshape(20, 1000, 1000)).tobytes())
+    return path.stat().st_size
+
+
+def cpu_model() -> str:
+    """``lscpu``'s model name and the vector flags that matter for numpy (avx2, avx512*)."""
+    import subprocess
+
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=False).stdout
+    except OSError:
+        return platform.processor() or platform.machine()
+    info = dict(line.split(":", 1) for line in out.splitlines() if ":" in line)
+    flags = [f for f in info.get("Flags", "").split() if f == "avx2" or f.startswith("avx512")]
+    return f"{info.get('Model name', '?').strip()} (flags: {' '.join(flags) or 'no avx2/avx512'})"
+
+
 def timed(fn, repeats: int) -> tuple[float, list[float]]:
     fn()  # warm-up (imports, page cache)
     times = []
@@ -170,22 +202,29 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "geometry.md")
     ap.add_argument("--tmp", type=Path, default=None, help="folder for the temporary files (needs 1 GB)")
     ap.add_argument("--wide", action="store_true", help="only the wider set of simulator captures (issue 14)")
+    ap.add_argument("--seed", type=int, default=1, help="simulator seed of the wider set (1: the reported set)")
     args = ap.parse_args(argv)
     if args.wide:
+        wide_name = "geometry_wide.md" if args.seed == 1 else f"geometry_wide_seed{args.seed}.md"
+        load_before = os.getloadavg()
         with tempfile.TemporaryDirectory(dir=args.tmp) as d:
             t0 = time.perf_counter()
-            rows, hits = wide_set(Path(d))
+            rows, hits = wide_set(Path(d), args.seed)
             secs = time.perf_counter() - t0
+        load_after = os.getloadavg()
         text = "\n".join([
             "# Geometry guessing: the wider set (issue 14)", "",
             f"Simulator captures (realistic noise, integrate-and-fire) of {len(WIDE_SIZES)} sizes × ticks "
-            f"{', '.join(map(str, WIDE_TICKS))} × RGGB/mono × scenes {', '.join(WIDE_SCENES)} (flat: a uniform grey, only "
+            f"{', '.join(map(str, WIDE_TICKS))} × RGGB/mono × scenes {', '.join(WIDE_SCENES)}, simulator seed {args.seed} (flat: a uniform grey, only "
             "the pixels' fixed pattern tells the frame size; gradient: a smooth colour ramp, little texture), written "
             f"without a sidecar. True size ranked first: **RGGB {hits['RGGB'][0]} of {hits['RGGB'][1]}, monochrome "
             f"{hits['none'][0]} of {hits['none'][1]}** ({secs:.0f} s in all). Misses:", "",
             "| size | CFA | ticks | scene | rank | first guess |", "|---|---|---:|---|---:|---|", *(rows or ["| (none) | | | | | |"]),
-            "", "`python benchmarks/bench_geometry.py --wide` (writes benchmarks/results/geometry_wide.md)."])
-        (ROOT / "benchmarks" / "results" / "geometry_wide.md").write_text(text + "\n")
+            "", f"Machine: {cpu_model()}, os.cpu_count() = {os.cpu_count()}; load average (1/5/15 min) before "
+            f"{load_before[0]:.2f}/{load_before[1]:.2f}/{load_before[2]:.2f}, after {load_after[0]:.2f}/"
+            f"{load_after[1]:.2f}/{load_after[2]:.2f} (the seconds include simulating the captures).",
+            "", f"`python benchmarks/bench_geometry.py --wide --seed {args.seed}` (writes benchmarks/results/{wide_name})."])
+        (ROOT / "benchmarks" / "results" / wide_name).write_text(text + "\n")
         print(text)
         return 0
 
@@ -209,6 +248,11 @@ def main(argv: list[str] | None = None) -> int:
         big_top = rank_plain_geometries(big)[0]
         base_med, _ = timed(lambda: plain_geometry_candidates(size), args.repeats)
         base_top = plain_geometry_candidates(size)[0]
+        big.unlink()
+        iaf = tmp / "iaf.dat"
+        make_gb_iaf_file(iaf)
+        iaf_med, iaf_times = timed(lambda: rank_plain_geometries(iaf), args.repeats)
+        iaf_top = rank_plain_geometries(iaf)[0]
     load_after = os.getloadavg()
 
     lines = [
@@ -227,7 +271,10 @@ def main(argv: list[str] | None = None) -> int:
         f"**{big_med * 1e3:.0f} ms** median of {args.repeats} (runs: {', '.join(f'{t * 1e3:.0f}' for t in big_times)} ms; "
         f"first guess {big_top.width}×{big_top.height}, {big_top.n_frames} ticks); the size-only baseline takes "
         f"{base_med * 1e3:.1f} ms and guesses {base_top[0]}×{base_top[1]}. A 16 MB 256×256 capture (2000 ticks): "
-        f"{small_med * 1e3:.0f} ms, first guess {small_top[0]}×{small_top[1]}. Only a sample is read (a 2 MB block, "
+        f"{small_med * 1e3:.0f} ms, first guess {small_top[0]}×{small_top[1]}. The same 1 GB of integrate-and-fire spikes "
+        f"(each pixel fires when its accumulated rate crosses a threshold, as in the simulator and real cameras: the "
+        f"ranking's tick-to-tick path): **{iaf_med * 1e3:.0f} ms** median (runs: "
+        f"{', '.join(f'{t * 1e3:.0f}' for t in iaf_times)} ms; first guess {iaf_top.width}×{iaf_top.height}). Only a sample is read (a 2 MB block, "
         "then up to 8 MB of frames), so the time does not grow with the file; a cold cache adds the time to read "
         "those ~10 MB from disk.",
         "",
@@ -235,7 +282,7 @@ def main(argv: list[str] | None = None) -> int:
         "",
         "Machine and conditions:",
         "",
-        f"- {platform.platform()}, {platform.processor() or platform.machine()}, os.cpu_count() = {os.cpu_count()}",
+        f"- {platform.platform()}, {cpu_model()}, os.cpu_count() = {os.cpu_count()}",
         f"- Python {platform.python_version()}, numpy {np.__version__}",
         f"- load average (1/5/15 min) before: {load_before[0]:.2f}/{load_before[1]:.2f}/{load_before[2]:.2f}, "
         f"after: {load_after[0]:.2f}/{load_after[1]:.2f}/{load_after[2]:.2f} (other processes share the CPUs)",

@@ -249,7 +249,7 @@ BAYER_CONTRAST = 0.08
 #: frame sizes whose parts repeat at or above this ratio (:func:`repeats_within`) are a period of the file
 REPEAT_TOLERANCE = 0.8
 #: a tick-to-tick correlation (:func:`tick_correlation`) below minus this is a pixel's own refractory
-#: signature (chance stays within about ±0.03 at sizes that are not the frame size)
+#: signature (other frame sizes read no lower than about −0.04 on the simulator's wider set, two seeds)
 TICK_EVIDENCE = 0.08
 #: bytes compared per frame size for :func:`tick_correlation`: chunks spread over the file
 TICK_CHUNK, TICK_CHUNKS = 8192, 8
