@@ -1,4 +1,4 @@
-"""The sRGB transfer curve (IEC 61966-2-1), both ways: its one home.
+"""The sRGB transfer curve (IEC 61966-2-1), both ways: its one home; and the rule for display levels.
 
 The exporters (:mod:`spikeview.export.display`), the app's display (:mod:`spikeview.classical.display`),
 the simulator's image loading (:mod:`spikeview.sim.images`) and the benchmark's ground truth all call
@@ -8,7 +8,17 @@ float64 out), so each caller keeps its own precision; they do not clip.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+
+def levels_ordered(black: float, white: float | None) -> bool:
+    """The one rule for display levels (the app's display and the exporters): both finite, white above black.
+
+    ``white=None`` (the sequence's own white point, not known yet) passes.
+    """
+    return math.isfinite(black) and (white is None or (math.isfinite(white) and white > black))
 
 
 def srgb_encode(linear: np.ndarray) -> np.ndarray:

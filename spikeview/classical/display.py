@@ -19,7 +19,7 @@ import numba
 import numpy as np
 
 from spikeview.errors import ParameterError
-from spikeview.transfer import srgb_encode
+from spikeview.transfer import levels_ordered, srgb_encode
 
 _LUT_SIZE = 65_536
 
@@ -39,7 +39,7 @@ def _check_gamma(gamma: Gamma) -> Gamma:
 
 def _check_levels(black: float, white: float) -> tuple[float, float]:
     black, white = float(black), float(white)
-    if not (np.isfinite(black) and np.isfinite(white) and white > black):
+    if not levels_ordered(black, white):
         raise ParameterError(f"Display levels need black < white, got black={black}, white={white}; e.g. black=0, white=1.")
     return black, white
 

@@ -12,6 +12,7 @@ import numpy as np
 
 from spikeview.config import Config, param
 from spikeview.errors import ParameterError
+from spikeview.transfer import levels_ordered
 
 #: EXR compressions offered (all lossless); OpenImageIO names
 EXR_COMPRESSIONS = ("zip", "piz", "none")
@@ -105,7 +106,7 @@ class ExportConfig(Config):
             raise bad("png_bits", self.png_bits, "use 8 or 16")
         if self.white is not None and 0 < self.white < 1e-6:  # 1/white must stay finite in float32 frames
             raise bad("white", self.white, "use a white point of at least 1e-06 (linear frame units)")
-        if not (math.isfinite(self.black) and (self.white is None or (math.isfinite(self.white) and self.black < self.white))):
+        if not levels_ordered(self.black, self.white):
             raise bad("black/white", (self.black, self.white), "black must be less than white, e.g. 0 and 1")
         if self.transfer not in TRANSFERS:
             raise bad("transfer", self.transfer, f"use one of {', '.join(TRANSFERS)}")
