@@ -274,13 +274,17 @@ def tick_correlation(buf: np.ndarray, frame_bytes: int) -> float:
     length = min(TICK_CHUNK, n - frame_bytes - 2)
     if frame_bytes < 1 or length < 64:
         return 0.0
-    both = ctrl = ones = 0.0
-    for o in np.unique(np.linspace(1, n - frame_bytes - length - 1, TICK_CHUNKS).astype(np.int64)):
-        a = np.asarray(buf[o:o + length])
-        b = np.asarray(buf[o + frame_bytes - 1:o + frame_bytes + length + 1])
-        both += float(_POPCOUNT[a & b[1:-1]].sum())
-        ctrl += 0.5 * float(_POPCOUNT[a & b[:-2]].sum() + _POPCOUNT[a & b[2:]].sum())
-        ones += 0.5 * float(_POPCOUNT[a].sum() + _POPCOUNT[b[1:-1]].sum())
+    starts = np.unique(np.linspace(1, n - frame_bytes - length - 1, TICK_CHUNKS).astype(np.int64))
+    a = np.concatenate([buf[o:o + length] for o in starts])
+    b = np.stack([buf[o + frame_bytes - 1:o + frame_bytes + length + 1] for o in starts])
+    mid = b[:, 1:-1].ravel()
+
+    def bits(x: np.ndarray) -> float:
+        return float(np.bitwise_count(x).sum(dtype=np.int64))
+
+    both = bits(a & mid)
+    ctrl = 0.5 * (bits(a & b[:, :-2].ravel()) + bits(a & b[:, 2:].ravel()))
+    ones = 0.5 * (bits(a) + bits(mid))
     return (both - ctrl) / (ones - ctrl) if ones > ctrl else 0.0
 
 
