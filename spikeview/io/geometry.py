@@ -279,8 +279,8 @@ def tick_correlation(buf: np.ndarray, frame_bytes: int) -> float:
     b = np.stack([buf[o + frame_bytes - 1:o + frame_bytes + length + 1] for o in starts])
     mid = b[:, 1:-1].ravel()
 
-    def bits(x: np.ndarray) -> float:
-        return float(np.bitwise_count(x).sum(dtype=np.int64))
+    def bits(x: np.ndarray) -> float:  # numpy >= 2 counts bits natively; 1.26 (allowed) looks them up
+        return float((np.bitwise_count(x) if hasattr(np, "bitwise_count") else _POPCOUNT[x]).sum(dtype=np.int64))
 
     both = bits(a & mid)
     ctrl = 0.5 * (bits(a & b[:, :-2].ravel()) + bits(a & b[:, 2:].ravel()))
