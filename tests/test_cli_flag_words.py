@@ -66,3 +66,21 @@ def test_window_longer_than_the_stream_is_said_before_the_white_point(tmp_path, 
     assert err.startswith("spikeview: error: window of 10 ticks is longer than the stream's 8 ticks"), err
     assert "white point" not in err
     assert main(["reconstruct", str(path), "--cfa", "none", "--at", "1", "--window", "8", "--out", str(tmp_path / "r.png")]) == 0
+
+
+def test_export_names_an_existing_output_before_the_slow_motion_line(tmp_path, capsys):
+    pytest.importorskip("zarr")
+    path = tmp_path / "s.npy"
+    np.save(path, (np.random.default_rng(0).random((60, 8, 8)) < 0.3).astype(np.uint8))
+    store = tmp_path / "s.zarr"
+    assert main(["reconstruct", str(path), "--cfa", "none", "--range", "5:55:10", "--out", str(store)]) == 0
+    (tmp_path / "c.mp4").write_bytes(b"keep me")
+    capsys.readouterr()
+    assert main(["export", str(store), "--out", str(tmp_path / "c.mp4")]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("spikeview: error:") and "already exists" in err and "slow motion" not in err, err
+    assert (tmp_path / "c.mp4").read_bytes() == b"keep me"
+    assert main(["export", str(store), "--out", str(tmp_path / "nofolder" / "c.mp4")]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("spikeview: error:") and "does not exist" in err, err
+    assert main(["export", str(store), "--out", str(tmp_path / "c2.mp4")]) == 0

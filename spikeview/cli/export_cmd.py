@@ -66,6 +66,13 @@ def run(args: argparse.Namespace) -> int:
     n, h, w, c = frames.shape
     shape = (h, w, 3) if c == 3 else (h, w)
     out = Path(args.out)
+    from spikeview._files import check_writable
+    from spikeview.export.base import check_output_folder
+
+    # the output's folder and the files it would replace, before any informational line (as reconstruct does)
+    check_output_folder(out)
+    for path in ([out] if "%" not in out.name else []) + [preset_path(out)]:
+        check_writable(path, bool(args.overwrite), [store])
     if out.suffix.lower() == ".mp4":
         print(f"{n} frames, one per {step} ticks, at {ecfg.fps:g} fps: "
               f"{describe_slow_motion(slow_motion_factor(float(attrs['tick_rate']), step, ecfg.fps))}", file=sys.stderr)
