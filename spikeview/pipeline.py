@@ -145,6 +145,14 @@ def output_white(recipe: Recipe, state: SequenceState) -> float:
     return recipe.export.white_or(state.white)
 
 
+def white_point_line(recipe: Recipe, state: SequenceState, how: str) -> str:
+    """The one line every output prints about its exposure (plain runs, ``.zarr`` stores and their
+    export): the white point (:func:`output_white`), its unit and ``how`` it was chosen."""
+    unit = "spikes per tick" if state.alpha is None else "Y·α/η, rates corrected for the colour cast"
+    return (f"white point {output_white(recipe, state):.4g} ({unit}; {how}): EXR keeps values above it, "
+            "npy/PNG/MP4 map it to full scale.")
+
+
 def exposure_mapping(recipe: Recipe, state: SequenceState, out: str | Path) -> tuple[Any, Callable[[np.ndarray], np.ndarray]]:
     """The exporter settings and the frame mapping of an output (the one exposure rule of every writer).
 

@@ -78,10 +78,12 @@ def run(args: argparse.Namespace) -> int:
               f"{describe_slow_motion(slow_motion_factor(float(attrs['tick_rate']), step, ecfg.fps))}", file=sys.stderr)
     chunk = int(attrs["chunk"])
     from spikeview.cluster._compute import state_from_attrs
-    from spikeview.pipeline import exposure_mapping
+    from spikeview.pipeline import exposure_mapping, white_point_line
 
     # the store holds linear frames; the output maps them by the white point, as reconstruct does
-    ecfg, expose = exposure_mapping(recipe, state_from_attrs(attrs), out)
+    state = state_from_attrs(attrs)
+    ecfg, expose = exposure_mapping(recipe, state, out)
+    print(white_point_line(recipe, state, f"recorded in {store.name}"), file=sys.stderr)
     for i in range(check.n_chunks):  # every chunk decodes before the first frame is written (no partial output)
         check.read_chunk(i)
     with open_exporter(out, n, shape, ecfg, meta, overwrite=args.overwrite, inputs=[store],

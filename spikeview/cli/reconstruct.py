@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     if batch.wants_zarr(args):  # a .zarr output: the chunked, resumable batch path
         return batch.run_zarr(args)
     from spikeview.export import describe_slow_motion, slow_motion_factor
-    from spikeview.pipeline import prepare_sequence, recipe_for_state, window_centres, write_sequence
+    from spikeview.pipeline import prepare_sequence, recipe_for_state, white_point_line, window_centres, write_sequence
 
     recipe = recipe_from_args(args)
     out = Path(args.out)
@@ -97,9 +97,7 @@ def run(args: argparse.Namespace) -> int:
         how = "set by --white" if "export.white" in given_flags(args) else (
             "from the preset" if getattr(args, "preset", None) and state.white is not None and
             recipe.export.white != state.white else "the 99.9th percentile of the sequence's rates")
-        unit = "spikes per tick" if state.alpha is None else "Y·α/η, rates corrected for the colour cast"
-        print(f"white point {recipe.export.white:.4g} ({unit}; {how}): EXR keeps values above it, npy/PNG/MP4 map it to full scale.",
-              file=sys.stderr)
+        print(white_point_line(recipe, state, how), file=sys.stderr)
         for note in inactive_notes(recipe, args, src, centres[0], state):
             print(f"note: {note}", file=sys.stderr)
         if out.suffix.lower() == ".mp4" and recipe.run.at is None and recipe.run.range is None:

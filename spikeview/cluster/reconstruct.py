@@ -187,7 +187,7 @@ def _run_store(input_path, recipe, out: Path, chunk: int, attrs, client, progres
     from spikeview.cluster.store import check_compatible, check_store, create_store, input_fingerprint, repair_markers
     from spikeview.errors import InputFileError
     from spikeview.io import open_source
-    from spikeview.pipeline import prepare_sequence, recipe_for_state, window_centres
+    from spikeview.pipeline import prepare_sequence, recipe_for_state, white_point_line, window_centres
     from spikeview.recipe import StreamTable
 
     with open_source(input_path, **kwargs) as src:
@@ -217,6 +217,9 @@ def _run_store(input_path, recipe, out: Path, chunk: int, attrs, client, progres
                 "tick_rate": float(src.tick_rate), "chunk": chunk, "keyframe": DEFAULT_KEYFRAME,
                 "n_windows": len(centres), "frame_shape": list(frame_shape)})
             write_atomic(out.with_name(out.name + ".preset.toml"), recipe_toml, "the preset")
+        given = recipe.export.white is not None and recipe.export.white != state.white
+        say(white_point_line(recipe, state, "recorded in the store" if attrs is not None else (
+            "set by --white or the preset" if given else "the 99.9th percentile of the sequence's rates")))
         job = BatchJob(input=str(Path(src.info.path).absolute()), open_kwargs=kwargs, recipe=settings,
                        centres=tuple(int(c) for c in centres), chunk=chunk, store=str(out),
                        keyframe=int(attrs["keyframe"]) if attrs else DEFAULT_KEYFRAME)
