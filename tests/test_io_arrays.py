@@ -136,3 +136,22 @@ def test_write_array_round_trip(tmp_path, spikes):
         src.close()
         with pytest.raises(ParameterError, match="closed"):
             src.read(0, 1)
+
+
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_layout_note_only_when_the_order_is_ambiguous(tmp_path, cfa):
+    """(T, H, W) with time the longest axis (or a known sensor frame) is read without a note; an
+    order open to doubt keeps the --layout hwt hint, stronger when the last axis is the longest."""
+    rng = np.random.default_rng(4)
+    clear = tmp_path / "clear.npy"
+    np.save(clear, (rng.random((100, 8, 12)) < 0.3).astype(np.uint8))
+    src = NpySource(clear, cfa=cfa)
+    assert src.shape == (100, 8, 12) and src.info.warnings == []
+    assert src.info.cfa == (None if cfa is None else "RGGB")
+    assert decide_layout((7, 250, 400)) == ("thw", None)
+    odd = tmp_path / "odd.npy"  # (64, 48, 100): read as 64 ticks, but time may well be the last axis
+    np.save(odd, (rng.random((64, 48, 100)) < 0.3).astype(np.uint8))
+    note = NpySource(odd, cfa=cfa).info.warnings
+    assert len(note) == 1 and "--layout hwt" in note[0] and "last axis is the longest" in note[0]
+    lay, note = decide_layout((40, 48, 30))  # no axis stands out as time
+    assert lay == "thw" and "--layout hwt" in note and "longest" not in note

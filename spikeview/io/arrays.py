@@ -13,7 +13,10 @@ members cannot be mapped). Values are checked as they are read: anything other t
    if the first two are → ``(H, W, T)``;
 4. else ``(T, H, W)``, the toolkits' convention.
 
-Whenever the rule (not an explicit setting) decided, ``info.warnings`` says which layout was used.
+``info.warnings`` says which layout was used only when the choice is open to doubt: (H, W, T) from a
+known sensor size, or (T, H, W) by the default rule when the first axis is not the longest (a real
+capture has more ticks than rows or columns); a first axis longer than both others, or a known sensor
+size in the last two axes, reads as (T, H, W) without a note.
 """
 
 from __future__ import annotations
@@ -127,11 +130,14 @@ def decide_layout(shape: tuple[int, ...], *, layout: str | None = None, width: i
         return "thw", (f"array of shape {shape} fits {width or '?'}x{height or '?'} frames either way; read it as "
                        f"(T, H, W) — pass --layout hwt (layout='hwt' in Python) if time is the last axis.")
     if frame["thw"] in KNOWN_FRAME_SHAPES:
-        return "thw", f"array of shape {shape} read as (T, H, W) (its last two axes are a known sensor size)."
+        return "thw", None  # the last two axes are a known sensor size: nothing to doubt
     if frame["hwt"] in KNOWN_FRAME_SHAPES:
         return "hwt", f"array of shape {shape} read as (H, W, T) (its first two axes are a known sensor size)."
-    return "thw", (f"array of shape {shape} read as (T, H, W), the usual order; pass --layout hwt (layout='hwt' in Python) if time is the "
-                   f"last axis.")
+    if shape[0] > max(shape[1], shape[2]):
+        return "thw", None  # the first axis is the longest, as time is in any real capture
+    longest = " (its last axis is the longest, as time usually is)" if shape[2] > max(shape[0], shape[1]) else ""
+    return "thw", (f"array of shape {shape} read as (T, H, W), the usual order, though that is ambiguous here{longest}; "
+                   f"pass --layout hwt (layout='hwt' in Python) if time is the last axis.")
 
 
 class NpySource(SpikeSource):
