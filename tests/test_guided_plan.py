@@ -195,3 +195,30 @@ def test_demosaic_auto_is_bilinear_for_frames_too_small_for_malvar():
     assert auto_demosaic(np.zeros((2, 2), np.float32), "RGGB")[0] == "bilinear"
     plan = make_plan(Observation(np.full((2, 4), 0.5, np.float32), "RGGB", 10, CAST, 1.0), GuidedConfig(diffusion="always"))
     assert plan.demosaic == "bilinear" and "too small" in plan.reasons["demosaic"]
+
+
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_q_reason_says_what_the_count_counts_when_windows_are_pooled(cfa):
+    """With temporal_radius > 0 the count compared with Q_COUNT is the pooled one (Δτ_eff ticks): the
+    reason says so and gives the own window's count beside it; the decision is the same number's."""
+    from spikeview.guided.plan import Q_COUNT
+
+    src = ArraySource(spikes_from_rates(np.full((32, 32), 0.3), 120, seed=2), cfa=cfa)  # static: ~3 spikes per 10 ticks
+    alpha = CAST if cfa else None
+    pooled = Observation.from_source(src, 60, 10, alpha=alpha, eta=1.0, radius=3)
+    assert pooled.dtau is not None and pooled.own is not None
+    reason = make_plan(pooled, GuidedConfig(diffusion="always")).reasons["quantise"]
+    own = pooled.own.mean_count()
+    assert own == pytest.approx(3.0, abs=0.5) and pooled.mean_count() > 2 * own
+    assert f"{pooled.mean_count():.2f} spikes per photosite pooled over the aligned windows" in reason
+    assert f"{own:.2f} in its own 10-tick window" in reason and f">= {Q_COUNT:g}" in reason
+    alone = Observation.from_source(src, 60, 10, alpha=alpha, eta=1.0)
+    reason = make_plan(alone, GuidedConfig(diffusion="always")).reasons["quantise"]
+    assert f"{alone.mean_count():.2f} spikes per photosite per window" in reason and "pooled" not in reason
+
+
+def test_sparse_demosaic_reason_names_the_pooled_count():
+    src = ArraySource(spikes_from_rates(np.full((32, 32), 0.005), 120, seed=3), cfa="RGGB")
+    pooled = Observation.from_source(src, 60, 10, alpha=CAST, eta=1.0, radius=3)
+    plan = make_plan(pooled, GuidedConfig(diffusion="always"))
+    assert plan.demosaic == "bilinear" and "pooled over the aligned windows" in plan.reasons["demosaic"]

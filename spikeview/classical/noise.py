@@ -9,6 +9,8 @@ and the guided plan (:mod:`spikeview.guided.plan`), so ``demosaic = "auto"`` mea
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
 #: noise σ (max over channels, fraction of 1) of the bilinear TFP estimate at or below which a window
@@ -19,7 +21,8 @@ SPARSE_COUNT = 0.3
 
 
 def choose_demosaic(sigma: float, requested: str = "auto", *, denoised: bool = False,
-                    mean_count: float | None = None, shape: tuple[int, int] | None = None) -> tuple[str, str]:
+                    mean_count: float | None = None, shape: tuple[int, int] | None = None,
+                    count_words: Callable[[float], str] | None = None) -> tuple[str, str]:
     """The demosaic for a window with noise ``sigma``, and the reason (``requested`` other than
     ``"auto"`` is used as set).
 
@@ -33,13 +36,16 @@ def choose_demosaic(sigma: float, requested: str = "auto", *, denoised: bool = F
       dominates (``sigma > DEMOSAIC_CLEAN_SIGMA``) — Malvar/Menon sharpen the noise: on 10- to
       200-tick windows of the benchmark scenes bilinear was ahead by 0.5–3.3 dB at σ >= 14/255,
       Malvar ahead by at most 0.25 dB (one scene, 41–100 ticks) —, ``malvar2004`` where it is clean.
+
+    ``count_words`` words ``mean_count`` in the reason (e.g. a pooled count); default "… per window".
     """
     if requested != "auto":
         return requested, f"set by demosaic={requested}"
     if shape is not None and min(shape) < 3:
         return "bilinear", f"a {shape[0]}x{shape[1]} frame is too small for Malvar-2004 (3x3 at least)"
     if denoised and mean_count is not None and mean_count < SPARSE_COUNT:
-        return "bilinear", (f"sparse counts ({mean_count:.2f} spikes per photosite per window < {SPARSE_COUNT:g}): "
+        words = count_words(mean_count) if count_words is not None else f"{mean_count:.2f} spikes per photosite per window"
+        return "bilinear", (f"sparse counts ({words} < {SPARSE_COUNT:g}): "
                             "Malvar would ring around isolated spikes, bilinear averages them")
     if denoised:
         return "malvar2004", "the prior denoises afterwards: the sharper Malvar-2004 start, its amplified noise is removed"

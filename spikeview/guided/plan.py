@@ -113,6 +113,17 @@ class Plan:
         return "\n".join(lines)
 
 
+def _count_words(obs: Observation, count: float) -> str:
+    """``count`` (:meth:`Observation.mean_count`) in words that say what it counts: the window's own
+    spikes, or, for a pooled observation, the spikes pooled from the aligned neighbouring windows
+    (over Δτ_eff ticks) with the own window's count beside them."""
+    if obs.dtau is None:
+        return f"{count:.2f} spikes per photosite per window"
+    own = f"; {obs.own.mean_count():.2f} in its own {obs.window}-tick window" if obs.own is not None else ""
+    return (f"{count:.2f} spikes per photosite pooled over the aligned windows "
+            f"(Δτ_eff {float(np.mean(obs.effective_window)):.0f} ticks{own})")
+
+
 #: HQS: mean spikes per photosite per window below which Q (soft quantisation) is switched on.
 #: Chosen on the tuning scenes of the guided benchmark (256×256, k = 20): Q gained +0.02 to +0.16 dB
 #: PSNR and +0.04 to +0.08 SSIM at 0.16–0.95 spikes, lost 0.22–0.34 dB at 1.3–2.1 spikes; the
@@ -199,10 +210,10 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     else:
         count = obs.mean_count()
         if count < Q_COUNT:
-            quantise, r["quantise"] = True, (f"low rate ({count:.2f} spikes per photosite per window < {Q_COUNT:g}): the counts "
+            quantise, r["quantise"] = True, (f"low rate ({_count_words(obs, count)} < {Q_COUNT:g}): the counts "
                                              f"are small integers and Q models their 1/Δτ steps")
         else:
-            quantise, r["quantise"] = False, (f"rate {count:.2f} spikes per photosite per window >= {Q_COUNT:g}: Q's slope, "
+            quantise, r["quantise"] = False, (f"rate {_count_words(obs, count)} >= {Q_COUNT:g}: Q's slope, "
                                               "between 0 and k/2Δτ, costs PSNR in the HQS data step here; --quantise turns it on")
 
     # --- levels
@@ -253,7 +264,7 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
                                            else "M is off: the gray frame is not demosaicked")
     else:
         demosaic, r["demosaic"] = choose_demosaic(smax, p.demosaic, denoised=denoised, mean_count=obs.mean_count(),
-                                                  shape=obs.shape)
+                                                  shape=obs.shape, count_words=lambda c: _count_words(obs, c))
     # --- temporal support (what the observation pooled: spikeview.guided.temporal)
     pool = obs.pooling
     temporal = "off" if pool is None or pool.kind in ("off", "unavailable") else pool.kind
