@@ -19,6 +19,8 @@ def test_alpha_shown_only_for_colour_captures(window, qtbot, tmp_path, cfa):
     colour = cfa != "none"
     assert rp.alpha_plot.isVisibleTo(window) == colour
     assert ("window α" in rp.summary.text()) == colour, rp.summary.text()
+    # α in its unit, the one the plan's "gains η/α" divides the sampler's η by
+    assert ("window α = 1/mean SFR = (" in rp.summary.text() and "ticks/spike" in rp.summary.text()) == colour
     assert "Mean SFR" in rp.summary.text()
 
 

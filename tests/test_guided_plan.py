@@ -222,3 +222,13 @@ def test_sparse_demosaic_reason_names_the_pooled_count():
     pooled = Observation.from_source(src, 60, 10, alpha=CAST, eta=1.0, radius=3)
     plan = make_plan(pooled, GuidedConfig(diffusion="always"))
     assert plan.demosaic == "bilinear" and "pooled over the aligned windows" in plan.reasons["demosaic"]
+
+
+def test_cast_reason_names_the_eta_and_the_alpha_it_divides():
+    """The plan's gains η/α name their η (the sampler's exposed η) and α's unit, so that they can be
+    matched with the Rates panel's α = 1/mean SFR (a factor of the exposure scale apart otherwise)."""
+    obs = _obs(eta=6.0)
+    reason = make_plan(obs).reasons["cast"]
+    g = np.round(6.0 / np.asarray(CAST), 3).tolist()
+    assert f"gains η/α = {g} (η 6, the sampler's exposed η; α = 1/mean SFR, ticks/spike)" in reason
+    assert "monochrome" in make_plan(_obs(cfa=None)).reasons["cast"] or "no colour" in make_plan(_obs(cfa=None)).reasons["cast"]

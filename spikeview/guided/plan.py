@@ -159,14 +159,16 @@ def changed_blocks(obs: Observation, alpha: float = 1e-3) -> np.ndarray | None:
 
 def _cast_neutral(obs: Observation, tol: float) -> tuple[bool, str]:
     g = obs.gains()
+    # which η and α: the sampler's exposed η (not the classical one) over α = 1/mean SFR, the Rates panel's α
+    words = f"gains η/α = {np.round(g, 3).tolist()} (η {obs.eta:.3g}, the sampler's exposed η; α = 1/mean SFR, ticks/spike)"
     dev = float(np.max(np.abs(g / g.mean() - 1.0)))
     scale = abs(float(g.mean()) - 1.0)
     if dev <= tol and scale <= tol:
-        return True, f"gains η/α = {np.round(g, 3).tolist()} are within {100 * tol:.0f}% of 1: neutral, C would change nothing"
+        return True, f"{words} are within {100 * tol:.0f}% of 1: neutral, C would change nothing"
     if dev <= tol:  # neutral in colour, but C also carries the sequence's exposure (the white point at 0.9)
-        return False, (f"gains η/α = {np.round(g, 3).tolist()} are neutral in colour ({100 * dev:.1f}%) but set the "
+        return False, (f"{words} are neutral in colour ({100 * dev:.1f}%) but set the "
                        f"exposure (×{1 / float(g.mean()):.3g})")
-    return False, f"gains η/α = {np.round(g, 3).tolist()} deviate {100 * dev:.0f}% from neutral"
+    return False, f"{words} deviate {100 * dev:.0f}% from neutral"
 
 
 def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:

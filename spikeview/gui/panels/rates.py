@@ -80,7 +80,7 @@ class RatesPanel(QtWidgets.QWidget):
         self.alpha_plot.plotItem.legend.setVisible(colour)
         # …and no α plot at all: an empty plot whose axis title did not fit at 1366×768 told nothing
         self.alpha_plot.setVisible(colour)
-        self.alpha_plot.setLabel("left", "gray-world α" if colour else "gray-world α (none: monochrome)")
+        self.alpha_plot.setLabel("left", "gray-world α (ticks/spike)" if colour else "gray-world α (none: monochrome)")
 
     def _on_tick(self, tick: int) -> None:
         if not self.session.playing:
@@ -104,7 +104,8 @@ class RatesPanel(QtWidgets.QWidget):
         alpha = ", ".join(f"{a:.2f}" for a in r.alpha)
         note = " (refreshed 4×/s while playing)" if s.playing else ""
         colour = getattr(s.source, "cfa", None) is not None
-        alpha_text = f"   ·   window α = ({alpha})" if colour else ""  # monochrome: no colour cast, no α
+        # α = 1/mean SFR in ticks per spike, the quantity the plan divides the sampler's η by (its "gains η/α")
+        alpha_text = f"   ·   window α = 1/mean SFR = ({alpha}) ticks/spike" if colour else ""  # monochrome: no cast, no α
         self.summary.setText(f"Mean SFR ({where}, tick {r.tick}{note}): {means}{alpha_text}")
         self.hint.setText(cfa_hint(r.means))
 
