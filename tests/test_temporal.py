@@ -216,3 +216,20 @@ def test_temporal_error_measures_flicker():
     assert 4.0 < temporal_error(flick, g) < 5.5
     rgb = [np.full((8, 8, 3), 0.5, dtype=np.float32)] * 3
     assert temporal_error(rgb, rgb) == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("cfa", CFAS)
+def test_library_reconstruct_frame_pools_as_its_config_says(cfa):
+    """``guided.reconstruct_frame`` (the library's one-frame call) reads the neighbours ``temporal_radius`` asks for."""
+    from spikeview.guided.sampler import GuidedSampler
+    from spikeview.guided.video import reconstruct_frame, resolve_alpha
+
+    rates = np.repeat(_texture()[None, 8:56, 8:56] * 0.6, 90, axis=0)
+    src = ArraySource(_spikes(rates), cfa=cfa)
+    p = GuidedConfig(temporal_radius=3)
+    a = resolve_alpha(src, p, None)
+    got = np.asarray(reconstruct_frame(src, 45, p))
+    want = np.asarray(GuidedSampler(p).run(Observation.from_source(src, 45, p.window, alpha=a, eta=p.eta, radius=3), p))
+    np.testing.assert_array_equal(got, want)
+    single = np.asarray(reconstruct_frame(src, 45, p.replace(temporal_radius=0)))
+    assert np.abs(single - got).mean() > 1 / 255

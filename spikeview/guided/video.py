@@ -80,7 +80,7 @@ def reconstruct_frame(source, center: int, params: GuidedConfig | None = None, *
     """
     p = params if params is not None else GuidedConfig()
     a = resolve_alpha(source, p, alpha)
-    obs = Observation.from_source(source, center, p.window, alpha=a, eta=p.eta)
+    obs = Observation.from_source(source, center, p.window, alpha=a, eta=p.eta, radius=p.temporal_radius)
     return (sampler or GuidedSampler(p)).run(obs, p, callback, cancel)
 
 
