@@ -98,10 +98,10 @@ def test_edited_weights_are_not_served_from_the_cache():
 
 
 def test_auto_follows_the_cpu():
-    assert prec.resolve_precision("auto", BF16_CPU)[0] == ("bfloat16-mixed" if prec.AUTO_BF16 else "float32-fast")
-    assert prec.resolve_precision("auto", AVX2_CPU)[0] == "float32-fast"
+    assert prec.resolve_precision("auto", BF16_CPU)[0] == ("bfloat16-mixed" if prec.AUTO_BF16 else "float32")
+    assert prec.resolve_precision("auto", AVX2_CPU)[0] == "float32"
     choice, why = prec.resolve_precision("auto", BARE_CPU)
-    assert choice == "float32" and "no NNPACK" in why
+    assert choice == "float32" and "no native bfloat16" in why
     assert prec.resolve_precision("float32-fast", BARE_CPU)[0] == "float32"
     for p in ("float32", "bfloat16-mixed"):
         choice, why = prec.resolve_precision(p, AVX2_CPU)
@@ -111,7 +111,7 @@ def test_auto_follows_the_cpu():
 def test_bfloat16_only_on_high_noise_steps():
     sig = np.geomspace(50, 5, 6) / 255
     steps = prec.step_precisions("bfloat16-mixed", sig, threshold=30 / 255)
-    assert steps == ["bfloat16"] * 2 + ["float32-fast"] * 4
+    assert steps == ["bfloat16"] * 2 + ["float32"] * 4
     assert prec.step_precisions("float32", sig) == ["float32"] * 6
     assert prec.step_precisions("bfloat16-mixed", 4) == ["float32"] * 4  # a latent prior: no FFDNet layers
 
@@ -146,7 +146,7 @@ def test_plan_prints_the_precision_and_the_sampler_uses_it(cfa, monkeypatch):
     cfg = GuidedConfig(precision="bfloat16-mixed", steps=4, t_start=60 / 255, diffusion="always")
     out = smp.run(obs, cfg)
     assert out.shape == ((24, 24, 3) if cfa else (24, 24)) and smp.info.precision == "bfloat16-mixed"
-    assert seen[0] == "bfloat16" and seen[-1] == "float32-fast"
+    assert seen[0] == "bfloat16" and seen[-1] == "float32"
     seen.clear()
     f32 = smp.run(obs, cfg.replace(precision="float32"))
     assert set(seen) == {"float32"} and np.abs(f32 - out).max() > 0

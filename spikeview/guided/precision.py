@@ -5,10 +5,11 @@
 * ``"float32"`` — every prior call in float32 with oneDNN's channels-last convolutions: the same
   sums as the reference NCHW path (max difference ~3e-6), i.e. today's pixels;
 * ``"float32-fast"`` — float32 with NNPACK's fast convolution algorithms (built into torch's CPU
-  wheels for x86-64 with AVX2; max difference ~1e-5 per pass, well below one 8-bit level), about
-  1.5× less CPU time per pass than oneDNN on the machines measured; ``"float32"`` where torch lacks NNPACK;
+  wheels for x86-64 with AVX2; max difference ~1e-5 per pass, well below one 8-bit level); on a quiet
+  AMD EPYC (AVX-512) it was no faster than oneDNN channels-last at 1000² and 1.5× slower at 256²
+  (BENCHMARKS.md), so ``auto`` does not pick it; ``"float32"`` where torch lacks NNPACK;
 * ``"bfloat16-mixed"`` — the hidden layers of FFDNet in bfloat16 on the steps whose noise level is
-  at least :data:`MIXED_BF16_SIGMA`, ``float32-fast`` below it; the first layer (which sees the
+  at least :data:`MIXED_BF16_SIGMA`, ``float32`` (channels-last) below it; the first layer (which sees the
   image), the last layer (which produces the residual), ``x − residual`` and the data step stay float32;
 * ``"auto"`` (default) — the fastest of these that stays within 0.1 dB PSNR and 0.005 SSIM of
   float32 on the held-out scenes of ``spikeview bench``, for what this CPU offers
@@ -32,7 +33,7 @@ __all__ = ["MIXED_BF16_SIGMA", "MIXED_LAYERS", "PRECISIONS", "at_precision", "cp
 #: hidden layers, first and last float32; ``"bfloat16-all"`` = every layer)
 MIXED_LAYERS = "bfloat16"
 #: ``bfloat16-mixed``: a step runs in bfloat16 when its noise level (smallest over channels) is at
-#: least this (fraction of 1); below it the step runs ``float32-fast``. bfloat16's error in the
+#: least this (fraction of 1); below it the step runs ``float32`` (oneDNN channels-last). bfloat16's error in the
 #: prior's output is about 1.5/255 mean, 7/255 max (hidden layers, measured on a natural image); a
 #: step whose noise is far above it hides it, the later low-noise steps would keep it.
 MIXED_BF16_SIGMA = 30.0 / 255.0
@@ -88,17 +89,16 @@ def describe(precision: str) -> str:
     return {"float32": "float32, oneDNN channels-last (reference pixels)",
             "float32-fast": "float32, NNPACK fast convolution",
             "bfloat16-mixed": (f"bfloat16 hidden layers on steps with noise >= {255 * MIXED_BF16_SIGMA:.0f}/255, "
-                               "float32-fast below")}.get(precision, precision)
+                               "float32 below")}.get(precision, precision)
 
 
 def _auto(s: dict[str, object]) -> tuple[str, str]:
     feats = ", ".join(k for k in ("amx_bf16", "avx512_bf16", "avx512f", "avx2") if s.get(k)) or "no AVX2"
     if AUTO_BF16 and native_bf16(s):
         return "bfloat16-mixed", f"native bfloat16 ({feats}); within 0.1 dB / 0.005 SSIM of float32 on the bench"
-    if s.get("nnpack"):
-        why = "; bfloat16 was outside the quality budget on the bench" if native_bf16(s) else ""
-        return "float32-fast", f"{feats}, NNPACK in torch{why}"
-    return "float32", f"{feats}; no NNPACK in this torch and no faster path within the quality budget"
+    # NNPACK (float32-fast) measured no faster than oneDNN channels-last on a quiet machine (1.0x at
+    # 1000², 0.68x at 256²; BENCHMARKS.md): auto keeps the reference float32 path without native bf16
+    return "float32", f"{feats}; no native bfloat16, and no faster float32 path than oneDNN channels-last was measured"
 
 
 def resolve_precision(requested: str, summary: dict[str, object] | None = None) -> tuple[str, str]:
@@ -135,7 +135,7 @@ def step_precisions(precision: str, sigmas, layers: str | None = None, threshold
     if precision == "bfloat16-mixed":
         layers = MIXED_LAYERS if layers is None else layers
         threshold = MIXED_BF16_SIGMA if threshold is None else threshold
-        return [layers if s >= threshold else "float32-fast" for s in sigmas]
+        return [layers if s >= threshold else "float32" for s in sigmas]
     if precision == "float32-fast":
         return ["float32-fast"] * len(sigmas)
     return ["float32"] * len(sigmas)
