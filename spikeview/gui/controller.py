@@ -90,7 +90,8 @@ class Controller(QtCore.QObject):
             w.progress.connect(self._on_progress)
         self.alpha: np.ndarray | None = None
         self.alpha_note: str | None = None
-        self.enabled = {"tfi": True, "rates": True, "degradation": True}
+        # "pooling": the guided panel's pooling map is shown (it comes with the degradation job's plan)
+        self.enabled = {"tfi": True, "rates": True, "degradation": True, "pooling": False}
         self.display_factor = 1  # stream images are downsampled by this for the screen
         self.errors: list[str] = []  # every error shown, for tests and the log
         self.last_frames = None
@@ -147,11 +148,12 @@ class Controller(QtCore.QObject):
                 self.request_frames()
 
     def set_enabled(self, what: str, on: bool) -> None:
-        """Skip work for hidden views (``"tfi"``, ``"rates"``, ``"degradation"``)."""
+        """Skip work for hidden views (``"tfi"``, ``"rates"``, ``"degradation"``, ``"pooling"``)."""
         changed = self.enabled.get(what) != on
         self.enabled[what] = on
         if changed and on:
-            {"tfi": self.request_tfi, "rates": self.request_rates, "degradation": self.request_degradation}[what]()
+            {"tfi": self.request_tfi, "rates": self.request_rates, "degradation": self.request_degradation,
+             "pooling": self.request_degradation}[what]()
 
     # ------------------------------------------------------------------------------ memory
     @staticmethod
@@ -293,7 +295,7 @@ class Controller(QtCore.QObject):
         self.preview.submit("rates", lambda ctx, r=req, m=f.mosaic: jobs.rates_job(r, m, ctx))
 
     def request_degradation(self) -> None:
-        if self.session.source is None or not self.enabled["degradation"]:
+        if self.session.source is None or not (self.enabled["degradation"] or self.enabled["pooling"]):
             return
         g = self.guided_result
         s = self.session

@@ -98,6 +98,9 @@ class DegradationView:
     plan: str = ""
     knobs: dict[str, str | None] = field(default_factory=dict)
     quantise: bool = True  # Q in the model (False: the "quantised" stage is C M X itself)
+    #: what the observation pooled (:class:`spikeview.guided.temporal.Pooling`: Δτ_eff per photosite, the
+    #: plan's temporal reason): the guided panel's pooling map
+    pooling: Any = None
 
 
 def window_observation(source: Any, tick: int, cfg: Any, alpha: np.ndarray | None,
@@ -149,7 +152,7 @@ def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
     with torch.no_grad():
         st = data.stages(to_tensor(np.clip(x / scale, 0.0, 1.0)))
     res = core.stage_images(x, st, req.params, bool(req.params.get("show_pyramid")), scene_scale=float(scale))
-    return DegradationView(res, label, req.tick, obs.shape, str(plan), knob_status(cfg, plan), plan.quantise)
+    return DegradationView(res, label, req.tick, obs.shape, str(plan), knob_status(cfg, plan), plan.quantise, plan.pooling)
 
 
 # ---------------------------------------------------------------------------------- guided
@@ -178,6 +181,7 @@ class GuidedUpdate:
     ssim: float | None = None
     text: str = ""
     knobs: dict[str, str | None] = field(default_factory=dict)
+    pooling: Any = None  # "plan": the observation's Pooling (the guided panel's pooling map)
 
 
 @dataclass
@@ -210,7 +214,8 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     obs = window_observation(req.source, req.tick, cfg, state.alpha, req.roi)
     plan = make_plan(obs, cfg)
     origin = crop_roi(np.zeros((req.source.height, req.source.width), np.uint8), req.roi)[1][::-1] if req.roi else (0, 0)
-    ctx.report(GuidedUpdate("plan", req.run, total=cfg.steps * cfg.chains, text=str(plan), knobs=knob_status(cfg, plan)))
+    ctx.report(GuidedUpdate("plan", req.run, total=cfg.steps * cfg.chains, text=str(plan), knobs=knob_status(cfg, plan),
+                              pooling=plan.pooling))
     gt = None
     g = req.ground_truth(req.tick) if req.ground_truth is not None else None  # None: no frame stored near this tick
     if g is not None:

@@ -316,6 +316,8 @@ class MainWindow(QtWidgets.QMainWindow):
         c.alpha_ready.connect(self.rates_panel.show_sequence_alpha)
         c.degradation_ready.connect(self.degradation_panel.show_result)
         c.degradation_ready.connect(lambda view: self.guided_panel.show_knobs(view.knobs))
+        c.degradation_ready.connect(lambda view: self.guided_panel.show_pooling(view.pooling, view.knobs, view.tick))
+        self.guided_panel.pooling_toggled.connect(lambda v: c.set_enabled("pooling", v) if not self._closing else None)
         c.guided_update.connect(self.guided_panel.show_update)
         c.guided_done.connect(self.guided_panel.show_result)
         c.guided_state.connect(self.guided_panel.set_state)

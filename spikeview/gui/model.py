@@ -118,6 +118,7 @@ class ParamSpec:
 #: the app's group of each recipe parameter (which previews a change makes stale); default: its table
 _GROUPS = {"classical.window": "stream", "classical.tfi_half_window": "stream", "classical.eta": "forward",
            "guided.k": "forward", "guided.levels": "forward", "guided.quantise": "forward",
+           "guided.temporal_radius": "forward",  # Δτ_eff per photosite: the data term and the pooling map
            "export.black": "display", "export.white": "display", "export.transfer": "display",
            "export.gamma": "display", "run.method": "export"}
 #: the app shows an unset boolean (the plan decides) as a three-way choice

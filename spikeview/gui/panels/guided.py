@@ -20,12 +20,15 @@ from spikeview.gui.widgets import (
     job_controls,
     subscribe,
 )
+from spikeview.gui.panels.pooling import PoolingMap
 
 #: the live preview is redrawn at most this often during a run (ms)
 DRAW_INTERVAL_MS = 100
 #: the PSNR/SSIM curves are redrawn at most this often during a run (ms): re-plotting (axes, text)
 #: is the costliest update of the panel, and a busy machine stretches it
 PLOT_INTERVAL_MS = 500
+POOLING_TIP = ("Show the pooling map: Δτ_eff per photosite of this window (how many neighbouring windows each "
+               "photosite borrowed spikes from) in place of x̂₀")
 RUN_COLOURS = [(255, 170, 0), (0, 190, 255), (255, 90, 160), (120, 220, 90), (200, 140, 255), (255, 230, 80)]
 
 
@@ -35,6 +38,8 @@ class GuidedPanel(QtWidgets.QWidget):
     run_requested = QtCore.Signal()
     cancel_requested = QtCore.Signal()
     live_toggled = QtCore.Signal(bool)
+    #: the pooling map is shown (True) or hidden: the controller keeps the window's plan current while shown
+    pooling_toggled = QtCore.Signal(bool)
 
     def __init__(self, session: Session, parent: QtWidgets.QWidget | None = None):
         super().__init__(parent)
@@ -48,6 +53,9 @@ class GuidedPanel(QtWidgets.QWidget):
         self.seed = ParamSpin(session, "seed")
         self.temporal = ParamSpin(session, "temporal_radius")
         self.temporal.setToolTip(SPECS["temporal_radius"].help)
+        self.pool_btn = QtWidgets.QToolButton(text="Map", objectName="pooling_map_toggle", checkable=True)
+        self.pool_btn.setToolTip(POOLING_TIP)
+        self.pool_btn.toggled.connect(self._toggle_pooling_map)
         self.prior = ParamCombo(session, "prior", {"ffdnet": "FFDNet (embedded)", "sd": "Stable Diffusion (folder)"})
         self.guidance = ParamCombo(session, "guidance", {"hqs": "HQS (DiffPIR, fast)", "dps": "DPS (backprop)"})
         self.quantise = ParamCombo(session, "quantise", {"auto": "auto (the plan decides)", "on": "on", "off": "off"})
@@ -67,7 +75,7 @@ class GuidedPanel(QtWidgets.QWidget):
         tw = hbox((self.t_start, 1), self.t_note)
         settings = form([self.s, self.k, self.levels, tw, ("", smallw), ("Prior", self.prior), ("Weights", mpw),
                          ("Guidance", self.guidance), ("Q", self.quantise), ("Precision", self.precision),
-                         ("Neighbours ±", self.temporal)])
+                         ("Neighbours ±", hbox((self.temporal, 1), self.pool_btn))])
         #: recipe path → the control of that knob (disabled with the plan's reason when it cannot act)
         self.knob_controls = {"guided.s": self.s, "guided.k": self.k, "guided.levels": self.levels,
                               "guided.t_start": self.t_start, "guided.temporal_radius": self.temporal}
@@ -96,6 +104,8 @@ class GuidedPanel(QtWidgets.QWidget):
         self.plan.setMaximumHeight(110)
         self.plan.setMinimumHeight(44)  # two lines and a scroll bar on a 768-pixel-high screen
         self.preview = ImagePane("x̂₀ (clean estimate)", min_size=120)
+        self.pooling_map = PoolingMap()  # shown in place of x̂₀ by the "Map" button
+        self.pooling_map.setVisible(False)
         self.psnr_plot = pg.PlotWidget()
         self.psnr_plot.setObjectName("psnr_plot")
         self.psnr_plot.setLabel("left", "PSNR (dB)")
@@ -123,6 +133,7 @@ class GuidedPanel(QtWidgets.QWidget):
         ml.addWidget(self.clear_btn, 0, QtCore.Qt.AlignmentFlag.AlignRight)
         live = QtWidgets.QHBoxLayout()
         live.addWidget(self.preview, 1)
+        live.addWidget(self.pooling_map, 1)
         live.addWidget(self.metrics_box, 1)
 
         lay = QtWidgets.QVBoxLayout(self)
@@ -153,6 +164,9 @@ class GuidedPanel(QtWidgets.QWidget):
             self._idle_progress()
         elif name == "model_path":
             self.model_path.setText(value)
+        elif name == "temporal_radius" and not self.pool_btn.isEnabled():  # the next plan says whether it can act
+            self.pool_btn.setEnabled(True)
+            self.pool_btn.setToolTip(POOLING_TIP)
         elif name == "prior":
             self.model_path.setPlaceholderText("packaged FFDNet weights" if value == "ffdnet" else "folder with diffusers weights (required)")
 
@@ -163,12 +177,34 @@ class GuidedPanel(QtWidgets.QWidget):
             control.setEnabled(why is None)
             control.setToolTip(SPECS[path.split(".")[1]].help if why is None else f"No effect on this window: {why}.")
 
+    def show_pooling(self, pool: Any, knobs: dict[str, str | None] | None = None, tick: int | None = None) -> None:
+        """Show the window's :class:`~spikeview.guided.temporal.Pooling` (the library's, from the observation
+        the sampler uses) in the pooling map; without one (``temporal_radius = 0``, a capture too short)
+        the "Map" button is disabled with the reason as its tooltip."""
+        self.pooling_map.show_pooling(pool, knobs, tick)
+        why = None if pool is None else self.pooling_map.why_not  # no plan yet: the button asks for one
+        self.pool_btn.setEnabled(why is None)
+        if pool is None:
+            self.pool_btn.setToolTip(POOLING_TIP)
+        elif why is None:
+            self.pool_btn.setToolTip(f"Show the pooling map (Δτ_eff per photosite) in place of x̂₀: {pool.reason}")
+        else:
+            self.pool_btn.setToolTip(f"No pooling map for this window: {why}.")
+            if self.pool_btn.isChecked():
+                self.pool_btn.setChecked(False)
+
+    def _toggle_pooling_map(self, on: bool) -> None:
+        self.pooling_map.setVisible(on)
+        self.preview.setVisible(not on)
+        self.pooling_toggled.emit(bool(on))
+
     def _on_source(self) -> None:
         stream = self.session.stream
         sim = stream is not None and stream.is_simulated
         self.metrics_box.setVisible(sim)
         self.preview.set_image(None)
         self.plan.setPlainText("")
+        self.show_pooling(None)
         # nothing of the previous capture's runs stays on screen (issue 10: its run and PSNR stayed)
         self.clear_curves()
         self.status.setText("Idle.")
@@ -210,6 +246,8 @@ class GuidedPanel(QtWidgets.QWidget):
             self._flush()
             self.plan.setPlainText(u.text)
             self.show_knobs(u.knobs)
+            if getattr(u, "pooling", None) is not None:
+                self.show_pooling(u.pooling, u.knobs)
             self.progress.setRange(0, max(u.total, 1))
             self.progress.setValue(0)
             return
