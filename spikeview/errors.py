@@ -7,6 +7,9 @@ in a dialog or the status bar.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+from collections.abc import Iterator
 from typing import Any
 
 
@@ -47,6 +50,34 @@ def is_cancelled(cancel: Any) -> bool:
     if callable(cancel):
         return bool(cancel())
     return bool(cancel)
+
+
+#: the cancel flags of the jobs running in this thread (innermost last), for loops deep inside a job
+#: that are not handed a flag (a prior's strips and layers): :func:`check_cancelled`
+_SCOPE: contextvars.ContextVar[tuple[Any, ...]] = contextvars.ContextVar("spikeview_cancel_scope", default=())
+
+
+@contextlib.contextmanager
+def cancel_scope(cancel: Any) -> Iterator[None]:
+    """Make ``cancel`` (as for :func:`is_cancelled`; ``None`` adds nothing) visible to
+    :func:`check_cancelled` in everything this thread runs inside the block; scopes nest."""
+    if cancel is None:
+        yield
+        return
+    token = _SCOPE.set(_SCOPE.get() + (cancel,))
+    try:
+        yield
+    finally:
+        _SCOPE.reset(token)
+
+
+def check_cancelled(where: str = "") -> None:
+    """Raise :class:`Cancelled` when a flag of an enclosing :func:`cancel_scope` is set (a no-op
+    outside every scope; costs a few microseconds, so inner loops can call it between their
+    pieces of work)."""
+    for cancel in _SCOPE.get():
+        if is_cancelled(cancel):
+            raise Cancelled(f"cancelled {where}".rstrip())
 
 
 class OutputFileError(SpikeviewError):

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from spikeview.errors import Cancelled, ParameterError, is_cancelled
+from spikeview.errors import Cancelled, ParameterError, cancel_scope, is_cancelled
 from spikeview.guided.baseline import baseline, start_estimate, to_image, to_tensor
 from spikeview.guided.config import GuidedConfig
 from spikeview.guided.guidance import DPSGuidance, GuidanceRule, HQSGuidance
@@ -206,9 +206,18 @@ class GuidedSampler:
             ``(H, W, 3)`` float32 RGB in [0, 1] for a Bayer stream (``(H, W)`` when M is off).
 
         Raises:
-            Cancelled: the cancel flag was set.
+            Cancelled: the cancel flag was set (checked before every step and, through
+                :func:`~spikeview.errors.cancel_scope`, between the layers and strips of every
+                prior pass, so a 1000×1000 run stops within one layer).
             ParameterError: inconsistent settings (e.g. a prior with the wrong channels).
         """
+        with cancel_scope(cancel):
+            return self._run(observation, params, callback, cancel, init=init, previous=previous, plan=plan, noise=noise)
+
+    def _run(self, observation: Observation, params: GuidedConfig | None, callback: Callback | None, cancel: Any, *,
+             init: np.ndarray | None, previous: np.ndarray | None, plan: Plan | None,
+             noise: torch.Tensor | None) -> np.ndarray:
+        """:meth:`run` inside its cancel scope."""
         p = params if params is not None else self.params
         if (p.prior == "sd" or is_latent(self._prior)) and p.guidance != "dps" and self._guidance is None:
             raise ParameterError(SD_NEEDS_DPS)

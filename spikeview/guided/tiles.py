@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from spikeview.errors import Cancelled, is_cancelled
 from spikeview.guided.observation import Observation
 
 #: overlap between neighbouring tiles (pixels; even, so crops keep the CFA phase)
@@ -152,9 +153,20 @@ class _FrameNoise(Observation):
         return self.kappa if self.kappa is not None else super().noise_scale()
 
 
+def _canvas(acc: np.ndarray, wsum: np.ndarray, t: Any, preview: np.ndarray, wt: np.ndarray) -> np.ndarray:
+    """The frame so far with tile ``t``'s running ``preview`` blended in at weight ``wt`` (a copy)."""
+    a, s = acc.copy(), wsum.copy()
+    a[t.y0:t.y1, t.x0:t.x1] += preview * (wt[..., None] if preview.ndim == 3 else wt)
+    s[t.y0:t.y1, t.x0:t.x1] += wt
+    s = np.where(s > 0, s, 1.0)
+    return a / (s[..., None] if a.ndim == 3 else s)
+
+
 def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, cancel: Any = None) -> np.ndarray:
     """Reconstruct ``obs`` tile by tile (``plan.tile_map``) and blend; ``callback(step, total, canvas)``
-    gets the frame filled in so far after every step."""
+    gets the whole frame filled in so far after every step (finished tiles blended, the running
+    tile's current estimate over them, zeros where no tile has run yet: the app shows the frame
+    filling in). The cancel flag is checked before every tile, and inside a tile by the sampler."""
     import torch
 
     from spikeview.guided.baseline import baseline, start_estimate
@@ -172,8 +184,13 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
     done = 0
     sub_p = p.replace(tile=0)
     kappa = obs.noise_scale()
-    for t in tm.tiles:
+    for k, t in enumerate(tm.tiles):
+        if is_cancelled(cancel):
+            raise Cancelled(f"guided reconstruction cancelled before tile {k + 1} of {len(tm.tiles)}")
         sub = _FrameNoise.of(obs.crop(t.y0, t.y1, t.x0, t.x1), kappa)
+        wy = _ramp(t.y1 - t.y0, t.y0 > 0, t.y1 < h, OVERLAP)
+        wx = _ramp(t.x1 - t.x0, t.x0 > 0, t.x1 < w, OVERLAP)
+        wt = wy[:, None] * wx[None, :]
         if t.kind == "skipped":
             if t.fallback == "tfp":
                 out = start_estimate(sub, plan.mosaic, plan.cast, p.demosaic)
@@ -191,16 +208,13 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
             cfg = sub_p.replace(steps=t.steps, t_start=t.t_start)
             offset = done
 
-            def cb(step, _total, preview, _o=offset):
+            def cb(step, _total, preview, _o=offset, _t=t, _wt=wt):
                 if callback is not None:
-                    callback(_o + step, total, preview)
+                    callback(_o + step, total, _canvas(acc, wsum, _t, np.asarray(preview, dtype=np.float32), _wt))
 
             out = sampler.run(sub, cfg, cb if callback is not None else None, cancel, plan=sub_plan,
                               noise=noise[..., t.y0:t.y1, t.x0:t.x1])
             done += t.steps
-        wy = _ramp(t.y1 - t.y0, t.y0 > 0, t.y1 < h, OVERLAP)
-        wx = _ramp(t.x1 - t.x0, t.x0 > 0, t.x1 < w, OVERLAP)
-        wt = wy[:, None] * wx[None, :]
         acc[t.y0:t.y1, t.x0:t.x1] += out * (wt[..., None] if out.ndim == 3 else wt)
         wsum[t.y0:t.y1, t.x0:t.x1] += wt
         if callback is not None:

