@@ -94,30 +94,30 @@ def _run_in_scope(fn, flag):
         return fn()
 
 
-@COLOR
-def test_prior_pass_stops_between_strips(monkeypatch, color):
+def _cancel_a_four_strip_pass(monkeypatch, color, match, strip, layer):
+    """Run one prior pass over 4 strips while another thread sets the flag at (``strip``, ``layer``);
+    the pass must raise ``Cancelled`` (message matching ``match``). Returns the trap (what ran)."""
     net = _net(color)
     x = torch.rand(1, net.channels, 8 * STRIP, 40, generator=torch.Generator().manual_seed(1))  # 4 strips
     flag = threading.Event()
-    trap = _Trap(monkeypatch, flag, strip=0, layer=None)
+    trap = _Trap(monkeypatch, flag, strip=strip, layer=layer)
     th = trap.set_flag_from_another_thread()
-    with pytest.raises(Cancelled, match="between the strips"):
+    with pytest.raises(Cancelled, match=match):
         _run_in_scope(lambda: net(x, 20 / 255), flag)
     th.join()
+    return net, trap
+
+
+@COLOR
+def test_prior_pass_stops_between_strips(monkeypatch, color):
+    net, trap = _cancel_a_four_strip_pass(monkeypatch, color, "between the strips", strip=0, layer=None)
     assert trap.strips == [net.n_layers] and trap.layers_after_flag == 0  # strip 2 never started
 
 
 @COLOR
 @pytest.mark.parametrize("layer", [0, 5], ids=["first-layer", "mid-strip"])
 def test_prior_pass_stops_within_one_layer_of_the_strip_it_is_in(monkeypatch, color, layer):
-    net = _net(color)
-    x = torch.rand(1, net.channels, 8 * STRIP, 40, generator=torch.Generator().manual_seed(1))  # 4 strips
-    flag = threading.Event()
-    trap = _Trap(monkeypatch, flag, strip=1, layer=layer)
-    th = trap.set_flag_from_another_thread()
-    with pytest.raises(Cancelled, match="inside a prior pass"):
-        _run_in_scope(lambda: net(x, 20 / 255), flag)
-    th.join()
+    _, trap = _cancel_a_four_strip_pass(monkeypatch, color, "inside a prior pass", strip=1, layer=layer)
     # the flag was set while layer `layer` of strip 2 was being fetched: no layer was fetched after it,
     # and the fetched one stopped at the check before its convolution; nothing of strips 3 and 4 ran
     assert len(trap.strips) == 2 and trap.strips[1] == layer + 1
