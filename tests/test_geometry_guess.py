@@ -195,3 +195,18 @@ def test_flat_grey_captures_with_few_ticks_rank_first(tmp_path, w, h, ticks, cfa
     or, monochrome, from the shape prior alone (a flat monochrome scene has no rows to line up)."""
     guesses = rank_plain_geometries(_flat_capture(tmp_path, w, h, ticks, cfa))
     assert guesses[0].size == (w, h), [g.describe() for g in guesses]
+
+
+@pytest.mark.parametrize("cfa", [True, False], ids=["RGGB", "mono"])
+def test_a_known_sensor_file_cut_short_is_still_guessed_at_its_size(tmp_path, capsys, cfa):
+    """A copy cut short (a partial last tick) no longer divides by 400x250: the guess must not fall to a row-sized frame."""
+    full = write_capture(tmp_path / "full.dat", 400, 250, 40, seed=3, cfa=cfa)
+    cut = tmp_path / "cut.dat"
+    cut.write_bytes(full.read_bytes()[:-100])
+    best = rank_plain_geometries(cut)[0]
+    assert (best.size, best.n_frames, best.trailing) == ((400, 250), 39, 12400), best
+    assert any("partial last tick" in r for r in best.reasons)
+    assert main(["info", str(cut)]) == 1
+    assert "most likely --width 400 --height 250 (39 ticks)" in capsys.readouterr().err
+    with open_source(cut, width=400, height=250, cfa="RGGB" if cfa else "none") as src:
+        assert src.n_frames == 39

@@ -48,6 +48,8 @@ import numpy as np
 
 #: plain-file geometries of known sensors, as (width, height)
 KNOWN_SIZES: tuple[tuple[int, int], ...] = ((1000, 1000), (400, 250))
+#: a known sensor size that does not divide the file is still a candidate with this many whole frames
+PARTIAL_MIN_FRAMES = 8
 #: common aspect ratios (w, h) preferred on ties
 COMMON_ASPECTS: tuple[tuple[int, int], ...] = ((1, 1), (4, 3), (3, 2), (16, 9), (8, 5), (5, 4), (2, 1))
 #: widest aspect ratio considered (either way); known sizes are always considered
@@ -80,6 +82,8 @@ class GeometryGuess:
         pattern: sharpness of a colour filter's 2×2 site pattern at this width, relative to the
             sharpest width of the same frame size (0 when the file shows no filter pattern).
         reasons: short phrases for people ("known sensor size", "rows line up" …).
+        trailing: bytes after the last whole frame (a known sensor size in a file cut short; 0 when
+            the frames divide the file).
     """
 
     width: int
@@ -90,6 +94,7 @@ class GeometryGuess:
     known: bool = False
     reasons: list[str] = field(default_factory=list)
     pattern: float = 0.0
+    trailing: int = 0
 
     @property
     def size(self) -> tuple[int, int]:
@@ -406,6 +411,10 @@ def rank_geometries(buf: np.ndarray, *, limit: int | None = 8) -> list[GeometryG
     """:func:`rank_plain_geometries` on the bytes of a file (a 1-D uint8 array or memory map)."""
     size = int(buf.size)
     sizes = candidate_sizes(size)
+    # a known sensor size is also a candidate when the file ends in a partial tick (a copy or capture cut
+    # short): whole frames read, the rest is left out with a warning when the file is opened
+    partial = {(w, h) for (w, h) in KNOWN_SIZES if size % (w * h // 8) and size // (w * h // 8) >= PARTIAL_MIN_FRAMES}
+    sizes = sorted(set(sizes) | partial)
     if not sizes:
         return []
     by_fb: dict[int, list[tuple[int, int]]] = {}
@@ -479,7 +488,8 @@ def rank_geometries(buf: np.ndarray, *, limit: int | None = 8) -> list[GeometryG
             rates = pair_sums(raw) if raw is not None else None
         lags = _Lags(rates) if rates is not None else None
         for w, h in by_fb[fb]:
-            g = GeometryGuess(w, h, size // fb, temporal=round(t_rel[fb], 4), known=(w, h) in KNOWN_SIZES)
+            g = GeometryGuess(w, h, size // fb, temporal=round(t_rel[fb], 4), known=(w, h) in KNOWN_SIZES,
+                              trailing=size % fb)
             if rates is not None:
                 g.spatial = round(spatial_score(rates.reshape(h, w), lags=lags), 4)
             if top > BAYER_CONTRAST:  # a colour filter: its 2x2 pattern is sharpest at the true width
@@ -488,7 +498,7 @@ def rank_geometries(buf: np.ndarray, *, limit: int | None = 8) -> list[GeometryG
         group.sort(key=lambda g: (-(g.spatial + 0.5 * g.pattern + _prior(g.width, g.height)), -g.width))
         guesses += group
     if not signal:  # nothing to measure (a black, uniform or random file): known sizes, common shapes, more ticks
-        guesses.sort(key=lambda g: (-_prior(g.width, g.height), -g.n_frames, -g.width))
+        guesses.sort(key=lambda g: (g.trailing > 0, -_prior(g.width, g.height), -g.n_frames, -g.width))
     for i, g in enumerate(guesses):
         if g.known:
             g.reasons.append("known sensor size")
@@ -498,6 +508,8 @@ def rank_geometries(buf: np.ndarray, *, limit: int | None = 8) -> list[GeometryG
             g.reasons.append("rows line up")
         if g.n_frames == 1:
             g.reasons.append("a single tick")
+        if g.trailing:
+            g.reasons.append(f"{g.trailing} bytes of a partial last tick left out")
     return guesses[:limit] if limit else guesses
 
 
