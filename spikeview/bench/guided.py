@@ -429,6 +429,10 @@ def main(argv=None) -> int:
     out = a.out if a.out is not None else (None if a.quick else "benchmarks/results")
     res = run_benchmark(out, size=size, scenes=scenes, frames=a.frames, quick=a.quick, spikezoo=a.spikezoo)
     s = summarise(res)
+    if a.quick:
+        print(f"smoke run (--quick): {size}x{size} frames, 4 scenes, guided rows with 1-2 sampler steps instead of the "
+              "default 6 -- it checks that every method runs; its figures and rankings are not the defaults' "
+              "(run without --quick, or see BENCHMARKS.md).")
     for m, d in s["methods"].items():
         print(f"{m:<40} tune {d['psnr_tune']:6.2f}  held {d['psnr_held']:6.2f} / {d['ssim_held']:.3f}  {d['seconds']:.2f} s  clip {100 * d['clipped']:.2f}%")
     for z in res["spikezoo"]:
