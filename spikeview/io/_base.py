@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from spikeview.errors import InputFileError, ParameterError
-from spikeview.io.source import DEFAULT_TICK_RATE, SpikeSource, StreamInfo
+from spikeview.io.source import DEFAULT_TICK_RATE, SpikeSource, StreamInfo, check_tick_rate  # noqa: F401 (re-exported)
 
 
 def check_dims(width: object, height: object, where: str = "") -> tuple[int, int]:
@@ -27,17 +27,6 @@ def check_dims(width: object, height: object, where: str = "") -> tuple[int, int
             raise ParameterError(f"{where}{name} must be a positive whole number of pixels, got {v!r}; "
                                  f"pass the sensor size, e.g. width 400 and height 250.")
     return int(width), int(height)  # type: ignore[arg-type]
-
-
-def check_tick_rate(tick_rate: object) -> float:
-    """Validate a tick rate (readouts per second)."""
-    try:
-        value = float(tick_rate)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        value = float("nan")
-    if not (np.isfinite(value) and value > 0):
-        raise ParameterError(f"tick_rate must be a positive number of readouts per second, got {tick_rate!r}; the cameras run at 20000.")
-    return value
 
 
 def open_bytes(path: str | os.PathLike[str], what: str) -> tuple[Path, np.ndarray]:

@@ -23,7 +23,6 @@ override the sidecar's values.
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 from pathlib import Path
 from typing import Any
@@ -31,7 +30,7 @@ from typing import Any
 from spikeview.cfa import cfa_to_str, parse_cfa
 from spikeview.config import Config, load_toml
 from spikeview.errors import InputFileError, ParameterError, SpikeviewError
-from spikeview.io.source import DEFAULT_TICK_RATE, FORMATS, StreamInfo
+from spikeview.io.source import DEFAULT_TICK_RATE, FORMATS, StreamInfo, check_tick_rate
 
 SIDECAR_SUFFIX = ".toml"
 
@@ -61,8 +60,7 @@ class StreamSettings(Config):
             raise ParameterError(f"format {self.format!r} is unknown: use one of {', '.join(FORMATS)}.")
         if self.width < 1 or self.height < 1:
             raise ParameterError(f"width and height must be positive, got {self.width}x{self.height}.")
-        if not (math.isfinite(self.tick_rate) and self.tick_rate > 0):
-            raise ParameterError(f"tick_rate must be a positive number of readouts per second, got {self.tick_rate}.")
+        self.tick_rate = check_tick_rate(self.tick_rate)
         self.cfa = cfa_to_str(parse_cfa(self.cfa))
 
     @classmethod

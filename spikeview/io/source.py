@@ -20,6 +20,22 @@ from spikeview.cfa import parse_cfa
 from spikeview.errors import ParameterError
 
 DEFAULT_TICK_RATE = 20_000.0
+#: tick rates accepted (readouts per second): spike cameras run at 20–40 kHz; slower or faster
+#: rates are allowed for simulations and emulated sensors, but not absurd ones (durations overflow)
+TICK_RATE_RANGE = (1.0, 1e9)
+
+
+def check_tick_rate(tick_rate: object) -> float:
+    """Validate a tick rate (readouts per second) and return it as a float."""
+    try:
+        value = float(tick_rate)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        value = float("nan")
+    lo, hi = TICK_RATE_RANGE
+    if not (np.isfinite(value) and lo <= value <= hi):
+        raise ParameterError(f"tick_rate (--tick-rate) must be a number of readouts per second between {lo:g} and {hi:g}, got "
+                             f"{tick_rate!r}; the cameras run at 20000.")
+    return value
 
 #: format names, as used by ``--format`` and in sidecars
 FORMATS = ("plain", "raw400", "raw1m", "npz")
