@@ -199,8 +199,9 @@ def test_demosaic_auto_is_bilinear_for_frames_too_small_for_malvar():
 
 @pytest.mark.parametrize("cfa", [None, "RGGB"])
 def test_q_reason_says_what_the_count_counts_when_windows_are_pooled(cfa):
-    """With temporal_radius > 0 the count compared with Q_COUNT is the pooled one (Δτ_eff ticks): the
-    reason says so and gives the own window's count beside it; the decision is the same number's."""
+    """With temporal_radius > 0 the count compared with Q_COUNT is the pooled rate per 10-tick window
+    (a pooled value is the mean of its windows' values on Q's 1/Δτ grid): the reason says so and gives
+    the own window's count beside it; the decision is the same number's."""
     from spikeview.guided.plan import Q_COUNT
 
     src = ArraySource(spikes_from_rates(np.full((32, 32), 0.3), 120, seed=2), cfa=cfa)  # static: ~3 spikes per 10 ticks
@@ -210,7 +211,8 @@ def test_q_reason_says_what_the_count_counts_when_windows_are_pooled(cfa):
     reason = make_plan(pooled, GuidedConfig(diffusion="always")).reasons["quantise"]
     own = pooled.own.mean_count()
     assert own == pytest.approx(3.0, abs=0.5) and pooled.mean_count() > 2 * own
-    assert f"{pooled.mean_count():.2f} spikes per photosite pooled over the aligned windows" in reason
+    assert f"{pooled.window_count():.2f} spikes per photosite per 10-tick window, the rate pooled over the aligned windows" in reason
+    assert pooled.window_count() == pytest.approx(own, rel=0.2)
     assert f"{own:.2f} in its own 10-tick window" in reason and f">= {Q_COUNT:g}" in reason
     alone = Observation.from_source(src, 60, 10, alpha=alpha, eta=1.0)
     reason = make_plan(alone, GuidedConfig(diffusion="always")).reasons["quantise"]

@@ -106,10 +106,11 @@ def test_capture_too_short_and_radius_zero_say_why(cfa):
 
 @pytest.mark.parametrize("cfa", CFAS)
 def test_data_term_uses_the_effective_window(cfa):
-    """Noise weights from Δτ_eff per photosite; Q's step 1/Δτ_eff (hard-rounding limit)."""
+    """Noise weights from Δτ_eff per photosite; Q keeps the 1/Δτ grid of the windows whose mean a pooled value is."""
     import torch
 
     from spikeview.guided.sampler import GuidedSampler
+    from spikeview.ops.quantise import soft_quantise
 
     rng = np.random.default_rng(3)
     dtau = np.where(rng.random((16, 16)) < 0.5, 10.0, 30.0).astype(np.float32)
@@ -120,17 +121,36 @@ def test_data_term_uses_the_effective_window(cfa):
         m = dtau == n
         np.testing.assert_allclose(v[m], binomial_variance(y, int(n))[m], rtol=1e-5)
     assert obs.variance().shape == (16, 16)
+    assert float(obs.variance()[dtau == 30.0].mean()) < float(obs.variance()[dtau == 10.0].mean())
     plan = make_plan(obs, GuidedConfig(quantise=True))
     fm = GuidedSampler.forward_model(obs, plan, GuidedConfig(quantise=True, k=1000.0))
-    assert "per-photosite" in fm.quantise.extra_repr()
-    # a value 0.3 of a step above level m rounds to m on its own grid (k = 1000 is nearly hard rounding)
-    m = rng.integers(0, 8, (16, 16)).astype(np.float32)
-    x = torch.from_numpy((m + 0.3) / dtau)[None, None]
-    out = fm.quantise(x)[0, 0].numpy()
-    np.testing.assert_allclose(out * dtau, m, atol=2e-3)
-    assert fm.quantise(x).shape == x.shape and fm(torch.rand(1, 1 if cfa is None else 3, 16, 16)).shape == (1, 1, 16, 16)
+    # the mean of 1 + n windows' values n_k/Δτ, each modelled by Q: Q(x) on the 1/Δτ grid, pooled or not
+    x = torch.rand(1, 1, 16, 16)
+    np.testing.assert_allclose(fm.quantise(x).numpy(), soft_quantise(x, 10, 1000.0).numpy(), atol=1e-6)
+    assert fm(torch.rand(1, 1 if cfa is None else 3, 16, 16)).shape == (1, 1, 16, 16)
     with pytest.raises(Exception, match="dtau"):
         Observation(y, cfa, 10, dtau=np.full((16, 16), 5.0, dtype=np.float32))
+
+
+@pytest.mark.parametrize("cfa", CFAS)
+def test_q_is_decided_from_the_count_per_window_not_the_pooled_count(cfa):
+    """A dim static scene (~0.5 spikes per photosite per window) pools several over ±3 windows; Q is on
+    as for its single window (the pooled value is the mean of 10-tick windows' values), and the reason
+    gives the count per window; a bright one (~2 per window) has Q off, pooled or not."""
+    from spikeview.guided.plan import Q_COUNT
+
+    for rate, on in ((0.05, True), (0.2, False)):
+        src = ArraySource(_spikes(np.full((90, 32, 32), rate), seed=4), cfa=cfa)
+        pooled = Observation.from_source(src, 45, 10, radius=3)
+        alone = Observation.from_source(src, 45, 10)
+        assert pooled.mean_count() > 3 * pooled.window_count()  # most photosites pooled several windows
+        assert pooled.window_count() == pytest.approx(10 * rate, rel=0.2)
+        assert alone.window_count() == pytest.approx(alone.mean_count())
+        cfg = GuidedConfig(diffusion="always")
+        plan, single = make_plan(pooled, cfg), make_plan(alone, cfg)
+        assert plan.quantise is on and single.quantise is on
+        assert (pooled.mean_count() >= Q_COUNT) is True  # the pooled count alone would have turned Q off
+        assert f"{pooled.window_count():.2f} spikes per photosite per 10-tick window" in plan.reasons["quantise"]
 
 
 @pytest.mark.parametrize("cfa", CFAS)

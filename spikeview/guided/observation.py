@@ -191,6 +191,12 @@ class Observation:
         """Mean spikes per photosite over its (effective) window."""
         return float((self.y * self.effective_window).mean())
 
+    def window_count(self) -> float:
+        """Mean spikes per photosite per ``window``-tick window: the (pooled) rate × Δτ (equals
+        :meth:`mean_count` without pooling). The plan's Q rule reads it: a pooled value is the mean of
+        its windows' TFP values, each on the 1/Δτ grid that Q models."""
+        return float(self.y.mean()) * self.window
+
     def crop(self, y0: int, y1: int, x0: int, x1: int) -> "Observation":
         """The observation on the photosites ``[y0:y1, x0:x1]`` (``previous`` and ``own`` not kept)."""
         d = None if self.dtau is None else self.dtau[y0:y1, x0:x1]

@@ -18,7 +18,9 @@ diffusion     skipped when the data-derived noise σ of the corrected TFP estima
               target); then ``fallback`` is ``"tfp"`` when σ <= noise_target / 4, else
               the one-pass ``"baseline"``
 quantise (Q)  DPS: on; HQS: on at low rates (mean spikes per photosite per window below   ``quantise``
-              ``Q_COUNT`` = 1.1: small integer counts, where Q gains), off above
+              ``Q_COUNT`` = 1.1: small integer counts, where Q gains), off above; a
+              pooled observation counts per Δτ-tick window (its rate × Δτ: the pooled
+              value is the mean of its windows' TFP values, each on Q's 1/Δτ grid)
 demosaic      ``auto``: Malvar-2004 for an estimate the prior denoises (diffusion start,  ``demosaic``
               one-pass input) unless counts are sparse (< ``SPARSE_COUNT`` = 0.3 spikes per
               photosite per window: bilinear); the TFP fallback: bilinear where the noise
@@ -113,13 +115,17 @@ class Plan:
         return "\n".join(lines)
 
 
-def _count_words(obs: Observation, count: float) -> str:
-    """``count`` (:meth:`Observation.mean_count`) in words that say what it counts: the window's own
-    spikes, or, for a pooled observation, the spikes pooled from the aligned neighbouring windows
-    (over Δτ_eff ticks) with the own window's count beside them."""
+def _count_words(obs: Observation, count: float, per_window: bool = False) -> str:
+    """``count`` in words that say what it counts: the window's own spikes, or, for a pooled observation,
+    the spikes pooled from the aligned neighbouring windows (over Δτ_eff ticks, :meth:`Observation.mean_count`)
+    or, ``per_window``, the pooled rate per Δτ-tick window (:meth:`Observation.window_count`), with the
+    own window's count beside them."""
     if obs.dtau is None:
         return f"{count:.2f} spikes per photosite per window"
     own = f"; {obs.own.mean_count():.2f} in its own {obs.window}-tick window" if obs.own is not None else ""
+    if per_window:
+        return (f"{count:.2f} spikes per photosite per {obs.window}-tick window, the rate pooled over the aligned windows "
+                f"(Δτ_eff {float(np.mean(obs.effective_window)):.0f} ticks{own})")
     return (f"{count:.2f} spikes per photosite pooled over the aligned windows "
             f"(Δτ_eff {float(np.mean(obs.effective_window)):.0f} ticks{own})")
 
@@ -210,12 +216,13 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     elif p.guidance == "dps" or p.prior == "sd":
         quantise, r["quantise"] = True, "DPS guidance: the residual of the non-squared loss sees the TFP's 1/Δτ steps"
     else:
-        count = obs.mean_count()
+        # per Δτ-tick window: a pooled value is the mean of its windows' TFP values, each on the 1/Δτ grid
+        count = obs.window_count()
         if count < Q_COUNT:
-            quantise, r["quantise"] = True, (f"low rate ({_count_words(obs, count)} < {Q_COUNT:g}): the counts "
+            quantise, r["quantise"] = True, (f"low rate ({_count_words(obs, count, True)} < {Q_COUNT:g}): the counts "
                                              f"are small integers and Q models their 1/Δτ steps")
         else:
-            quantise, r["quantise"] = False, (f"rate {_count_words(obs, count)} >= {Q_COUNT:g}: Q's slope, "
+            quantise, r["quantise"] = False, (f"rate {_count_words(obs, count, True)} >= {Q_COUNT:g}: Q's slope, "
                                               "between 0 and k/2Δτ, costs PSNR in the HQS data step here; --quantise turns it on")
 
     # --- levels

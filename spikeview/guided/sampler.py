@@ -166,10 +166,8 @@ class GuidedSampler:
         fm = ForwardModel(obs.cfa if plan.mosaic else None, obs.window, alpha=alpha,
                           eta=obs.eta if alpha is not None else 1.0, k=params.k if plan.quantise else None,
                           dense_grad=params.dense_gradient, cast=alpha is not None, bands=plan.levels + 1, norm="l2")
-        if fm.quantise is not None and obs.dtau is not None:  # pooled windows: Q's step is 1/Δτ_eff per photosite
-            from spikeview.guided.temporal import pooled_quantise
-
-            fm.quantise = pooled_quantise(torch.from_numpy(obs.dtau)[None, None], params.k)
+        # a pooled observation keeps Q's 1/Δτ grid: its value is the mean of its aligned windows' TFP values,
+        # each modelled by Q (spikeview.guided.temporal); Δτ_eff enters the noise weights (obs.variance)
         return fm
 
     @classmethod
