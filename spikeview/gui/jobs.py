@@ -101,6 +101,8 @@ class DegradationView:
     #: what the observation pooled (:class:`spikeview.guided.temporal.Pooling`: Δτ_eff per photosite, the
     #: plan's temporal reason): the guided panel's pooling map
     pooling: Any = None
+    #: the pooling map's uint8 image, made here in the worker (:func:`pooling_display`), or None
+    pooling_image: np.ndarray | None = None
 
 
 def window_observation(source: Any, tick: int, cfg: Any, alpha: np.ndarray | None,
@@ -152,7 +154,15 @@ def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
     with torch.no_grad():
         st = data.stages(to_tensor(np.clip(x / scale, 0.0, 1.0)))
     res = core.stage_images(x, st, req.params, bool(req.params.get("show_pyramid")), scene_scale=float(scale))
-    return DegradationView(res, label, req.tick, obs.shape, str(plan), knob_status(cfg, plan), plan.quantise, plan.pooling)
+    return DegradationView(res, label, req.tick, obs.shape, str(plan), knob_status(cfg, plan), plan.quantise, plan.pooling,
+                           pooling_display(plan.pooling))
+
+
+def pooling_display(pool: Any) -> np.ndarray | None:
+    """The guided panel's pooling-map image of ``pool`` (uint8), made in the worker, not on the GUI thread."""
+    from spikeview.gui.panels.pooling import pooling_display as image
+
+    return image(pool)
 
 
 # ---------------------------------------------------------------------------------- guided
@@ -182,6 +192,7 @@ class GuidedUpdate:
     text: str = ""
     knobs: dict[str, str | None] = field(default_factory=dict)
     pooling: Any = None  # "plan": the observation's Pooling (the guided panel's pooling map)
+    pooling_image: np.ndarray | None = None  # "plan": its map image (uint8, made in the worker)
 
 
 @dataclass
@@ -215,7 +226,7 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     plan = make_plan(obs, cfg)
     origin = crop_roi(np.zeros((req.source.height, req.source.width), np.uint8), req.roi)[1][::-1] if req.roi else (0, 0)
     ctx.report(GuidedUpdate("plan", req.run, total=cfg.steps * cfg.chains, text=str(plan), knobs=knob_status(cfg, plan),
-                              pooling=plan.pooling))
+                              pooling=plan.pooling, pooling_image=pooling_display(plan.pooling)))
     gt = None
     g = req.ground_truth(req.tick) if req.ground_truth is not None else None  # None: no frame stored near this tick
     if g is not None:

@@ -169,6 +169,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self.export_panel.set_folder(self.settings.value("last_export_dir", "", str) or None)
         self._params_timer = QtCore.QTimer(self, singleShot=True, interval=500)
         self._params_timer.timeout.connect(self._save_params)
+        # everything loaded so far (torch, numba, pyqtgraph, the widgets) out of the collector's reach now,
+        # before the window shows: the first collection after opening a file otherwise walked all of it on
+        # the GUI thread (a 270 ms freeze at the first 1000×1000 open; issue 15)
+        Controller.settle_heap()
 
     # ------------------------------------------------------------------------------ layout
     def add_panel(self, key: str, title: str, widget: QtWidgets.QWidget, *, beside: str | None = None) -> QtWidgets.QDockWidget:
@@ -316,7 +320,8 @@ class MainWindow(QtWidgets.QMainWindow):
         c.alpha_ready.connect(self.rates_panel.show_sequence_alpha)
         c.degradation_ready.connect(self.degradation_panel.show_result)
         c.degradation_ready.connect(lambda view: self.guided_panel.show_knobs(view.knobs))
-        c.degradation_ready.connect(lambda view: self.guided_panel.show_pooling(view.pooling, view.knobs, view.tick))
+        c.degradation_ready.connect(lambda view: self.guided_panel.show_pooling(view.pooling, view.knobs, view.tick,
+                                                                               getattr(view, "pooling_image", None)))
         self.guided_panel.pooling_toggled.connect(lambda v: c.set_enabled("pooling", v) if not self._closing else None)
         c.guided_update.connect(self.guided_panel.show_update)
         c.guided_done.connect(self.guided_panel.show_result)

@@ -496,10 +496,19 @@ class Session:
         """The session's reconstruction settings as a :class:`~spikeview.recipe.Recipe`
         (``[run]`` and ``[stream]`` as last loaded; :func:`spikeview.gui.presets.session_recipe`
         fills them from the open stream and the current tick)."""
+        # Built once per set of values: building checks every field (≈15 ms), and the window asks for it
+        # several times per change on the GUI thread (previews, export panel, guided run; issue 15: 130 ms
+        # on opening a file). A Recipe is treated as immutable (changes make copies: ``with_values``).
+        key = tuple(repr(self.params[k]) for k in BY_KEY)
+        cached = getattr(self, "_recipe_cache", None)
+        if cached is not None and cached[0] is self.base_recipe and cached[1] == key:
+            return cached[2]
         values = {p.path: to_recipe_value(k, self.params[k]) for k, p in BY_KEY.items()}
         # the two level sliders move independently: white stays just above black (as the display does)
         values["export.white"] = max(float(values["export.white"]), float(values["export.black"]) + 1e-3)
-        return self.base_recipe.with_values(values, names={p.path: p.label for p in BY_KEY.values()})
+        recipe = self.base_recipe.with_values(values, names={p.path: p.label for p in BY_KEY.values()})
+        self._recipe_cache = (self.base_recipe, key, recipe)
+        return recipe
 
     def load_recipe(self, recipe: Recipe, label: str = "Load preset") -> None:
         """Show ``recipe`` in the controls (one undo step) and keep its other fields."""

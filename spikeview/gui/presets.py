@@ -40,7 +40,16 @@ def session_recipe(session: Session) -> Recipe:
         if info.format in ("plain", "raw400", "raw1m", "npz"):
             stream = StreamTable.from_info(info, recipe.stream.layout)
             values.update({f"stream.{k}": v for k, v in stream.to_dict().items()})
-    return recipe.with_values(values) if values else recipe
+    if not values:
+        return recipe
+    # cached per (recipe, values): the export panel asks on every change, on the GUI thread (≈20 ms a build)
+    key = repr(sorted(values.items()))
+    cached = getattr(session, "_session_recipe_cache", None)
+    if cached is not None and cached[0] is recipe and cached[1] == key:
+        return cached[2]
+    full = recipe.with_values(values)
+    session._session_recipe_cache = (recipe, key, full)
+    return full
 
 
 def save_preset(session: Session, path: str | os.PathLike[str]) -> Path:

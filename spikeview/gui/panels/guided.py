@@ -177,11 +177,12 @@ class GuidedPanel(QtWidgets.QWidget):
             control.setEnabled(why is None)
             control.setToolTip(SPECS[path.split(".")[1]].help if why is None else f"No effect on this window: {why}.")
 
-    def show_pooling(self, pool: Any, knobs: dict[str, str | None] | None = None, tick: int | None = None) -> None:
+    def show_pooling(self, pool: Any, knobs: dict[str, str | None] | None = None, tick: int | None = None,
+                     image: np.ndarray | None = None) -> None:
         """Show the window's :class:`~spikeview.guided.temporal.Pooling` (the library's, from the observation
         the sampler uses) in the pooling map; without one (``temporal_radius = 0``, a capture too short)
-        the "Map" button is disabled with the reason as its tooltip."""
-        self.pooling_map.show_pooling(pool, knobs, tick)
+        the "Map" button is disabled with the reason as its tooltip. ``image``: the map's image, made by the worker."""
+        self.pooling_map.show_pooling(pool, knobs, tick, image)
         why = None if pool is None else self.pooling_map.why_not  # no plan yet: the button asks for one
         self.pool_btn.setEnabled(why is None)
         if pool is None:
@@ -247,7 +248,7 @@ class GuidedPanel(QtWidgets.QWidget):
             self.plan.setPlainText(u.text)
             self.show_knobs(u.knobs)
             if getattr(u, "pooling", None) is not None:
-                self.show_pooling(u.pooling, u.knobs)
+                self.show_pooling(u.pooling, u.knobs, image=getattr(u, "pooling_image", None))
             self.progress.setRange(0, max(u.total, 1))
             self.progress.setValue(0)
             return

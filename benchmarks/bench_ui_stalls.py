@@ -1,0 +1,472 @@
+"""Desktop app at full resolution: main-thread stalls of a real Qt event loop (issue 15, item 3).
+
+What it measures: the real :class:`spikeview.gui.main_window.MainWindow` (``QT_QPA_PLATFORM=offscreen``,
+1600×1000, every panel visible) on simulated 1000×1000 captures, **monochrome and RGGB**, while
+
+* **open** — ``open_path`` of the file until every preview (stream, TFI, rates, degradation, α) is shown
+  and the workers are idle;
+* **playback** — "every window" playback (Δτ = 10 ticks, TFI pane on, rates throttled);
+* **MP4 export** — a marked range exported as TFP frames to MP4, as the Export panel starts it;
+* **guided run** — a full-frame guided run (defaults, ``steps`` set by ``--guided-steps``), a preview
+  reported after every step.
+
+A 5 ms precise ``QTimer`` records the time of each of its ticks; an interval between two ticks is how
+long the event loop did not run (a stall of the window) plus the 5 ms period. Reported per scenario:
+the largest interval, the 99th percentile and the median (ms). **Baseline, same process**: the same
+timer with the window open and nothing running ("idle"), which shows what the machine's load alone
+does to the timer (the machine is shared).
+
+``--diagnose``: a watchdog thread samples the GUI thread's Python stack whenever the timer is more
+than ``--late`` ms late and counts where it was (``sys._current_frames``); the top places are printed
+and written to the JSON. A GUI thread "waiting in the event loop" during a stall was not running
+Python code: it was off the CPU (load) or in Qt's C++ (painting).
+
+Before/after: the script runs every tree given by ``--tree LABEL=DIR`` (``DIR`` on ``PYTHONPATH``, e.g. a
+``git archive`` of the starting commit) and the working tree (``after``) in child processes, alternating
+``--rounds`` times, and writes ``benchmarks/results/ui_stalls.{md,json}``.
+
+Usage::
+
+    git archive HEAD | tar -x -C /tmp/before
+    python benchmarks/bench_ui_stalls.py --tree before=/tmp/before
+    python benchmarks/bench_ui_stalls.py --quick --diagnose --out /tmp/s.md   # this tree only, short
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import traceback
+from collections import Counter
+from pathlib import Path
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+from _common import cpu_model, write_report  # noqa: E402
+
+SCENARIOS = ("idle", "open_first", "open", "playback", "export", "guided")
+TIMER_MS = 5
+
+
+# ------------------------------------------------------------------------------------ data
+def synthetic_capture(folder: Path, size: int, ticks: int, cfa: str | None, seed: int = 0) -> Path:
+    """A moving scene as a plain ``.dat`` with sidecar (integrate-and-fire; RGGB or monochrome)."""
+    from spikeview.cfa import channel_map
+    from spikeview.io import write_plain
+
+    name = f"ui_{size}_{cfa or 'mono'}_{ticks}.dat"
+    path = folder / name
+    if path.exists() and Path(str(path) + ".toml").exists():
+        return path
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:size, 0:size].astype(np.float32) / size
+    if cfa is not None:
+        cmap = channel_map(cfa, size, size)
+        gains = np.array([0.45, 0.8, 0.35], np.float32)[cmap]
+    else:
+        cmap, gains = None, np.float32(0.7)
+    v = rng.random((size, size), dtype=np.float32)
+    spikes = np.empty((ticks, size, size), np.uint8)
+    for t in range(ticks):
+        shift = 0.2 * t / size
+        r = 0.5 + 0.45 * np.sin(2 * np.pi * (3 * (xx + shift) + yy))
+        if cmap is None:
+            scene = r
+        else:
+            g = 0.5 + 0.45 * np.sin(2 * np.pi * (2 * (yy - shift) + 0.3))
+            b = 0.5 + 0.45 * np.cos(2 * np.pi * (4 * (xx + yy) + shift))
+            scene = np.where(cmap == 0, r, np.where(cmap == 1, g, b))
+        v += scene * gains
+        fire = v >= 1.0
+        v -= fire
+        spikes[t] = fire
+    write_plain(path, spikes, flip_vertical=True, cfa=cfa)
+    return path
+
+
+def load() -> list[float]:
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        return []
+
+
+# ------------------------------------------------------------------------------------ measurement
+class Sampler(threading.Thread):
+    """Samples the GUI thread's Python stack while the stall timer is late (``--diagnose``)."""
+
+    def __init__(self, gui_ident: int, late_ms: float):
+        super().__init__(daemon=True)
+        self.gui, self.late = gui_ident, late_ms / 1000
+        self.last = time.perf_counter()
+        self.counts: Counter[str] = Counter()
+        self.samples: list[tuple[float, str]] = []
+        self.stop_flag = threading.Event()
+
+    def run(self) -> None:
+        names = {}
+        while not self.stop_flag.wait(0.003):
+            if time.perf_counter() - self.last < self.late:
+                continue
+            frames = sys._current_frames()
+            frame = frames.get(self.gui)
+            if frame is None:
+                continue
+            key = self._where(frame, gui=True)
+            self.counts[key] += 1
+            now = time.perf_counter()
+            self.samples.append((now, key))
+            if len(names) != threading.active_count():
+                names = {t.ident: t.name for t in threading.enumerate()}
+            for ident, f in frames.items():  # where the other threads are (a worker holding the lock in C code)
+                if ident not in (self.gui, threading.get_ident()):
+                    w = self._where(f, gui=False)
+                    if w:
+                        self.samples.append((now, f"    [{names.get(ident, ident)}] {w}"))
+
+    @staticmethod
+    def _where(frame, gui: bool) -> str:
+        stack = traceback.extract_stack(frame)
+        own = [f for f in stack if any(s in f.filename for s in ("spikeview", "pyqtgraph", "numpy", "torch", "/av/", "numba"))
+               and "bench_ui_stalls" not in f.filename]
+        if not own:
+            return "waiting in the event loop (no Python running)" if gui else ""
+        parts = [own[0]] + own[-2:] if len(own) > 3 else own  # the slot (outermost of ours) and the innermost two
+        return " > ".join(f"{Path(f.filename).name}:{f.name}:{f.lineno}" for f in parts)
+
+
+def measure(app, start, done, timeout: float, sampler: Sampler | None = None) -> dict:
+    """Intervals between ticks of a precise ``TIMER_MS`` QTimer while ``start()``'s work runs until ``done()``."""
+    from PySide6 import QtCore
+
+    stamps: list[float] = []
+    cpu: list[float] = []  # the GUI thread's own CPU time at each tick (time.thread_time)
+    loop = QtCore.QEventLoop()
+    t_end = time.perf_counter() + timeout
+
+    def tick() -> None:
+        now = time.perf_counter()
+        stamps.append(now)
+        cpu.append(time.thread_time())
+        if sampler is not None:
+            sampler.last = now
+        if done() or now > t_end:
+            loop.quit()
+
+    timer = QtCore.QTimer()
+    timer.setTimerType(QtCore.Qt.TimerType.PreciseTimer)
+    timer.setInterval(TIMER_MS)
+    timer.timeout.connect(tick)
+    if sampler is not None:
+        sampler.counts.clear()
+        sampler.samples.clear()
+        sampler.last = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
+    timer.start()
+    start()
+    loop.exec()
+    timer.stop()
+    gaps = np.diff(np.array([t0] + stamps)) * 1000
+    busy = np.diff(np.array([c0] + cpu)) * 1000
+    out = {"max": float(gaps.max()), "p99": float(np.percentile(gaps, 99)), "median": float(np.median(gaps)),
+           "cpu_max": float(busy.max()), "cpu_p99": float(np.percentile(busy, 99)), "cpu_total": float(busy.sum()),
+           "n": int(gaps.size), "over50": int((gaps > 50).sum()), "seconds": float(stamps[-1] - t0),
+           "timed_out": bool(stamps[-1] > t_end)}
+    if sampler is not None:
+        out["where"] = sampler.counts.most_common(12)
+        # the places seen during the three longest stalls
+        ends = np.array(stamps)
+        worst = np.argsort(gaps)[::-1][:3]
+        out["worst"] = []
+        for i in worst:
+            hi = ends[i]
+            lo = hi - gaps[i] / 1000
+            seen = Counter(k for ts, k in sampler.samples if lo <= ts <= hi)
+            out["worst"].append([float(gaps[i]), seen.most_common(8)])
+    return out
+
+
+def wait(app, cond, timeout: float = 300.0) -> None:
+    end = time.perf_counter() + timeout
+    while not cond():
+        if time.perf_counter() > end:
+            raise TimeoutError("benchmark step timed out")
+        app.processEvents()
+        time.sleep(0.002)
+
+
+def spin(app, seconds: float) -> None:
+    wait(app, lambda e=time.perf_counter() + seconds: time.perf_counter() > e)
+
+
+def idle_workers(w) -> bool:
+    c = w.controller
+    return not any(x.is_active() for x in (c.preview, c.tfi, c.guided, c.exporter, w.loader))
+
+
+# ------------------------------------------------------------------------------------ one tree
+def child(args) -> int:
+    from PySide6 import QtCore
+
+    from spikeview.gui.app import make_application
+    from spikeview.gui.main_window import MainWindow
+
+    app = make_application()
+    data = Path(args.data)
+    sampler = None
+    if args.diagnose:
+        sampler = Sampler(threading.get_ident(), args.late)
+        sampler.start()
+    res: dict = {"load_start": load(), "scenarios": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        st = QtCore.QSettings(str(tmp / "settings.ini"), QtCore.QSettings.Format.IniFormat)
+        st.clear()
+        w = MainWindow(settings=st)
+        w.ask_overwrite = lambda out, existing: True
+        w.resize(1600, 1000)
+        w.show()
+        spin(app, 1.0)
+        s, c = w.session, w.controller
+        for cfa in args.cfas:
+            label = cfa or "mono"
+            path = synthetic_capture(data, args.size, args.ticks, None if cfa == "none" else cfa)
+            out = res["scenarios"].setdefault(label, {})
+
+            def opened(p=path):
+                return (s.stream is not None and s.stream.path == p and c.last_frames is not None
+                        and w.degradation_panel.last is not None and idle_workers(w))
+
+            # the first open of the process (cold for the first capture: numba kernels load, first paints), then
+            # the same file again ("open")
+            first: dict = {"old": s.stream}
+            out["open_first"] = measure(app, lambda: (first.__setitem__("t", time.perf_counter()), w.open_path(path)),
+                                        lambda: time.perf_counter() - first["t"] > 0.3 and opened()
+                                        and s.stream is not first.get("old"), 300, sampler)
+            spin(app, 0.5)
+            print(f"[{label}] idle…", flush=True)
+            out["idle"] = measure(app, lambda: None, lambda: False, args.idle_seconds, sampler)
+            if "open" in args.scenarios:
+                print(f"[{label}] open…", flush=True)
+                holder: dict = {"old": s.stream}
+                out["open"] = measure(app, lambda: (holder.__setitem__("t", time.perf_counter()), w.open_path(path)),
+                                      lambda: time.perf_counter() - holder["t"] > 0.3 and opened()
+                                      and s.stream is not holder.get("old"), 120, sampler)
+                spin(app, 0.5)
+            if "playback" in args.scenarios:
+                print(f"[{label}] playback…", flush=True)
+                w.stream_panel.tfi_check.setChecked(True)
+                s.update_params({"speed": "window", "window": 10, "loop": True}, record=False)
+                s.set_playing(True)
+                spin(app, 1.0)  # warm-up
+                t_play = time.perf_counter()
+                out["playback"] = measure(app, lambda: None, lambda: time.perf_counter() - t_play > args.play_seconds,
+                                          args.play_seconds + 10, sampler)
+                out["playback"]["frames_shown_per_s"] = float(c.display_fps())
+                s.set_playing(False)
+                wait(app, lambda: idle_workers(w))
+                spin(app, 0.5)
+            if "export" in args.scenarios:
+                print(f"[{label}] MP4 export…", flush=True)
+                n = min(s.n_frames - 20, args.export_ticks)
+                s.set_tick(10)
+                s.set_mark_in()
+                s.set_tick(10 + n)
+                s.set_mark_out()
+                s.update_params({"export_format": "mp4", "export_range": "marked", "export_method": "tfp"}, record=False)
+                target = tmp / f"stall_{label}.mp4"
+                flag: dict = {}
+                conn = c.export_state.connect(lambda state, msg: flag.__setitem__("state", state) if state != "running" else None)
+                out["export"] = measure(app, lambda: w.export_to(str(target)), lambda: "state" in flag, 600, sampler)
+                out["export"]["frames"] = len(w.export_panel.ticks())
+                out["export"]["state"] = flag.get("state")
+                c.export_state.disconnect(conn)
+                s.clear_marks()
+                wait(app, lambda: idle_workers(w))
+                spin(app, 0.5)
+            if "guided" in args.scenarios:
+                print(f"[{label}] guided run…", flush=True)
+                s.set_tick(s.n_frames // 2)
+                wait(app, lambda: idle_workers(w))
+                s.update_params({"steps": 2}, record=False)  # warm-up: torch, the prior, once per worker
+                run = c.run_guided()
+                wait(app, lambda: c.guided_result is not None and c.guided_result.run == run, 900)
+                wait(app, lambda: idle_workers(w))
+                spin(app, 0.5)
+                s.update_params({"steps": args.guided_steps}, record=False)
+                steps: list[float] = []
+                conn = c.guided_update.connect(lambda u: steps.append(time.perf_counter()) if u.kind == "step" else None)
+                gstate: dict = {}
+                out["guided"] = measure(app, lambda: gstate.__setitem__("run", c.run_guided()),
+                                        lambda: c.guided_result is not None and c.guided_result.run == gstate.get("run")
+                                        and idle_workers(w), 900, sampler)
+                c.guided_update.disconnect(conn)
+                out["guided"]["previews"] = len(steps)
+                out["guided"]["run_s"] = float(c.guided_result.elapsed)
+                wait(app, lambda: idle_workers(w))
+            for k, r in out.items():
+                print(f"  {label:5s} {k:10s} max {r['max']:6.1f} ms  p99 {r['p99']:5.1f}  median {r['median']:4.1f}  "
+                      f"n {r['n']}  >50ms {r['over50']}  | GUI CPU per interval max {r['cpu_max']:5.1f} p99 {r['cpu_p99']:4.1f}"
+                      f" total {r['cpu_total'] / 1000:.2f} s of {r['seconds']:.1f}", flush=True)
+                for gap, seen in r.get("worst", []):
+                    if gap > args.late:
+                        print(f"      stall {gap:.0f} ms:\n" + "\n".join(f"        {n}× {k}" for k, n in seen), flush=True)
+        w.close()
+        app.processEvents()
+    if sampler is not None:
+        sampler.stop_flag.set()
+    res["load_end"] = load()
+    import spikeview
+
+    res["spikeview"] = str(Path(spikeview.__file__).resolve().parent)
+    Path(args.json).write_text(json.dumps(res, indent=1), encoding="utf-8")
+    return 0
+
+
+# ------------------------------------------------------------------------------------ driver
+def machine() -> str:
+    import pyqtgraph
+    import PySide6
+
+    flags = ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("flags"):
+                have = set(line.split(":", 1)[1].split())
+                flags = " ".join(f for f in ("avx2", "avx512f", "avx512_bf16", "amx_bf16") if f in have)
+                break
+    except OSError:
+        pass
+    return (f"{cpu_model(platform.processor() or 'unknown CPU')} ({flags}), {os.cpu_count()} logical CPUs; "
+            f"{platform.system()} {platform.release()}; Python {platform.python_version()}, PySide6 {PySide6.__version__}, "
+            f"pyqtgraph {pyqtgraph.__version__}; Qt platform {os.environ.get('QT_QPA_PLATFORM')}")
+
+
+NAMES = {"idle": "idle window (baseline)", "open_first": "opening the file (first in the process: mono cold, RGGB after mono)",
+         "open": "opening the file again", "playback": "playback (every window, TFI on)",
+         "export": "MP4 export (TFP)", "guided": "guided run (full frame)"}
+
+
+def report(runs: list[dict], args) -> list[str]:
+    labels = list(dict.fromkeys(r["tree"] for r in runs))
+    cfas = list(dict.fromkeys(c for r in runs for c in r["scenarios"]))
+    lines = [
+        "# Desktop app at 1000×1000: main-thread stalls (target: no stall over 50 ms)", "",
+        f"Produced by `python benchmarks/bench_ui_stalls.py {' '.join(args.argv)}`".rstrip() + " "
+        f"({args.size}×{args.size} simulated captures, {args.ticks} ticks, mono and RGGB; playback {args.play_seconds:g} s; "
+        f"MP4 export of {args.export_ticks} ticks; guided runs of {args.guided_steps} steps).", "",
+        f"Machine: {machine()}. The machine is shared with other sessions: load averages (1/5/15 min) are given per run.", "",
+        f"Method: a {TIMER_MS} ms precise QTimer in the app's real Qt event loop (window 1600×1000, offscreen); each "
+        "interval between two of its ticks is recorded while the work runs. A frozen GUI thread shows as one long "
+        f"interval; {TIMER_MS} ms is a perfect score. \"idle\" is the same measurement in the same process with the window "
+        "open and nothing running: what the machine's load does to the timer by itself. Trees alternate "
+        f"({args.rounds} round(s)); each cell is max / p99 (ms) of one run.", "",
+    ]
+    for tree in labels:
+        rs = [r for r in runs if r["tree"] == tree]
+        lines.append(f"**{tree}** (`{rs[0].get('rev', '')}`): " + "; ".join(
+            f"run {i + 1} load {r['load_start'][0] if r['load_start'] else '?'} → {r['load_end'][0] if r['load_end'] else '?'}"
+            for i, r in enumerate(rs)))
+        lines.append("")
+    lines.append("| capture | during | " + " | ".join(f"{t}: max / p99 (ms)" for t in labels) + " | > 50 ms (" + labels[-1] + ") |")
+    lines.append("|---|---|" + "---|" * len(labels) + "---|")
+    for cfa in cfas:
+        for sc in SCENARIOS:
+            cells = []
+            last = []
+            for tree in labels:
+                vals = [r["scenarios"][cfa][sc] for r in runs if r["tree"] == tree and sc in r["scenarios"].get(cfa, {})]
+                cells.append(", ".join(f"{v['max']:.0f} / {v['p99']:.0f}" for v in vals) or "—")
+                if tree == labels[-1]:
+                    last = vals
+            verdict = "—" if sc == "idle" else ("met" if last and all(v["max"] <= 50 for v in last) else "NOT met")
+            lines.append(f"| {cfa} | {NAMES[sc]} | " + " | ".join(cells) + f" | {verdict} |")
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--size", type=int, default=1000)
+    ap.add_argument("--ticks", type=int, default=400)
+    ap.add_argument("--cfas", nargs="+", default=["none", "RGGB"], help="none = monochrome")
+    ap.add_argument("--scenarios", nargs="+", default=list(SCENARIOS[2:]), choices=SCENARIOS[2:])
+    ap.add_argument("--idle-seconds", type=float, default=4.0)
+    ap.add_argument("--play-seconds", type=float, default=8.0)
+    ap.add_argument("--export-ticks", type=int, default=200, help="ticks of the marked range exported (Δτ-spaced frames)")
+    ap.add_argument("--guided-steps", type=int, default=6)
+    ap.add_argument("--tree", action="append", default=[], help="LABEL=DIR: another tree to run first (on PYTHONPATH)")
+    ap.add_argument("--rounds", type=int, default=1)
+    ap.add_argument("--diagnose", action="store_true", help="sample the GUI thread's stack during stalls")
+    ap.add_argument("--late", type=float, default=30.0, help="--diagnose: sample when the timer is this many ms late")
+    ap.add_argument("--quick", action="store_true", help="short: 3 s playback, 60-tick export, 2 guided steps")
+    ap.add_argument("--data", default=None, help="folder for the simulated captures (kept between runs)")
+    ap.add_argument("--out", type=Path, default=HERE / "results" / "ui_stalls.md")
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--json", default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    args.argv = [a for a in (argv if argv is not None else sys.argv[1:]) if not a.startswith("--json")]
+    if args.quick:
+        args.play_seconds, args.export_ticks, args.guided_steps, args.idle_seconds = 3.0, 60, 2, 2.0
+    if args.data is None:
+        args.data = str(Path(tempfile.gettempdir()) / "spikeview_ui_stalls")
+    Path(args.data).mkdir(parents=True, exist_ok=True)
+    args.cfas = [None if c == "none" else c for c in args.cfas]
+    if args.child:
+        args.cfas = ["none" if c is None else c for c in args.cfas]
+        return child(args)
+
+    trees = [tuple(t.split("=", 1)) for t in args.tree] + [("after", str(ROOT))]
+    runs: list[dict] = []
+    child_args = [a for a in (argv if argv is not None else sys.argv[1:])]
+    # drop --tree/--out/--rounds (the driver's) before handing the rest to the children
+    keep: list[str] = []
+    skip = False
+    for a in child_args:
+        if skip:
+            skip = False
+            continue
+        if a in ("--tree", "--out", "--rounds"):
+            skip = True
+            continue
+        if a.startswith(("--tree=", "--out=", "--rounds=")):
+            continue
+        keep.append(a)
+    for rnd in range(args.rounds):
+        for label, folder in trees:
+            with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
+                jpath = f.name
+            env = dict(os.environ, PYTHONPATH=folder + os.pathsep + os.environ.get("PYTHONPATH", ""))
+            print(f"== {label} ({folder}), round {rnd + 1}", flush=True)
+            rc = subprocess.call([sys.executable, str(Path(__file__).resolve()), "--child", "--json", jpath,
+                                  "--data", args.data, *keep], env=env, cwd=folder)
+            if rc != 0:
+                print(f"{label}: child failed (exit {rc})", file=sys.stderr)
+                continue
+            r = json.loads(Path(jpath).read_text())
+            os.unlink(jpath)
+            r["tree"] = label
+            rev = Path(folder) / "REV"
+            r["rev"] = rev.read_text().strip() if rev.exists() else subprocess.run(
+                ["git", "-C", folder, "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+            runs.append(r)
+    lines = report(runs, args)
+    print("\n".join(lines))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.with_suffix(".json").write_text(json.dumps(runs, indent=1), encoding="utf-8")
+    return write_report(args.out, lines)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
