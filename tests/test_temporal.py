@@ -236,6 +236,24 @@ def test_temporal_error_measures_flicker():
     assert 4.0 < temporal_error(flick, g) < 5.5
     rgb = [np.full((8, 8, 3), 0.5, dtype=np.float32)] * 3
     assert temporal_error(rgb, rgb) == pytest.approx(0.0, abs=1e-9)
+    # one gain per channel for the whole sequence: a colour cast of the output costs nothing, a gain
+    # per frame or per column would hide a flicker (gray) and one gain for all channels would not fit
+    rng = np.random.default_rng(0)
+    moving = [rng.random((8, 8, 3)).astype(np.float32) for _ in range(4)]
+    cast = [m * np.array([0.5, 1.0, 2.0], np.float32) for m in moving]
+    assert temporal_error(cast, moving) == pytest.approx(0.0, abs=1e-6)
+    gray = [m[..., 1] for m in moving]
+    ramp = [m * np.linspace(0.5, 1.5, 8, dtype=np.float32)[None, :] for m in gray]  # not one gain: it counts
+    assert temporal_error(ramp, gray) > 10.0
+    # moved=(dy, dx): errors carried along with the content; a fixed error pattern moved by one pixel
+    # gives the RMS of its own difference, not 0
+    err = rng.random((8, 8)).astype(np.float32) * 0.1
+    still = [np.full((8, 8), 0.5, np.float32)] * 3
+    stuck = [g + err for g in still]
+    assert temporal_error(stuck, still) == pytest.approx(0.0, abs=1e-3)
+    carried = [g + np.roll(err, (i, 2 * i), axis=(0, 1)) for i, g in enumerate(still)]
+    assert temporal_error(carried, still, moved=(1, 2)) == pytest.approx(0.0, abs=0.3)
+    assert temporal_error(stuck, still, moved=(1, 2)) > 5.0
 
 
 @pytest.mark.parametrize("cfa", CFAS)
