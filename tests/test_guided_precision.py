@@ -87,6 +87,51 @@ def test_bfloat16_keeps_first_and_last_layer_float32(net):
         net(x, 0.1, "float16")
 
 
+def test_fused_packed_layers_give_the_unfused_numbers(net, monkeypatch):
+    """oneDNN's fused conv + ReLU on pre-packed weights: the float32 sums of F.conv2d + ReLU, in strips too."""
+    if not ffdnet.fused_ok():
+        pytest.skip("this torch has no oneDNN fused convolution (torch.ops.mkldnn._convolution_pointwise)")
+    x = _image(net, 90, 38, seed=4)
+    with torch.no_grad():
+        monkeypatch.setattr(ffdnet, "STRIP_ROWS", 12)  # 45 half-resolution rows: 4 strips
+        fused = net(x, 0.07)
+        fused_bf = net(x, 0.07, "bfloat16-all")
+        monkeypatch.setattr(ffdnet, "fused_ok", lambda: False)
+        plain = net(x, 0.07)
+        plain_bf = net(x, 0.07, "bfloat16-all")
+    assert net._layers(torch.float32, "float32", torch.channels_last, True)[1][0].is_mkldnn
+    assert (fused - plain).abs().max() < 1e-6 and (fused - reference(net, x, 0.07)).abs().max() < 1e-5
+    # bfloat16: the same function up to bf16 rounding (the fused path keeps the corrected bias in float32)
+    assert 0 < float((fused_bf - plain_bf).abs().max()) < 0.05
+
+
+@pytest.mark.parametrize("layers", ["bfloat16", "bfloat16-all"])
+def test_bias_correction_removes_the_mean_error_of_bf16_weights(net, monkeypatch, layers):
+    """Rounding the weights to bfloat16 shifts every output channel by ΔW·E[x]; the float32 bias absorbs it."""
+    g = torch.Generator().manual_seed(6)
+    smooth = F.interpolate(torch.rand(1, net.channels, 8, 8, generator=g), size=(96, 96), mode="bicubic", align_corners=False)
+    x = smooth.clamp(0, 1) + 0.05 * torch.randn(smooth.shape, generator=g)
+    with torch.no_grad():
+        ref = net(x, 0.05)
+        corrected = net(x, 0.05, layers) - ref
+        zero = [torch.zeros_like(m) for m in net._input_means()]
+        monkeypatch.setattr(net, "_input_means", lambda: zero)
+        net.__dict__.pop("_layer_cache", None)
+        plain = net(x, 0.05, layers) - ref
+    net.__dict__.pop("_layer_cache", None)
+    # the systematic part (mean over the image per channel) shrinks, and so does the total error
+    assert corrected.mean(dim=(2, 3)).abs().max() < 0.5 * plain.mean(dim=(2, 3)).abs().max()
+    assert corrected.square().mean() < plain.square().mean()
+
+
+def test_an_isa_cap_below_bf16_means_no_native_bf16():
+    """ONEDNN_MAX_CPU_ISA=AVX2 (how this machine plays an AVX2-only CPU) turns auto's bf16 off."""
+    assert prec.max_isa({}) == "ALL" and prec.max_isa({"ONEDNN_MAX_CPU_ISA": "avx2"}) == "AVX2"
+    assert prec.max_isa({"DNNL_MAX_CPU_ISA": "AVX512_CORE"}) == "AVX512_CORE"
+    assert not prec.isa_has_bf16("AVX2") and not prec.isa_has_bf16("AVX512_CORE") and not prec.isa_has_bf16("AVX512_CORE_VNNI")
+    assert prec.isa_has_bf16("ALL") and prec.isa_has_bf16("AVX512_CORE_BF16") and prec.isa_has_bf16("AVX512_CORE_AMX")
+
+
 def test_edited_weights_are_not_served_from_the_cache():
     net = FFDNetDenoiser(color=False, pretrained=False, generator=torch.Generator().manual_seed(5))
     x = _image(net, 16, 16)
@@ -111,7 +156,9 @@ def test_auto_follows_the_cpu():
 def test_bfloat16_only_on_high_noise_steps():
     sig = np.geomspace(50, 5, 6) / 255
     steps = prec.step_precisions("bfloat16-mixed", sig, threshold=30 / 255)
-    assert steps == ["bfloat16"] * 2 + ["float32"] * 4
+    assert steps == [prec.MIXED_LAYERS] * 2 + ["float32"] * 4
+    # the default policy: the first 3 of the default 6 steps (50 → 5/255) in bfloat16, every layer
+    assert prec.step_precisions("bfloat16-mixed", sig) == ["bfloat16-all"] * 3 + ["float32"] * 3
     assert prec.step_precisions("float32", sig) == ["float32"] * 6
     assert prec.step_precisions("bfloat16-mixed", 4) == ["float32"] * 4  # a latent prior: no FFDNet layers
 
@@ -146,7 +193,7 @@ def test_plan_prints_the_precision_and_the_sampler_uses_it(cfa, monkeypatch):
     cfg = GuidedConfig(precision="bfloat16-mixed", steps=4, t_start=60 / 255, diffusion="always")
     out = smp.run(obs, cfg)
     assert out.shape == ((24, 24, 3) if cfa else (24, 24)) and smp.info.precision == "bfloat16-mixed"
-    assert seen[0] == "bfloat16" and seen[-1] == "float32"
+    assert seen[0] == prec.MIXED_LAYERS and seen[-1] == "float32"
     seen.clear()
     f32 = smp.run(obs, cfg.replace(precision="float32"))
     assert set(seen) == {"float32"} and np.abs(f32 - out).max() > 0

@@ -8,9 +8,10 @@
   wheels for x86-64 with AVX2; max difference ~1e-5 per pass, well below one 8-bit level); on a quiet
   AMD EPYC (AVX-512) it was no faster than oneDNN channels-last at 1000² and 1.5× slower at 256²
   (BENCHMARKS.md), so ``auto`` does not pick it; ``"float32"`` where torch lacks NNPACK;
-* ``"bfloat16-mixed"`` — the hidden layers of FFDNet in bfloat16 on the steps whose noise level is
-  at least :data:`MIXED_BF16_SIGMA`, ``float32`` (channels-last) below it; the first layer (which sees the
-  image), the last layer (which produces the residual), ``x − residual`` and the data step stay float32;
+* ``"bfloat16-mixed"`` — every FFDNet layer in bfloat16 (oneDNN's fused convolution + ReLU, float32
+  accumulation, float32 biases that absorb the mean error of the rounded weights) on the steps whose
+  noise level is at least :data:`MIXED_BF16_SIGMA`, ``float32`` (channels-last) below it;
+  ``x − residual`` and the data step stay float32;
 * ``"auto"`` (default) — the fastest of these that stays within 0.1 dB PSNR and 0.005 SSIM of
   float32 on the held-out scenes of ``spikeview bench``, for what this CPU offers
   (:func:`resolve_precision`).
@@ -24,19 +25,25 @@ with the same arithmetic on any machine.
 from __future__ import annotations
 
 import functools
+import os
 from pathlib import Path
 
 from spikeview.guided.config import PRECISIONS  # the values of ``guided.precision`` (one list: the config's)
 
 __all__ = ["MIXED_BF16_SIGMA", "MIXED_LAYERS", "PRECISIONS", "at_precision", "cpu_summary", "resolve_precision", "step_precisions"]
-#: ``bfloat16-mixed``: the FFDNet layers in bfloat16 on the high-noise steps (``"bfloat16"`` = the
-#: hidden layers, first and last float32; ``"bfloat16-all"`` = every layer)
-MIXED_LAYERS = "bfloat16"
+#: ``bfloat16-mixed``: the FFDNet layers in bfloat16 on the high-noise steps (``"bfloat16-all"`` = every
+#: layer, ``"bfloat16"`` = the hidden layers, first and last float32). With the bias correction of the
+#: rounded weights (:meth:`FFDNetDenoiser._layers`) the two cost the same on the bench (worst scene
+#: −0.002 / −0.005 dB at σ ≥ 18/255), and every layer in bf16 is the faster pass
+MIXED_LAYERS = "bfloat16-all"
 #: ``bfloat16-mixed``: a step runs in bfloat16 when its noise level (smallest over channels) is at
-#: least this (fraction of 1); below it the step runs ``float32`` (oneDNN channels-last). bfloat16's error in the
-#: prior's output is about 1.5/255 mean, 7/255 max (hidden layers, measured on a natural image); a
-#: step whose noise is far above it hides it, the later low-noise steps would keep it.
-MIXED_BF16_SIGMA = 30.0 / 255.0
+#: least this (fraction of 1); below it the step runs ``float32`` (oneDNN channels-last). bfloat16's
+#: error in the prior's output is about 0.85–1.05/255 RMS (the activations' rounding; the weights'
+#: mean error is corrected), measured on two natural images at 5–40/255: a step whose noise is far above
+#: it hides it, the last low-noise steps would keep it. 18/255 = the first 3 of the default 6 steps
+#: (50 → 5/255): worst held-out scene −0.002 dB / −0.0023 SSIM; 4 steps (σ ≥ 12/255, hidden layers) cost
+#: −0.0080 SSIM on colorwheel, over the 0.005 budget (``benchmarks/bench_prior.py --quality``)
+MIXED_BF16_SIGMA = 18.0 / 255.0
 #: ``auto`` picks ``bfloat16-mixed`` on a CPU with native bfloat16 (set from the bench's numbers)
 AUTO_BF16 = True
 
@@ -54,6 +61,18 @@ def cpu_flags() -> frozenset[str]:
     return frozenset()
 
 
+def max_isa(environ=None) -> str:
+    """oneDNN's instruction-set cap from the environment (``ONEDNN_MAX_CPU_ISA``, older ``DNNL_MAX_CPU_ISA``;
+    ``"ALL"`` when unset), upper-case: ``ONEDNN_MAX_CPU_ISA=AVX2`` makes this CPU run as an AVX2-only one."""
+    env = os.environ if environ is None else environ
+    return (env.get("ONEDNN_MAX_CPU_ISA") or env.get("DNNL_MAX_CPU_ISA") or "ALL").strip().upper() or "ALL"
+
+
+def isa_has_bf16(isa: str) -> bool:
+    """oneDNN capped at ``isa`` (a :func:`max_isa` value) still runs bfloat16 natively (AVX512_CORE_BF16 and up)."""
+    return isa == "ALL" or any(t in isa for t in ("BF16", "FP16", "AMX", "AVX10"))
+
+
 @functools.lru_cache(maxsize=1)
 def cpu_summary() -> dict[str, object]:
     """What the prior's speed depends on: torch's CPU capability, the SIMD/bf16/AMX flags and
@@ -67,6 +86,10 @@ def cpu_summary() -> dict[str, object]:
         onednn_bf16 = bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
     except (AttributeError, RuntimeError):
         onednn_bf16 = False
+    # oneDNN's instruction set capped by the environment (ONEDNN_MAX_CPU_ISA=AVX2 plays an AVX2-only CPU):
+    # torch's bf16 check reads the CPU, not the cap, so a cap below AVX512_CORE_BF16 means no native bf16
+    isa = max_isa()
+    onednn_bf16 = onednn_bf16 and isa_has_bf16(isa)
     return {
         "capability": str(torch.backends.cpu.get_cpu_capability()),
         "avx2": "avx2" in flags,
@@ -74,6 +97,7 @@ def cpu_summary() -> dict[str, object]:
         "avx512_bf16": "avx512_bf16" in flags,
         "amx_bf16": "amx_bf16" in flags,
         "onednn_bf16": onednn_bf16,
+        "onednn_max_isa": isa,
         "nnpack": nnpack_ok(),
     }
 
@@ -88,8 +112,8 @@ def describe(precision: str) -> str:
     """What a resolved precision does, in a few words."""
     return {"float32": "float32, oneDNN channels-last (reference pixels)",
             "float32-fast": "float32, NNPACK fast convolution",
-            "bfloat16-mixed": (f"bfloat16 hidden layers on steps with noise >= {255 * MIXED_BF16_SIGMA:.0f}/255, "
-                               "float32 below")}.get(precision, precision)
+            "bfloat16-mixed": (f"bfloat16 {'layers' if MIXED_LAYERS == 'bfloat16-all' else 'hidden layers'} on steps "
+                               f"with noise >= {255 * MIXED_BF16_SIGMA:.0f}/255, float32 below")}.get(precision, precision)
 
 
 def _auto(s: dict[str, object]) -> tuple[str, str]:
