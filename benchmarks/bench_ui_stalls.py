@@ -111,6 +111,8 @@ class Sampler(threading.Thread):
         super().__init__(daemon=True)
         self.gui, self.late = gui_ident, late_ms / 1000
         self.last = time.perf_counter()
+        self.last_cpu = 0.0  # the GUI thread's CPU time at its last tick
+        self.clock = time.pthread_getcpuclockid(gui_ident)
         self.counts: Counter[str] = Counter()
         self.samples: list[tuple[float, str]] = []
         self.stop_flag = threading.Event()
@@ -118,7 +120,9 @@ class Sampler(threading.Thread):
     def run(self) -> None:
         names = {}
         while not self.stop_flag.wait(0.003):
-            if time.perf_counter() - self.last < self.late:
+            late = time.perf_counter() - self.last >= self.late
+            busy = time.clock_gettime(self.clock) - self.last_cpu >= self.late / 3
+            if not (late or busy):
                 continue
             frames = sys._current_frames()
             frame = frames.get(self.gui)
@@ -161,7 +165,7 @@ def measure(app, start, done, timeout: float, sampler: Sampler | None = None) ->
         stamps.append(now)
         cpu.append(time.thread_time())
         if sampler is not None:
-            sampler.last = now
+            sampler.last, sampler.last_cpu = now, cpu[-1]
         if done() or now > t_end:
             loop.quit()
 
@@ -172,7 +176,7 @@ def measure(app, start, done, timeout: float, sampler: Sampler | None = None) ->
     if sampler is not None:
         sampler.counts.clear()
         sampler.samples.clear()
-        sampler.last = time.perf_counter()
+        sampler.last, sampler.last_cpu = time.perf_counter(), time.thread_time()
     t0, c0 = time.perf_counter(), time.thread_time()
     timer.start()
     start()
@@ -188,13 +192,13 @@ def measure(app, start, done, timeout: float, sampler: Sampler | None = None) ->
         out["where"] = sampler.counts.most_common(12)
         # the places seen during the three longest stalls
         ends = np.array(stamps)
-        worst = np.argsort(gaps)[::-1][:3]
+        worst = list(np.argsort(gaps)[::-1][:3]) + [i for i in np.argsort(busy)[::-1][:3] if busy[i] > 8]
         out["worst"] = []
-        for i in worst:
+        for i in dict.fromkeys(worst):
             hi = ends[i]
             lo = hi - gaps[i] / 1000
             seen = Counter(k for ts, k in sampler.samples if lo <= ts <= hi)
-            out["worst"].append([float(gaps[i]), seen.most_common(8)])
+            out["worst"].append([float(gaps[i]), seen.most_common(8), float(busy[i])])
     return out
 
 
@@ -320,9 +324,9 @@ def child(args) -> int:
                 print(f"  {label:5s} {k:10s} max {r['max']:6.1f} ms  p99 {r['p99']:5.1f}  median {r['median']:4.1f}  "
                       f"n {r['n']}  >50ms {r['over50']}  | GUI CPU per interval max {r['cpu_max']:5.1f} p99 {r['cpu_p99']:4.1f}"
                       f" total {r['cpu_total'] / 1000:.2f} s of {r['seconds']:.1f}", flush=True)
-                for gap, seen in r.get("worst", []):
-                    if gap > args.late:
-                        print(f"      stall {gap:.0f} ms:\n" + "\n".join(f"        {n}× {k}" for k, n in seen), flush=True)
+                for gap, seen, cpu in r.get("worst", []):
+                    if gap > args.late or cpu > 8:
+                        print(f"      stall {gap:.0f} ms (GUI CPU {cpu:.0f} ms):\n" + "\n".join(f"        {n}× {k}" for k, n in seen), flush=True)
         w.close()
         app.processEvents()
     if sampler is not None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from spikeview.classical.windows import window_range
-from spikeview.errors import ParameterError
+from spikeview.errors import ParameterError, check_cancelled
 from spikeview.io.source import SpikeSource
 
 #: ``SpikeSource.count`` returns uint16, so longer ranges are counted in chunks of this many ticks.
@@ -26,7 +26,11 @@ def window_counts(source: SpikeSource, a: int, b: int) -> np.ndarray:
 
     Returns:
         ``(H, W)`` array of counts in ``[0, b - a]``: uint16 when ``b - a <= 65535``, else uint32.
+
+    A job's Cancel (:func:`spikeview.errors.cancel_scope`) stops it before the count: building a guided
+    window's observation counts a dozen windows, the sequence's α and white point hundreds.
     """
+    check_cancelled("while counting spikes")
     if b - a <= _MAX_COUNT_CHUNK:
         return source.count(a, b)
     total = np.zeros((source.height, source.width), dtype=np.uint32)

@@ -289,8 +289,10 @@ def estimate_sigma(obs: Observation, use_mosaic: bool = True, use_cast: bool = T
 
     import torch
 
+    from spikeview.errors import check_cancelled
     from spikeview.ops.noise import demosaic_variance
 
+    check_cancelled("while planning")
     var = obs.variance()
     if obs.cfa is None or not use_mosaic:
         return np.array([math.sqrt(float(var.mean()))])
