@@ -20,7 +20,6 @@ from spikeview.errors import Cancelled, cancel_scope, check_cancelled
 from spikeview.guided import tiles
 from spikeview.guided.config import GuidedConfig
 from spikeview.guided.observation import Observation
-from spikeview.guided.plan import make_plan
 from spikeview.guided.priors import ffdnet
 from spikeview.guided.priors.ffdnet import FFDNetDenoiser
 from spikeview.guided.sampler import GuidedSampler
@@ -157,7 +156,8 @@ def test_sampler_cancel_inside_the_first_prior_pass(monkeypatch, color):
 
 
 @COLOR
-def test_tiled_run_reports_the_whole_frame_filling_in_and_cancels_between_tiles(color):
+def test_tiled_run_reports_the_whole_frame_every_step_and_cancels_between_steps(color, monkeypatch):
+    monkeypatch.setattr(tiles, "MAX_AREA", 4096)  # a uniform frame is tiled only above this area (memory)
     obs = _obs((64, 160), "RGGB" if color else None)
     smp = GuidedSampler(prior=_net(color))
     p = GuidedConfig(precision="float32", steps=2, tile=64)
@@ -165,25 +165,22 @@ def test_tiled_run_reports_the_whole_frame_filling_in_and_cancels_between_tiles(
     out = smp.run(obs, p, callback=lambda s, n, im: frames.append((s, np.array(im, copy=True))))
     shape = obs.shape + ((3,) if color else ())
     assert smp.info.mode == "tiled" and out.shape == shape
-    n_tiles = len(tiles.tile_spans(64, 64)) * len(tiles.tile_spans(160, 64))
-    assert n_tiles >= 3
-    assert all(im.shape == shape for _, im in frames)  # every preview is the whole frame, not a tile
-    gray = [(im.mean(axis=-1) if im.ndim == 3 else im) for _, im in frames]
-    filled = [int((np.abs(g).sum(axis=0) > 0).sum()) for g in gray]  # columns something was drawn in
-    assert filled[0] < shape[1] and filled[-1] == shape[1] and filled == sorted(filled)
+    assert len(tiles.tile_spans(64, 64)) * len(tiles.tile_spans(160, 64)) >= 3
+    # step-synchronous tiles: every step's preview is the whole frame (every tile stepped once more)
+    assert [s for s, _ in frames] == [1, 2] and all(im.shape == shape for _, im in frames)
+    assert all(int(((im.mean(axis=-1) if im.ndim == 3 else im).sum(axis=0) > 0).sum()) == shape[1] for _, im in frames)
     np.testing.assert_array_equal(frames[-1][1], out)
     # callbacks change no pixel
     np.testing.assert_array_equal(smp.run(obs, p), out)
-    # a flag set at tile 1's last step: tile 1 is finished and shown, tile 2 never starts
-    first = max(make_plan(obs, p).tile_map.tiles[0].steps, 1)
+    # a flag set after step 1: step 2 never starts
     flag = threading.Event()
     steps_seen: list[int] = []
 
     def cb(step, _n, _im):
         steps_seen.append(step)
-        if step == first:
+        if step == 1:
             flag.set()
 
-    with pytest.raises(Cancelled, match="before tile 2 of"):
+    with pytest.raises(Cancelled, match="at step 2 of 2"):
         smp.run(obs, p, callback=cb, cancel=flag)
-    assert max(steps_seen) == first
+    assert steps_seen == [1]

@@ -136,9 +136,11 @@ class GuidedConfig(Config):
             (the fastest path within 0.1 dB / 0.005 SSIM of float32 on the bench, from the CPU's
             features), ``"float32"`` (the reference pixels), ``"float32-fast"`` (NNPACK's fast
             float32 convolution) or ``"bfloat16-mixed"`` (bfloat16 hidden layers on high-noise steps).
-        tile: per-tile plan and sampling (:mod:`spikeview.guided.tiles`): tiles of about this many
-            pixels (>= 64), each skipped, shortened or fully sampled by its own noise; 0 = the whole
-            frame at once.
+        tile: per-tile plan and step-synchronous sampling (:mod:`spikeview.guided.tiles`): a frame
+            larger than this is cut into tiles of about this many pixels (>= 64), each skipped,
+            shortened or fully sampled by its own noise (128, the default: a 1000×1000 frame in 64
+            tiles; a frame whose tiles all need the full ladder gives the untiled pixels); 0 = the
+            whole frame at once.
         device, dtype: where and in what precision the sd prior runs (``"auto"`` = CUDA when
             available; ``float16``/``bfloat16`` need CUDA).
     """
@@ -203,9 +205,10 @@ class GuidedConfig(Config):
                                 "float32 on the bench, from the CPU's features), float32 (the reference pixels), "
                                 "float32-fast (NNPACK's fast float32 convolution) or bfloat16-mixed (bfloat16 on high-noise "
                                 "steps).")
-    tile: int = param(0, label="Tile size", unit="px", lo=0, hi=8192, step=64,
-                      help="Per-tile plan: split frames into tiles of about this many pixels, each skipped, shortened or "
-                           "fully sampled by its own noise (0 = the whole frame at once).")
+    tile: int = param(128, label="Tile size", unit="px", lo=0, hi=8192, step=64,
+                      help="Per-tile plan: split frames larger than this into tiles of about this many pixels, each "
+                           "skipped, shortened or fully sampled by its own noise; tiles step together, so there are no "
+                           "seams (0 = the whole frame at once).")
     temporal_radius: int = param(3, label="Temporal radius", unit="windows", lo=0, hi=8, step=1,
                                  help="Neighbouring windows on each side whose spikes a guided frame may borrow, aligned and "
                                       "used only where they match (0 = the window alone).")

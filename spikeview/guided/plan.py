@@ -280,15 +280,19 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     r["temporal"] = pool.reason if pool is not None else "off (temporal_radius = 0): the window alone, as in the paper"
     # --- per-tile plan (spikeview.guided.tiles): only for a frame larger than one tile that needs diffusion
     tile_map = None
-    if p.tile and max(obs.shape) > p.tile and diffusion and p.prior != "sd":
+    if p.tile and max(obs.shape) > p.tile and diffusion and p.prior != "sd" and p.guidance == "hqs":
         from spikeview.guided.tiles import plan_tiles
 
         probe = Plan(mosaic, cast, levels, diffusion, fallback, False, None, sigma, {}, quantise, demosaic)
         tile_map = plan_tiles(obs, probe, p)
         r["tiles"] = tile_map.summary()
+    elif not p.tile:
+        r["tiles"] = "off (guided.tile = 0): the whole frame at once"
     else:
-        r["tiles"] = ("off (guided.tile = 0): the whole frame at once" if not p.tile else
-                      f"off: {'the frame fits in one tile' if max(obs.shape) <= p.tile else 'no diffusion to tile'}")
+        why = ("the frame fits in one tile" if max(obs.shape) <= p.tile else "no diffusion to tile" if not diffusion
+               else "the sd prior runs on the whole frame" if p.prior == "sd"
+               else "DPS guidance takes one gradient of the whole frame's residual norm")
+        r["tiles"] = f"off: {why}"
     # --- arithmetic of the prior (spikeview.guided.precision: resolved from the CPU's features)
     if p.prior == "sd":
         precision, r["precision"] = "", f"the sd prior runs in guided.dtype = {p.dtype}"

@@ -243,12 +243,13 @@ class GuidedSampler:
             if callback is not None:
                 callback(1, 1, out)
             return out
-        if getattr(plan, "tile_map", None) is not None and init is None and not (p.prior == "sd" or is_latent(self._prior)):
+        tm = getattr(plan, "tile_map", None)
+        if tm is not None and tm.pays() and init is None and not (p.prior == "sd" or is_latent(self._prior)):
             from spikeview.guided.tiles import run_tiled
 
-            out = run_tiled(self, observation, p, plan, callback, cancel)
+            out = run_tiled(self, observation, p, plan, callback, cancel)  # sets info.steps (the frame's steps)
             self.info = info
-            info.mode, info.seconds, info.steps = "tiled", time.perf_counter() - t0, plan.tile_map.steps()
+            info.mode, info.seconds = "tiled", time.perf_counter() - t0
             info.precision = plan.precision
             return out
         out = self._sample(observation, p, plan, channels, callback, cancel, init, noise)

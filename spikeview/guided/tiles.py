@@ -1,22 +1,32 @@
-"""Per-tile plan and tiled sampling: leave out what each part of the frame does not need.
+"""Per-tile plan and step-synchronous tiled sampling: leave out what each part of the frame does not need.
 
-With ``guided.tile = T`` (pixels, 0 = off) a frame larger than ``T`` is split into tiles of about
-``T × T`` that overlap by :data:`OVERLAP` pixels (more than FFDNet's receptive field, 24 pixels at
-full resolution, so every kept pixel sees the same neighbourhood as in the whole frame). For each
-tile the plan measures the noise σ of the corrected TFP estimate on that tile alone
-(:func:`~spikeview.guided.plan.estimate_sigma`) and decides:
+With ``guided.tile = T`` (pixels, 0 = off) a frame larger than ``T`` is cut into a grid of tiles of
+about ``T × T`` (:func:`tile_spans`, even edges so every tile keeps the CFA phase). For each tile the
+plan measures the noise σ of the corrected TFP estimate on that tile alone
+(:func:`~spikeview.guided.observation.estimate_sigma`) and decides (:func:`plan_tiles`):
 
-* **skipped** — σ at or below ``noise_target``: no diffusion, the tile gets the frame's fallback
-  (TFP where σ <= target/4, else one FFDNet pass);
-* **short** — the noise the prior is told (``σ · sigma_scale``) is below ``t_start / 2``: the tile
-  starts at ``2 σ · sigma_scale`` instead of ``t_start`` and takes only the steps of the frame's
-  geometric schedule below that level;
-* **full** — the whole schedule.
+* **skipped** — σ at or below ``noise_target``: no diffusion; the tile gets TFP (σ <= target/4) or
+  one FFDNet pass, as a frame that needs no diffusion would;
+* **short** — the noise the prior is told (``σ · sigma_scale``) is below half the frame's start
+  level: the tile joins the frame's σ ladder at the first step whose level is at most twice that
+  noise and takes only the steps from there on;
+* **full** — the whole ladder.
 
-Tiles are blended with linear ramps across the overlap (weights 1 inside, falling to 0 at a tile
-edge that lies inside the frame), and every tile's start noise is cut from one noise field drawn
-for the whole frame with the run's seed, so a tiled run of a uniform scene matches the whole-frame
-run away from the frame's borders (``tests/test_guided_tiles.py``). Memory follows the tile, not
+Sampling is **step-synchronous** (:func:`run_tiled`): one sample ``x`` of the whole frame and one σ
+ladder (the untiled run's); at step ``i`` the pixels whose tile has joined (``join <= i``) are
+*active*. The active area is cut into as few rectangles as the memory cap :data:`MAX_AREA` allows
+(whole tile rows merged; a frame whose tiles are all full is one rectangle, i.e. the untiled run),
+and each rectangle runs the HQS step (prior pass + data step) on its crop widened by
+:func:`margin` pixels (more than FFDNet's receptive field plus the data step's 5×5 reach), keeping
+the rectangle's interior. Every pixel therefore gets the number the whole-frame step would give it
+(with ``levels = 0``, the default; a pyramid couples farther and is then approximate near
+rectangle edges), and the re-noising, the start noise and the dihedral self-ensemble are drawn for
+the whole frame from the run's seed, as untiled. Waiting pixels (a short tile before it joins) hold
+their start ``Y₀ + σ_join·z``; the prior sees them at their own level through a per-pixel noise map.
+Skipped tiles keep their fallback, cross-faded over :data:`BLEND` pixels into the diffused
+neighbours (those pixels are sampled with the neighbour), so there is no seam at a skipped edge and
+none between tiles at all: tiles exchange information every step, and the whole frame fills in
+step by step (``callback`` gets the frame after every step). Memory follows :data:`MAX_AREA`, not
 the frame.
 """
 
@@ -29,21 +39,35 @@ from typing import Any
 
 import numpy as np
 
-from spikeview.errors import Cancelled, is_cancelled
+from spikeview.errors import Cancelled, ParameterError, check_cancelled, is_cancelled
 from spikeview.guided.observation import Observation
 
-#: overlap between neighbouring tiles (pixels; even, so crops keep the CFA phase)
-OVERLAP = 48
-#: pixels at a tile's inner edge that get no weight in the blend (they see the tile's zero padding)
-HALO = 16
-#: a tile is "short" when the noise the prior is told is below this fraction of t_start
+#: pixels a skipped tile's fallback is cross-faded over into its diffused neighbours
+BLEND = 32
+#: largest rectangle (photosites, margins not counted) one prior pass + data step runs on: bounds the
+#: memory of a step (a 1000×1000 frame whose tiles all need the full ladder is one rectangle)
+MAX_AREA = 1_100_000
+#: a tile is "short" when the noise the prior is told is below this fraction of the start level
 SHORT_FRACTION = 0.5
+#: a short tile joins the frame's ladder at the first level at most this many times its own noise
+#: (1000² natural scene, bright to dark: 3 → −0.03 dB / +0.0002 SSIM against the whole frame, 16 of 64
+#: tiles short; 2.5 → −0.38 dB; 2 → −0.67 dB: a late start costs the data step its early iterations)
+JOIN_FACTOR = 3.0
 KINDS = ("skipped", "short", "full")
+#: kept for callers of the first tiled version (tiles no longer overlap: the margin does that work)
+OVERLAP = 0
+
+
+def margin(levels: int = 0) -> int:
+    """Context (even, pixels) around a rectangle: FFDNet's receptive field (15 layers at half
+    resolution: 30 pixels, gray) + the data step's reach (5×5 local rate, 3×3 spread) + the
+    pyramid's reach for ``levels > 0`` (approximate)."""
+    return 36 + (0 if levels <= 0 else 2 ** (int(levels) + 3))
 
 
 @dataclass
 class Tile:
-    """One tile: photosites ``[y0:y1, x0:x1]`` (overlap included) and what it gets."""
+    """One tile: photosites ``[y0:y1, x0:x1]`` and what it gets."""
 
     y0: int
     y1: int
@@ -54,6 +78,14 @@ class Tile:
     steps: int = 0
     t_start: float = 0.0
     fallback: str = ""
+    #: first step of the frame's ladder this tile takes (``steps`` = ladder length − join)
+    join: int = 0
+    #: per-channel σ of the tile's TFP estimate (fractions of 1)
+    sigma_c: tuple[float, ...] = ()
+
+    @property
+    def area(self) -> int:
+        return (self.y1 - self.y0) * (self.x1 - self.x0)
 
 
 @dataclass
@@ -65,15 +97,23 @@ class TileMap:
     rows: int
     cols: int
     tiles: list[Tile] = field(default_factory=list)
+    #: the frame's ladder length (steps of a full tile)
+    ladder: int = 0
 
     def counts(self) -> dict[str, int]:
         return {k: sum(t.kind == k for t in self.tiles) for k in KINDS}
 
+    def work(self) -> float:
+        """Prior work (pixel-steps, margins not counted) relative to the whole frame's full ladder."""
+        total = self.shape[0] * self.shape[1] * max(self.ladder, 1)
+        return sum(t.area * t.steps for t in self.tiles if t.kind != "skipped") / total
+
     def summary(self) -> str:
-        """``"1000×1000 in 16 tiles: 3 skipped (noise below target), 5 short, 8 full"``."""
+        """``"1000×1000 in 64 tiles of 125 px: 21 skipped (noise below target), 30 short, 13 full; prior work 41%"``."""
         c = self.counts()
         return (f"{self.shape[0]}×{self.shape[1]} in {len(self.tiles)} tiles of {self.size} px: {c['skipped']} skipped "
-                f"(noise below target), {c['short']} short, {c['full']} full")
+                f"(noise below target), {c['short']} short, {c['full']} full; "
+                f"{100 * self.work():.0f}% of the whole frame's prior work")
 
     def grid(self) -> np.ndarray:
         """``(rows, cols)`` int8 map of tile kinds (0 skipped, 1 short, 2 full), row-major (for an overlay)."""
@@ -82,66 +122,130 @@ class TileMap:
     def steps(self) -> int:
         return sum(t.steps for t in self.tiles)
 
+    def pays(self) -> bool:
+        """Whether sampling by tiles changes anything: a tile is skipped or short, or the frame exceeds
+        :data:`MAX_AREA` (memory). Otherwise the whole frame at once gives the same pixels, sooner."""
+        return any(t.kind != "full" for t in self.tiles) or self.shape[0] * self.shape[1] > MAX_AREA
 
-def tile_spans(n: int, size: int, overlap: int = OVERLAP) -> list[tuple[int, int]]:
-    """``[(start, stop)]`` of as few tiles of at most ``size`` as cover ``[0, n)`` overlapping by about
-    ``overlap`` (even starts: a crop keeps the CFA phase)."""
+    def as_dict(self) -> dict[str, Any]:
+        """The map for an output's metadata: summary, counts and every tile's box, kind and steps."""
+        return {"summary": self.summary(), "shape": list(self.shape), "size": self.size, "rows": self.rows, "cols": self.cols,
+                "counts": self.counts(), "work": round(self.work(), 4),
+                "tiles": [[t.y0, t.y1, t.x0, t.x1, t.kind, t.steps] for t in self.tiles]}
+
+
+def tile_spans(n: int, size: int, overlap: int = 0) -> list[tuple[int, int]]:
+    """``[(start, stop)]`` of as few tiles of about ``size`` as cover ``[0, n)`` (even edges: a crop
+    keeps the CFA phase). ``overlap`` > 0 makes neighbours share about that many pixels."""
     if n <= size:
         return [(0, n)]
+    if overlap <= 0:
+        count = math.ceil(n / size)
+        edges = [0] + [int(round(i * n / count)) & ~1 for i in range(1, count)] + [n]
+        return [(a, b) for a, b in zip(edges, edges[1:], strict=False) if b > a]
     count = math.ceil((n - overlap) / (size - overlap))
     length = min(n, math.ceil((n + (count - 1) * overlap) / count) + 1)
     starts = sorted({int(round(i * (n - length) / (count - 1))) & ~1 for i in range(count)})
     return [(a, n if i == len(starts) - 1 else min(n, a + length)) for i, a in enumerate(starts)]
 
 
+def frame_ladder(plan: Any, p: Any, channels: int, sigma_max: float) -> tuple[Any, np.ndarray, np.ndarray]:
+    """``(schedule, sigma_obs (C,), sigma_add (C,))``: the untiled run's σ ladder (``schedule.sigmas``,
+    ``(steps + 1, C)``) and start noise (as :meth:`GuidedSampler._sample` computes them)."""
+    from spikeview.guided.schedule import VESchedule
+
+    sigma_obs = np.asarray(plan.sigma, dtype=np.float64) * p.sigma_scale
+    if sigma_obs.size != channels:
+        sigma_obs = np.full(channels, float(np.sqrt(np.mean(sigma_obs ** 2))))
+    t_s = p.t_start
+    sigma_add = np.sqrt(np.maximum(t_s ** 2 - sigma_obs ** 2, 0.0)) if p.top_up else np.full(channels, t_s)
+    first = np.maximum(np.minimum(np.sqrt(sigma_obs ** 2 + sigma_add ** 2), sigma_max), 1e-4)
+    sched = VESchedule(tuple(first), p.sigma_end)
+    sched.set_timesteps(p.steps)
+    return sched, sigma_obs, sigma_add
+
+
 def plan_tiles(obs: Any, plan: Any, p: Any, size: int | None = None) -> TileMap:
     """The per-tile decisions for ``obs`` under the frame's ``plan`` and settings ``p`` (see the module docstring)."""
+    from spikeview.guided.config import SIGMA_MAX
     from spikeview.guided.observation import estimate_sigma
 
     size = int(size or p.tile)
     h, w = obs.shape
     ys, xs = tile_spans(h, size), tile_spans(w, size)
-    tm = TileMap((h, w), size, len(ys), len(xs))
-    full_steps = int(p.steps)
-    hi, lo = max(float(p.t_start), float(p.sigma_end)), float(p.sigma_end)
+    channels = 3 if plan.mosaic else 1
+    sched, _, _ = frame_ladder(plan, p, channels, SIGMA_MAX)
+    n = int(p.steps)
+    levels = sched.sigmas[:n].max(axis=1)  # the level of each step (largest over channels)
+    tm = TileMap((h, w), size, len(ys), len(xs), ladder=n)
     for y0, y1 in ys:
         for x0, x1 in xs:
-            s = float(np.max(estimate_sigma(obs.crop(y0, y1, x0, x1), plan.mosaic, plan.cast)))
-            t = Tile(y0, y1, x0, x1, "full", s)
+            sc = np.atleast_1d(estimate_sigma(obs.crop(y0, y1, x0, x1), plan.mosaic, plan.cast)).astype(float)
+            s = float(sc.max())
+            t = Tile(y0, y1, x0, x1, "full", s, sigma_c=tuple(sc.tolist()))
             told = s * float(p.sigma_scale)
             if not plan.diffusion or (s <= p.noise_target and p.diffusion == "auto"):
                 t.kind = "skipped"
                 t.fallback = plan.fallback if not plan.diffusion else ("tfp" if s <= p.noise_target / 4 else "baseline")
-            elif told < SHORT_FRACTION * hi and hi > lo:
-                t.kind = "short"
-                t.t_start = max(2.0 * told, lo)
-                frac = math.log(t.t_start / lo) / math.log(hi / lo) if t.t_start > lo else 0.0
-                t.steps = max(1, min(full_steps, math.ceil(full_steps * frac)))
+                t.join = n
             else:
-                t.t_start, t.steps = hi, full_steps
+                below = np.flatnonzero(levels <= JOIN_FACTOR * told)
+                j = int(below[0]) if below.size else n - 1
+                if told < SHORT_FRACTION * levels[0] and j > 0:
+                    t.kind, t.join = "short", j
+                t.steps, t.t_start = n - t.join, float(levels[t.join])
             tm.tiles.append(t)
     return tm
 
 
-def _ramp(n: int, lo_inside: bool, hi_inside: bool, overlap: int) -> np.ndarray:
-    """1-D blend weights of a tile of length ``n``: at an edge inside the frame, 0 over :data:`HALO`
-    pixels, then a linear ramp up to 1 over the rest of the overlap."""
-    r = np.ones(n, dtype=np.float32)
-    k = min(overlap, n // 2)
-    if k > 0:
-        halo = min(HALO, k // 2)
-        ramp = np.clip((np.arange(k, dtype=np.float32) + 0.5 - halo) / (k - halo), 0.0, 1.0)
-        if lo_inside:
-            r[:k] = np.minimum(r[:k], ramp)
-        if hi_inside:
-            r[n - k:] = np.minimum(r[n - k:], ramp[::-1])
-    return r
+def _split(c0: int, c1: int, rows: int, cuts: list[int], max_area: int) -> list[tuple[int, int]]:
+    """The column run ``[c0, c1)`` cut at tile edges ``cuts`` into pieces of at most ``max_area`` (a run
+    narrower than two tiles, or within the cap, stays whole)."""
+    if rows * (c1 - c0) <= max_area:
+        return [(c0, c1)]
+    out, a = [], c0
+    inner = [c for c in cuts if c0 < c < c1]
+    for i, c in enumerate(inner):
+        nxt = inner[i + 1] if i + 1 < len(inner) else c1
+        if rows * (nxt - a) > max_area:
+            out.append((a, c))
+            a = c
+    out.append((a, c1))
+    return out
+
+
+def _rectangles(active: np.ndarray, bands: list[tuple[int, int]], max_area: int,
+                cuts: list[int] | None = None) -> list[tuple[int, int, int, int]]:
+    """Rectangles ``(y0, y1, x0, x1)`` covering the active pixels: per band of tile rows the runs of
+    active columns (rows trimmed to the active ones; a run over ``max_area`` cut at the tile columns
+    ``cuts``), merged down the frame while their columns match and the area stays within
+    ``max_area``; edges made even (the CFA phase, FFDNet's 2×2 cells)."""
+    h, w = active.shape
+    rects: list[list[int]] = []
+    for r0, r1 in bands:
+        a = active[r0:r1]
+        cols = a.any(axis=0)
+        if not cols.any():
+            continue
+        d = np.diff(np.concatenate([[0], cols.astype(np.int8), [0]]))
+        runs = [piece for c0, c1 in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True)
+                for piece in _split(int(c0), int(c1), r1 - r0, cuts or [], max_area)]
+        for c0, c1 in runs:
+            rows = np.flatnonzero(a[:, c0:c1].any(axis=1))
+            y0, y1 = r0 + int(rows[0]), r0 + int(rows[-1]) + 1
+            for m in rects:
+                if m[2] == c0 and m[3] == c1 and m[1] == y0 and (y1 - m[0]) * (c1 - c0) <= max_area:
+                    m[1] = y1
+                    break
+            else:
+                rects.append([y0, y1, int(c0), int(c1)])
+    return [(y0 & ~1, min(h, y1 + (y1 & 1)), x0 & ~1, min(w, x1 + (x1 & 1))) for y0, y1, x0, x1 in rects]
 
 
 @dataclass
 class _FrameNoise(Observation):
-    """A tile's observation that keeps the frame's noise scale κ (estimated on many more photosites),
-    so the data weights of every tile are those of the whole frame."""
+    """A crop's observation that keeps the frame's noise scale κ (estimated on many more photosites),
+    so the data weights of every crop are those of the whole frame."""
 
     kappa: np.ndarray | None = None
 
@@ -153,71 +257,173 @@ class _FrameNoise(Observation):
         return self.kappa if self.kappa is not None else super().noise_scale()
 
 
-def _canvas(acc: np.ndarray, wsum: np.ndarray, t: Any, preview: np.ndarray, wt: np.ndarray) -> np.ndarray:
-    """The frame so far with tile ``t``'s running ``preview`` blended in at weight ``wt`` (a copy)."""
-    a, s = acc.copy(), wsum.copy()
-    a[t.y0:t.y1, t.x0:t.x1] += preview * (wt[..., None] if preview.ndim == 3 else wt)
-    s[t.y0:t.y1, t.x0:t.x1] += wt
-    s = np.where(s > 0, s, 1.0)
-    return a / (s[..., None] if a.ndim == 3 else s)
+class _MapPrior:
+    """A prior told a per-pixel noise map (pixels still waiting for their tile sit at their own level)."""
+
+    def __init__(self, prior: Any, smap: Any):
+        self.prior, self.smap = prior, smap
+        self.channels = getattr(prior, "channels", None)
+        self.sigma_max = getattr(prior, "sigma_max", math.inf)
+
+    def denoise(self, x: Any, sigma: Any) -> Any:
+        return self.prior.denoise(x, self.smap)
 
 
-def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, cancel: Any = None) -> np.ndarray:
-    """Reconstruct ``obs`` tile by tile (``plan.tile_map``) and blend; ``callback(step, total, canvas)``
-    gets the whole frame filled in so far after every step (finished tiles blended, the running
-    tile's current estimate over them, zeros where no tile has run yet: the app shows the frame
-    filling in). The cancel flag is checked before every tile, and inside a tile by the sampler."""
+def _weights(tm: TileMap) -> tuple[np.ndarray, np.ndarray]:
+    """``(join, wdiff)`` per pixel: the first step at which a pixel is sampled (ladder length = never)
+    and the weight of the diffused estimate in the output (1 in diffused tiles, a ramp over
+    :data:`BLEND` pixels into skipped ones, 0 beyond)."""
+    h, w = tm.shape
+    n = tm.ladder
+    join = np.full((h, w), n, dtype=np.int32)
+    wdiff = np.zeros((h, w), dtype=np.float32)
+    for t in tm.tiles:
+        if t.kind == "skipped":
+            continue
+        y0, y1, x0, x1 = max(0, t.y0 - BLEND), min(h, t.y1 + BLEND), max(0, t.x0 - BLEND), min(w, t.x1 + BLEND)
+        ry = 1.0 - np.clip(np.maximum(t.y0 - np.arange(y0, y1), np.arange(y0, y1) - (t.y1 - 1)), 0, None) / BLEND
+        rx = 1.0 - np.clip(np.maximum(t.x0 - np.arange(x0, x1), np.arange(x0, x1) - (t.x1 - 1)), 0, None) / BLEND
+        ramp = (ry[:, None] * rx[None, :]).astype(np.float32)
+        np.maximum(wdiff[y0:y1, x0:x1], ramp, out=wdiff[y0:y1, x0:x1])
+        join[y0:y1, x0:x1] = np.where(ramp > 0, np.minimum(join[y0:y1, x0:x1], t.join), join[y0:y1, x0:x1])
+    for t in tm.tiles:  # a diffused tile's own pixels: its own join and full weight
+        if t.kind != "skipped":
+            join[t.y0:t.y1, t.x0:t.x1] = t.join
+            wdiff[t.y0:t.y1, t.x0:t.x1] = 1.0
+    return join, wdiff
+
+
+def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, cancel: Any = None,
+              max_area: int | None = None) -> np.ndarray:
+    """Reconstruct ``obs`` step-synchronously over ``plan.tile_map`` (see the module docstring).
+
+    ``callback(step, total, frame)`` gets the whole frame after every step (diffused pixels' x̂₀,
+    waiting pixels' start estimate, skipped tiles' fallback). The cancel flag is checked before
+    every step and between rectangles (and inside every prior pass by the sampler's cancel scope).
+    ``max_area`` overrides :data:`MAX_AREA` (tests use it to cut a small frame into many rectangles).
+    """
     import torch
 
-    from spikeview.guided.baseline import baseline, start_estimate
+    from spikeview.guided import precision as prec
+    from spikeview.guided.baseline import baseline, start_estimate, to_image, to_tensor
+    from spikeview.guided.guidance import HQSGuidance, _dihedral
     from spikeview.ops.pyramid import max_levels
 
     tm = plan.tile_map if getattr(plan, "tile_map", None) is not None else plan_tiles(obs, plan, p)
     h, w = obs.shape
     channels = 3 if plan.mosaic else 1
-    shape = (h, w, 3) if channels == 3 else (h, w)
-    acc = np.zeros(shape, dtype=np.float32)
-    wsum = np.zeros((h, w), dtype=np.float32)
-    # one start-noise field for the whole frame, cut per tile: the same noise as an untiled run
-    noise = torch.randn((1, channels, h, w), generator=torch.Generator().manual_seed(int(p.seed)))
-    total = max(1, sum(max(t.steps, 1) for t in tm.tiles))
-    done = 0
-    sub_p = p.replace(tile=0)
+    prior = sampler.prior_for(channels, p)
+    rule = sampler._guidance if sampler._guidance is not None else sampler.guidance_for(p, prior, obs.shape)
+    if not isinstance(rule, HQSGuidance):
+        raise TypeError("step-synchronous tiles need HQS guidance (the plan turns tiles off for DPS)")
+    step_rule = HQSGuidance(rule.lam, rule.data_steps, renoise=False, s=rule.s)
+    n = int(p.steps)
+    sched, sigma_obs, sigma_add = frame_ladder(plan, p, channels, getattr(prior, "sigma_max", math.inf))
+    sigmas = sched.sigmas
+    tm.ladder = n
+    join, wdiff = _weights(tm)
     kappa = obs.noise_scale()
-    for k, t in enumerate(tm.tiles):
-        if is_cancelled(cancel):
-            raise Cancelled(f"guided reconstruction cancelled before tile {k + 1} of {len(tm.tiles)}")
-        sub = _FrameNoise.of(obs.crop(t.y0, t.y1, t.x0, t.x1), kappa)
-        wy = _ramp(t.y1 - t.y0, t.y0 > 0, t.y1 < h, OVERLAP)
-        wx = _ramp(t.x1 - t.x0, t.x0 > 0, t.x1 < w, OVERLAP)
-        wt = wy[:, None] * wx[None, :]
-        if t.kind == "skipped":
-            if t.fallback == "tfp":
-                out = start_estimate(sub, plan.mosaic, plan.cast, p.demosaic)
-            else:
-                denoiser = sampler.prior_for(channels, p)
-                out = baseline(sub, denoiser, sigma_scale=p.sigma_scale, use_mosaic=plan.mosaic, use_cast=plan.cast,
-                               demosaic=p.demosaic)
-            offset = done
-            done += 1
-        else:
-            # the frame's decisions (M, C, Q, demosaic, precision) and noise (more samples) on every tile
-            sub_plan = dataclasses.replace(plan, diffusion=True, reuse=False, changed=None, tile_map=None,
-                                           levels=min(plan.levels, max_levels(*sub.shape)),
-                                           sigma=np.minimum(plan.sigma, t.sigma) if t.kind == "short" else plan.sigma)
-            cfg = sub_p.replace(steps=t.steps, t_start=t.t_start)
-            offset = done
+    mg = margin(plan.levels)
+    max_area = int(max_area or MAX_AREA)
+    bands = tile_spans(h, tm.size)
+    cuts = [a for a, _ in tile_spans(w, tm.size)]
 
-            def cb(step, _total, preview, _o=offset, _t=t, _wt=wt):
-                if callback is not None:
-                    callback(_o + step, total, _canvas(acc, wsum, _t, np.asarray(preview, dtype=np.float32), _wt))
+    def crop(y0: int, y1: int, x0: int, x1: int) -> tuple[int, int, int, int]:
+        return max(0, y0 - mg), min(h, y1 + mg), max(0, x0 - mg), min(w, x1 + mg)
 
-            out = sampler.run(sub, cfg, cb if callback is not None else None, cancel, plan=sub_plan,
-                              noise=noise[..., t.y0:t.y1, t.x0:t.x1])
-            done += t.steps
-        acc[t.y0:t.y1, t.x0:t.x1] += out * (wt[..., None] if out.ndim == 3 else wt)
-        wsum[t.y0:t.y1, t.x0:t.x1] += wt
-        if callback is not None:
-            filled = np.where(wsum > 0, wsum, 1.0)
-            callback(done, total, acc / (filled[..., None] if acc.ndim == 3 else filled))
-    return acc / (wsum[..., None] if acc.ndim == 3 else wsum)
+    # the start estimate of the whole frame (as untiled), and every skipped tile's fallback
+    y0_img = start_estimate(obs, plan.mosaic, plan.cast, p.demosaic)
+    start = to_tensor(y0_img)
+    fallback = start.clone()
+    for t in tm.tiles:
+        if t.kind == "skipped" and t.fallback == "baseline":
+            check_cancelled("before a skipped tile's one-pass estimate")
+            cy0, cy1, cx0, cx1 = crop(t.y0, t.y1, t.x0, t.x1)
+            sub = _FrameNoise.of(obs.crop(cy0, cy1, cx0, cx1), kappa)
+            one = to_tensor(baseline(sub, prior, sigma_scale=p.sigma_scale, use_mosaic=plan.mosaic, use_cast=plan.cast,
+                                     demosaic=p.demosaic))
+            fallback[..., t.y0:t.y1, t.x0:t.x1] = one[..., t.y0 - cy0:t.y1 - cy0, t.x0 - cx0:t.x1 - cx0]
+
+    # per-pixel start: full tiles exactly as untiled; a short tile tops its own noise up to its join level
+    jt = torch.from_numpy(np.minimum(join, n - 1).astype(np.int64))
+    lad = torch.as_tensor(sigmas[:n], dtype=torch.float32)  # (n, C)
+    obs_c = np.tile(sigma_obs, (h, w, 1)).astype(np.float32)
+    for t in tm.tiles:
+        if t.kind != "full":
+            own = np.asarray(t.sigma_c, dtype=np.float64) * p.sigma_scale
+            own = own if own.size == channels else np.full(channels, float(np.sqrt(np.mean(own ** 2))))
+            obs_c[t.y0:t.y1, t.x0:t.x1] = np.minimum(sigma_obs, own)
+    level = lad[jt].permute(2, 0, 1)[None]  # (1, C, H, W): the level each pixel starts at
+    add = torch.sqrt(torch.clamp(level ** 2 - torch.from_numpy(obs_c).permute(2, 0, 1)[None] ** 2, min=0.0))
+    add = torch.where(torch.from_numpy(join == 0)[None, None], torch.as_tensor(sigma_add, dtype=torch.float32).view(1, -1, 1, 1), add)
+    del obs_c
+    skipped_only = torch.from_numpy(join >= n)[None, None]
+    wd = torch.from_numpy(wdiff)[None, None]
+    precision = plan.precision or prec.resolve_precision(p.precision)[0]
+    sampler.info.precision = precision
+    layer_prec = prec.step_precisions(precision, sigmas[:n].min(axis=1))
+    gen = torch.Generator().manual_seed(int(p.seed))
+    total = n * p.chains
+    data_cache: dict[tuple[int, int, int, int], Any] = {}  # this step's rectangles' data terms (kept while they last)
+
+    def data_for(box: tuple[int, int, int, int], cache: dict) -> Any:
+        if box not in cache:
+            cache[box] = data_cache.get(box)
+            if cache[box] is None:
+                sub = _FrameNoise.of(obs.crop(*box), kappa)
+                sub_plan = dataclasses.replace(plan, levels=min(plan.levels, max_levels(*sub.shape)), tile_map=None)
+                cache[box] = sampler.data_term(sub, sub_plan, p)
+        return cache[box]
+
+    def blend(x0: Any) -> Any:
+        return torch.where(skipped_only, fallback, wd * x0 + (1.0 - wd) * fallback)
+
+    acc = torch.zeros_like(start)
+    for chain in range(p.chains):
+        noise = torch.randn(start.shape, generator=gen, dtype=start.dtype) if bool((add > 0).any()) else torch.zeros_like(start)
+        x = torch.where(skipped_only, fallback, start + add * noise)
+        x0_full = torch.where(skipped_only, fallback, start)
+        for i in range(n):
+            done = chain * n + i
+            if is_cancelled(cancel):
+                raise Cancelled(f"guided reconstruction cancelled at step {done + 1} of {total}")
+            act = join <= i
+            if act.any():
+                sigma = torch.as_tensor(sigmas[i], dtype=start.dtype).view(1, -1, 1, 1)
+                transform = ((i + 3 * chain) % 8) if p.self_ensemble else None
+                prior_i = prec.at_precision(prior, layer_prec[i])
+                new = x0_full.clone()
+                used: dict = {}
+                for ry0, ry1, rx0, rx1 in _rectangles(act, bands, max_area, cuts):
+                    check_cancelled(f"at step {done + 1} of {total}")
+                    box = crop(ry0, ry1, rx0, rx1)
+                    cy0, cy1, cx0, cx1 = box
+                    jc = join[cy0:cy1, cx0:cx1]
+                    pr = prior_i
+                    if (jc > i).any():  # waiting or skipped pixels in the context: a per-pixel noise map
+                        smap = lad[torch.from_numpy(np.clip(np.maximum(jc, i), 0, n - 1).astype(np.int64))]
+                        smap = smap.permute(2, 0, 1)[None].to(start.dtype)
+                        pr = _MapPrior(prior_i, _dihedral(smap, transform) if transform else smap)
+                    _, x0c = step_rule.step(pr, None, data_for(box, used), x[..., cy0:cy1, cx0:cx1], i, sigma, zeta=p.zeta,
+                                            generator=None, transform=transform)
+                    keep = torch.from_numpy(act[ry0:ry1, rx0:rx1])[None, None]
+                    inner = x0c[..., ry0 - cy0:ry1 - cy0, rx0 - cx0:rx1 - cx0]
+                    new[..., ry0:ry1, rx0:rx1] = torch.where(keep, inner, new[..., ry0:ry1, rx0:rx1])
+                data_cache = used
+                if not bool(torch.isfinite(new).all()):
+                    raise ParameterError(f"the guided sample diverged (non-finite values at step {done + 1} of {total}, "
+                                         f"tiled, guidance = hqs); raise lam (now {p.lam:g}) or use fewer data_steps, "
+                                         "or use method tfp for this stream.")
+                mask = torch.from_numpy(act)[None, None]
+                if rule.renoise:
+                    prev = sched.step(new, i, x, zeta=p.zeta, generator=gen).prev_sample
+                else:
+                    prev = new
+                x = torch.where(mask, prev, x)
+                x0_full = new
+            sampler.info.steps = done + 1
+            if callback is not None:
+                callback(done + 1, total, to_image(blend((acc + x0_full) / (chain + 1))))
+        acc = acc + x0_full
+    return to_image(blend(acc / p.chains))
+

