@@ -193,6 +193,8 @@ class GuidedUpdate:
     knobs: dict[str, str | None] = field(default_factory=dict)
     pooling: Any = None  # "plan": the observation's Pooling (the guided panel's pooling map)
     pooling_image: np.ndarray | None = None  # "plan": its map image (uint8, made in the worker)
+    tile_map: dict[str, Any] | None = None  # "plan": the per-tile plan (TileMap.as_dict()), None when tiles are off
+    tiles: str = ""  # "plan": the plan's tiles line (the map's summary, or why tiles are off)
 
 
 @dataclass
@@ -211,7 +213,18 @@ class GuidedResult:
 
 def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     """Plan, then run the guided reconstruction of one window through the pipeline, reporting the clean
-    estimate (and metrics against the aligned ground truth) every step."""
+    estimate (and metrics against the aligned ground truth) every step.
+
+    Everything runs inside the job's :func:`~spikeview.errors.cancel_scope`: Cancel also stops the sequence's
+    α and white point, the window's observation (the neighbours' counts and their alignment, seconds at
+    1000×1000) and the plan, not only the sampler's steps."""
+    from spikeview.errors import cancel_scope
+
+    with cancel_scope(ctx.cancelled):
+        return _guided_job(req, ctx)
+
+
+def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     from spikeview import metrics
     from spikeview.guided.knobs import knob_status
     from spikeview.guided.plan import make_plan
@@ -226,7 +239,9 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     plan = make_plan(obs, cfg)
     origin = crop_roi(np.zeros((req.source.height, req.source.width), np.uint8), req.roi)[1][::-1] if req.roi else (0, 0)
     ctx.report(GuidedUpdate("plan", req.run, total=cfg.steps * cfg.chains, text=str(plan), knobs=knob_status(cfg, plan),
-                              pooling=plan.pooling, pooling_image=pooling_display(plan.pooling)))
+                              pooling=plan.pooling, pooling_image=pooling_display(plan.pooling),
+                              tile_map=None if plan.tile_map is None else plan.tile_map.as_dict(),
+                              tiles=plan.reasons.get("tiles", "")))
     gt = None
     g = req.ground_truth(req.tick) if req.ground_truth is not None else None  # None: no frame stored near this tick
     if g is not None:

@@ -210,7 +210,11 @@ def _tile_sum(x: np.ndarray, t: int) -> np.ndarray:
 def _tile_chi(g0: np.ndarray, gk: np.ndarray, pad: int, dy: int, dx: int, tile: int, noise: float,
               cap: float, v0: np.ndarray | None = None) -> np.ndarray:
     """Per tile: SSD between ``g0`` and the edge-padded ``gk`` read at ``(y + dy, x + dx)``, over the
-    noise-only SSD ``Σ noise·(v(g₀) + v(g_k))`` with ``v`` = :func:`_binvar` (``v0``: ``v(g₀)`` precomputed)."""
+    noise-only SSD ``Σ noise·(v(g₀) + v(g_k))`` with ``v`` = :func:`_binvar` (``v0``: ``v(g₀)`` precomputed).
+    Each call checks the job's Cancel (the motion search and the match test are hundreds of calls: seconds at 1000×1000)."""
+    from spikeview.errors import check_cancelled
+
+    check_cancelled("while aligning the neighbouring windows")
     h, w = g0.shape
     s = gk[pad + dy:pad + dy + h, pad + dx:pad + dx + w]
     d = g0 - s
