@@ -240,6 +240,14 @@ def reconstruct_windows(source: Any, centers: Iterable[int], recipe: Recipe, sta
         yield out
 
 
+class _FirstOnly(list):
+    """A list that keeps only the first item appended (the first frame's run info, not one per frame)."""
+
+    def append(self, item: Any) -> None:
+        if not self:
+            super().append(item)
+
+
 def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str | Path, *,
                    state: SequenceState | None = None, roi: tuple[int, int, int, int] | None = None,
                    step: int | None = None, callback: Callback | None = None, cancel: Any = None,
@@ -267,9 +275,14 @@ def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str
                           method=recipe.run.method, tick_rate=float(source.tick_rate), window=first,
                           centre_tick=int(centers[0]), step_ticks=step if len(centers) > 1 else None,
                           params=recipe.to_dict())
-    frames = reconstruct_windows(source, centers, recipe, state, roi=roi, callback=callback, cancel=cancel, sampler=sampler)
+    infos = _FirstOnly()
+    frames = reconstruct_windows(source, centers, recipe, state, roi=roi, callback=callback, cancel=cancel, sampler=sampler,
+                                 infos=infos)
     cfg, expose = exposure_mapping(recipe, state, out)
     head = expose(next(frames))
+    plan = getattr(infos[0], "plan", None) if infos else None
+    if plan is not None:  # the first frame's plan: its tile map and the prior's arithmetic, as printed
+        meta.plan = {k: plan.reasons[k] for k in ("tiles", "precision") if plan.reasons.get(k)}
     kwargs: dict[str, Any] = {}
     if progress is not None:
         kwargs["progress"] = progress

@@ -167,3 +167,22 @@ def test_tiled_run_skips_what_a_tile_does_not_need(cfa):
     g = tiled.mean(axis=-1) if tiled.ndim == 3 else tiled
     gx = np.abs(np.diff(g, axis=1))
     assert gx[:, 192 - tiles.BLEND:192].mean() <= gx[:, 200:].mean() + 2.0 / 255
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", None], ids=["bayer", "mono"])
+def test_output_metadata_records_the_tile_map(cfa, tmp_path):
+    from spikeview.export import read_export_metadata
+    from spikeview.pipeline import write_sequence
+    from spikeview.recipe import Recipe
+
+    rates = np.full((64, 192), 0.3)
+    rates[:, :64] = 1.0
+    src = ArraySource(np.random.default_rng(0).random((40,) + rates.shape) < rates, cfa=cfa)
+    recipe = Recipe().with_values({"run.method": "guided", "guided.tile": 64, "guided.steps": 1,
+                                   "guided.precision": "float32", "guided.temporal_radius": 0})
+    write_sequence(src, recipe, [20], tmp_path / "f.npy")
+    plan = read_export_metadata(tmp_path / "f.npy")["plan"]
+    assert plan["tiles"].startswith("64×192 in 3 tiles of 64 px: 1 skipped (noise below target), 0 short, 2 full")
+    assert plan["precision"]
+    write_sequence(src, recipe.with_values({"guided.tile": 0}), [20], tmp_path / "g.npy")
+    assert read_export_metadata(tmp_path / "g.npy")["plan"]["tiles"].startswith("off (guided.tile = 0)")

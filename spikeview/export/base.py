@@ -295,6 +295,8 @@ class Exporter(ABC):
             rec["step_ticks"] = m.step_ticks
         rec["frame_shape"] = list(self.frame_shape)
         rec["params"] = m.params
+        if m.plan:
+            rec["plan"] = dict(m.plan)
         rec["export"] = self.config.to_dict()
         return tomlable(rec)
 

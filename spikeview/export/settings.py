@@ -169,6 +169,8 @@ class ExportMetadata(Config):
             later frames record only what is passed to ``Exporter.write``.
         params: the full parameter set (plain dict). A :class:`~spikeview.config.Config` or TOML
             text passed here is converted to a dict.
+        plan: what the guided plan decided for the first frame, one line per choice where it matters
+            for reading the pixels (``tiles``: the per-tile map; ``precision``); empty for other methods.
     """
 
     source: str = ""
@@ -178,6 +180,7 @@ class ExportMetadata(Config):
     centre_tick: int | None = None
     step_ticks: int | None = None
     params: dict[str, Any] = dataclasses.field(default_factory=dict)
+    plan: dict[str, str] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if isinstance(self.source, Path):
