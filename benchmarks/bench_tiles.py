@@ -116,13 +116,23 @@ def big_scene(tile: int, size: int, repeats: int) -> dict:
             print(f"  {name} run {r + 1}: {wall:.1f} s wall, {cpu:.1f} s CPU (load {os.getloadavg()[0]:.1f})", flush=True)
     qw, qt = score(outs["whole"], gt), score(outs["tiled"], gt)
     tm = plan.tile_map
+    seam = {}
+    if tm is not None:  # gradient across the tile borders against the gradient everywhere, whole and tiled
+        from spikeview.guided.tiles import tile_spans
+
+        edges = [a for a, _ in tile_spans(size, tm.size)[1:]]
+        for name, img in outs.items():
+            g = img.mean(axis=-1) if img.ndim == 3 else img
+            gx, gy = np.abs(np.diff(g, axis=1)), np.abs(np.diff(g, axis=0))
+            border = np.concatenate([gx[:, [e - 1 for e in edges]].ravel(), gy[[e - 1 for e in edges], :].ravel()])
+            seam[name] = float(border.mean() / np.concatenate([gx.ravel(), gy.ravel()]).mean())
     med = {k: (statistics.median(w for w, _, _ in v), statistics.median(c for _, c, _ in v)) for k, v in times.items()}
     return {"size": size, "center": center, "psnr_whole": qw[0], "ssim_whole": qw[1], "psnr_tiled": qt[0], "ssim_tiled": qt[1],
             "dpsnr": qt[0] - qw[0], "dssim": qt[1] - qw[1], "times": times,
             "wall_whole": med["whole"][0], "cpu_whole": med["whole"][1], "wall_tiled": med["tiled"][0],
             "cpu_tiled": med["tiled"][1], "tiles": plan.reasons.get("tiles", ""),
             "tile_map": None if tm is None else tm.as_dict(), "frame_sigma": [255 * float(s) for s in plan.sigma],
-            "max_abs_diff": float(np.abs(outs["tiled"] - outs["whole"]).max())}
+            "max_abs_diff": float(np.abs(outs["tiled"] - outs["whole"]).max()), "border_gradient": seam}
 
 
 def seams() -> list[dict]:
@@ -203,6 +213,8 @@ def write_report(res: dict, out: Path) -> None:
               "| | PSNR (dB) | SSIM | wall (s, median) | CPU (s, median) |", "|---|---|---|---|---|",
               f"| whole frame (`tile = 0`) | {b['psnr_whole']:.2f} | {b['ssim_whole']:.4f} | {b['wall_whole']:.1f} | {b['cpu_whole']:.1f} |",
               f"| tiles of {res['tile']} px | {b['psnr_tiled']:.2f} | {b['ssim_tiled']:.4f} | {b['wall_tiled']:.1f} | {b['cpu_tiled']:.1f} |",
+              "", f"Gradient across the tile borders / everywhere: whole {b['border_gradient'].get('whole', float('nan')):.3f}, "
+              f"tiled {b['border_gradient'].get('tiled', float('nan')):.3f} (no seam: the tiled ratio is the whole frame's).",
               "", f"ΔPSNR {b['dpsnr']:+.3f} dB, ΔSSIM {b['dssim']:+.4f}; time saved {100 * (1 - b['wall_tiled'] / b['wall_whole']):.0f}% "
               f"wall, {100 * (1 - b['cpu_tiled'] / b['cpu_whole']):.0f}% CPU (runs interleaved: "
               + "; ".join(f"{k} " + ", ".join(f"{w:.1f} s @ load {ld:.1f}" for w, _, ld in v) for k, v in b["times"].items()) + ").", ""]

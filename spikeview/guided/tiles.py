@@ -332,9 +332,8 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
         return max(0, y0 - mg), min(h, y1 + mg), max(0, x0 - mg), min(w, x1 + mg)
 
     # the start estimate of the whole frame (as untiled), and every skipped tile's fallback
-    y0_img = start_estimate(obs, plan.mosaic, plan.cast, p.demosaic)
-    start = to_tensor(y0_img)
-    fallback = start.clone()
+    start = to_tensor(start_estimate(obs, plan.mosaic, plan.cast, p.demosaic))
+    fallback = start.clone() if any(t.kind == "skipped" and t.fallback == "baseline" for t in tm.tiles) else start
     for t in tm.tiles:
         if t.kind == "skipped" and t.fallback == "baseline":
             check_cancelled("before a skipped tile's one-pass estimate")
@@ -344,19 +343,21 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
                                      demosaic=p.demosaic))
             fallback[..., t.y0:t.y1, t.x0:t.x1] = one[..., t.y0 - cy0:t.y1 - cy0, t.x0 - cx0:t.x1 - cx0]
 
-    # per-pixel start: full tiles exactly as untiled; a short tile tops its own noise up to its join level
-    jt = torch.from_numpy(np.minimum(join, n - 1).astype(np.int64))
+    # per-pixel start noise: full tiles exactly as untiled; a short tile (and a skipped tile's cross-fade
+    # band) tops its own noise up to the level of the step it joins at (tile by tile: no frame-sized temporaries)
     lad = torch.as_tensor(sigmas[:n], dtype=torch.float32)  # (n, C)
-    obs_c = np.tile(sigma_obs, (h, w, 1)).astype(np.float32)
+    add = torch.as_tensor(sigma_add, dtype=torch.float32).view(1, -1, 1, 1).expand(1, channels, h, w).clone()
     for t in tm.tiles:
-        if t.kind != "full":
-            own = np.asarray(t.sigma_c, dtype=np.float64) * p.sigma_scale
-            own = own if own.size == channels else np.full(channels, float(np.sqrt(np.mean(own ** 2))))
-            obs_c[t.y0:t.y1, t.x0:t.x1] = np.minimum(sigma_obs, own)
-    level = lad[jt].permute(2, 0, 1)[None]  # (1, C, H, W): the level each pixel starts at
-    add = torch.sqrt(torch.clamp(level ** 2 - torch.from_numpy(obs_c).permute(2, 0, 1)[None] ** 2, min=0.0))
-    add = torch.where(torch.from_numpy(join == 0)[None, None], torch.as_tensor(sigma_add, dtype=torch.float32).view(1, -1, 1, 1), add)
-    del obs_c
+        jr = join[t.y0:t.y1, t.x0:t.x1]
+        if t.kind == "full" and not (jr > 0).any():
+            continue
+        own = np.asarray(t.sigma_c, dtype=np.float64) * p.sigma_scale
+        own = own if own.size == channels else np.full(channels, float(np.sqrt(np.mean(own ** 2))))
+        own = torch.as_tensor(np.minimum(sigma_obs, own) if t.kind != "full" else sigma_obs, dtype=torch.float32)
+        level = lad[torch.from_numpy(np.minimum(jr, n - 1).astype(np.int64))].permute(2, 0, 1)[None]
+        top = torch.sqrt(torch.clamp(level ** 2 - own.view(1, -1, 1, 1) ** 2, min=0.0))
+        region = add[..., t.y0:t.y1, t.x0:t.x1]
+        region.copy_(torch.where(torch.from_numpy(jr == 0)[None, None], region, top))
     skipped_only = torch.from_numpy(join >= n)[None, None]
     wd = torch.from_numpy(wdiff)[None, None]
     precision = plan.precision or prec.resolve_precision(p.precision)[0]
@@ -380,8 +381,9 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
 
     acc = torch.zeros_like(start)
     for chain in range(p.chains):
-        noise = torch.randn(start.shape, generator=gen, dtype=start.dtype) if bool((add > 0).any()) else torch.zeros_like(start)
-        x = torch.where(skipped_only, fallback, start + add * noise)
+        x = torch.randn(start.shape, generator=gen, dtype=start.dtype) if bool((add > 0).any()) else torch.zeros_like(start)
+        x.mul_(add).add_(start)  # start + add·z, as the untiled run draws it
+        x = torch.where(skipped_only, fallback, x, out=x)
         x0_full = torch.where(skipped_only, fallback, start)
         for i in range(n):
             done = chain * n + i
@@ -392,7 +394,7 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
                 sigma = torch.as_tensor(sigmas[i], dtype=start.dtype).view(1, -1, 1, 1)
                 transform = ((i + 3 * chain) % 8) if p.self_ensemble else None
                 prior_i = prec.at_precision(prior, layer_prec[i])
-                new = x0_full.clone()
+                new = x0_full  # written in place: the rectangles read x, never x̂₀
                 used: dict = {}
                 for ry0, ry1, rx0, rx1 in _rectangles(act, bands, max_area, cuts):
                     check_cancelled(f"at step {done + 1} of {total}")
@@ -419,8 +421,8 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
                     prev = sched.step(new, i, x, zeta=p.zeta, generator=gen).prev_sample
                 else:
                     prev = new
-                x = torch.where(mask, prev, x)
-                x0_full = new
+                torch.where(mask, prev, x, out=x)
+                del prev
             sampler.info.steps = done + 1
             if callback is not None:
                 callback(done + 1, total, to_image(blend((acc + x0_full) / (chain + 1))))
