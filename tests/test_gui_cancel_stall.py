@@ -155,3 +155,22 @@ def test_an_unset_flag_changes_nothing(cfa):
     with cancel_scope(threading.Event()):
         scoped = jobs.window_observation(src, TICK, cfg, state.alpha, None)
     assert np.array_equal(plain.y, scoped.y) and np.array_equal(plain.dtau, scoped.dtau)
+
+
+@pytest.mark.parametrize("cfa", [None, "RGGB"], ids=["mono", "bayer"])
+def test_cancel_stops_the_pooling_of_the_neighbours(cfa, monkeypatch):
+    """After the alignment, each neighbouring window's pooling (≈0.1 s at 1000×1000) checks the flag."""
+    import spikeview.guided.temporal as temporal
+
+    src = capture(cfa)
+    ctx, reports = context()
+    original = temporal._box_same_colour
+
+    def hooked(*args, **kwargs):  # the pooling loop's first 3×3 sums: Cancel pressed here
+        ctx.cancelled.set()
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(temporal, "_box_same_colour", hooked)
+    with pytest.raises(Cancelled, match="pooling"):
+        jobs.guided_job(request(src), ctx)
+    assert reports == [] and "sampler" not in ctx.state

@@ -326,6 +326,8 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     """
     from scipy.ndimage import gaussian_filter
 
+    from spikeview.errors import check_cancelled
+
     cache = cache if cache is not None else WindowCache()
     window = int(b - a)
     n0 = cache.counts(source, a, b)
@@ -372,6 +374,7 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
         for k in (-d, d):
             if k not in counts:
                 continue
+            check_cancelled("while pooling the neighbouring windows")  # each window's pooling: ~0.1 s at 1000×1000
             nk = counts[k]
             # tiles of the guide are tiles of TILE photosites (an odd last row/column of a Bayer frame
             # has no super-pixel: it takes its neighbour tile's match)
