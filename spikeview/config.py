@@ -14,6 +14,7 @@ one validation path, with :func:`check_value`) are all generated from it.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 import tomllib
@@ -98,9 +99,16 @@ def check_value(name: str, kind: Any, value: Any, lo: float | None = None, hi: f
     return value
 
 
+@functools.lru_cache(maxsize=None)
+def _type_hints(cls: type) -> dict[str, Any]:
+    """``typing.get_type_hints(cls)``, once per class: it evaluates every annotation string each call (~1 ms a
+    class), and every config built checks every field (the app builds its recipe on the GUI thread; issue 15)."""
+    return typing.get_type_hints(cls)
+
+
 def field_kind(cls: type, name: str) -> tuple[Any, bool]:
     """``(type, optional)`` of a config field: ``int | None`` gives ``(int, True)``."""
-    tp = typing.get_type_hints(cls)[name]
+    tp = _type_hints(cls)[name]
     if typing.get_origin(tp) in (typing.Union, types.UnionType):
         args = [a for a in typing.get_args(tp) if a is not type(None)]
         return (args[0] if len(args) == 1 else tp), type(None) in typing.get_args(tp)
