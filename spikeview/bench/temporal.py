@@ -26,7 +26,7 @@ keyframes, frames divided by the white point and clipped as in a bounded output)
 Scores: PSNR and SSIM (:mod:`spikeview.metrics`, ``data_range = 1``) per frame after the per-channel
 least-squares gain of the guided benchmark (:func:`spikeview.bench.guided.score`), averaged over the
 frames; the **temporal error** ``RMS_t,p((x_t − x_{t−1}) − (g_t − g_{t−1}))`` in 1/255 with one gain per
-sequence and method (fitted over all its frames), so a flickering exposure counts; seconds per frame
+channel, sequence and method (fitted over all its frames), so a flickering exposure counts; seconds per frame
 (mean over the sequence, so reused frames count at their cost; 2 torch threads, a shared machine).
 """
 
@@ -287,7 +287,7 @@ def report(res: dict, default_radius: int | None = None) -> str:
          f"are upper bounds); run took {info['minutes']:.0f} min. Command: `spikeview bench --sequences`"
          + (" --quick" if info.get("quick") else "") + f" ({info['size']}×{info['size']}, {info['frames']} frames per sequence).",
          "Scores: per frame after a per-channel least-squares gain (PSNR/SSIM, data_range 1, mean over frames); temporal error "
-         "RMS((x_t − x_{t−1}) − (g_t − g_{t−1})) ×255 with one gain per sequence; seconds: mean per frame (reused frames included).",
+         "RMS((x_t − x_{t−1}) − (g_t − g_{t−1})) ×255 with one gain per channel for the whole sequence; seconds: mean per frame (reused frames included).",
          f"Compared for the targets: **{pooled}** against **{single}**.", "",
          "| sequence | set | method | PSNR | SSIM | temporal error /255 | s/frame | pooling (frames) |", "|---|---|---|---|---|---|---|---|"]
     for s in seqs:
