@@ -3,13 +3,14 @@
 With ``guided.tile = T`` (pixels, 0 = off) a frame larger than ``T`` is cut into a grid of tiles of
 about ``T × T`` (:func:`tile_spans`, even edges so every tile keeps the CFA phase). For each tile the
 plan measures the noise σ of the corrected TFP estimate on that tile alone
-(:func:`~spikeview.guided.observation.estimate_sigma`) and decides (:func:`plan_tiles`):
+(:func:`~spikeview.guided.observation.estimate_sigma`, the noise scale κ estimated on the tile: a
+clean tile is found clean even where the frame's model would not say so) and decides (:func:`plan_tiles`):
 
 * **skipped** — σ at or below ``noise_target``: no diffusion; the tile gets TFP (σ <= target/4) or
   one FFDNet pass, as a frame that needs no diffusion would;
 * **short** — the noise the prior is told (``σ · sigma_scale``) is below half the frame's start
-  level: the tile joins the frame's σ ladder at the first step whose level is at most twice that
-  noise and takes only the steps from there on;
+  level: the tile joins the frame's σ ladder at the first step whose level is at most
+  :data:`JOIN_FACTOR` (3) times that noise and takes only the steps from there on;
 * **full** — the whole ladder.
 
 Sampling is **step-synchronous** (:func:`run_tiled`): one sample ``x`` of the whole frame and one σ

@@ -234,7 +234,7 @@ class GuidedPanel(QtWidgets.QWidget):
             pen.setCosmetic(True)
             pen.setWidthF(1.5)
             item.setPen(pen)
-            colour.setAlpha(40)
+            colour.setAlpha(28)
             item.setBrush(colour)
             item.setZValue(10)
             item.setToolTip(f"{kind}: {steps} step{'s' if steps != 1 else ''}")
