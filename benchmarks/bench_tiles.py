@@ -8,7 +8,7 @@ Usage::
    each, the benchmark's observation): the default sampler with ``tile = T`` against ``tile = 0``,
    PSNR/SSIM against the ground truth (``data_range = 1``) for both, and the plan's tile line;
 2. **a 1000² natural scene with bright and dark regions** (the astronaut photograph, static, its
-   exposure falling from 1 on the left to 0.06 on the right), observed as the CLI does (gray-world
+   exposure falling from 1 on the left to 0.06 on the right; and from 8, clipped, to 0.05), observed as the CLI does (gray-world
    α, exposure, temporal pooling ``temporal_radius = 3``): tiled vs whole, PSNR/SSIM vs ground
    truth, wall and CPU seconds interleaved (medians), the tile map;
 3. **seams**: a uniform-noise scene (160², Bayer and mono) tiled into 9 rectangles against the whole
@@ -77,26 +77,27 @@ def held_out(tile: int, frames: int, size: int, scenes: list[str] | None) -> dic
             "dpsnr_mean": float(np.mean([r["dpsnr"] for r in rows])), "dssim_mean": float(np.mean([r["dssim"] for r in rows]))}
 
 
-def natural_scene(size: int, n_ticks: int = 80, seed: int = 5):
-    """The astronaut, static, exposure falling from 1 (left) to 0.06 (right): bright and dark tiles."""
+def natural_scene(size: int, n_ticks: int = 80, seed: int = 5, bright: float = 1.0, dark: float = 0.06):
+    """The astronaut, static, exposure falling from ``bright`` (left; above 1: clipped, an overexposed
+    part) to ``dark`` (right): bright and dark tiles."""
     from spikeview.bench.data import scene_image
     from spikeview.sim import MotionScene, SimConfig, simulate as sim
 
     img = scene_image("astronaut")
-    gain = np.geomspace(1.0, 0.06, img.shape[1]).astype(np.float32)
+    gain = np.geomspace(bright, dark, img.shape[1]).astype(np.float32)
     img = np.clip(img * gain[None, :, None], 0.0, 1.0)
     scene = MotionScene(img, size=(size, size), pan=(0.0, 0.0))
     return sim(scene, SimConfig(n_ticks=n_ticks, seed=seed, gt_every=10))
 
 
-def big_scene(tile: int, size: int, repeats: int) -> dict:
+def big_scene(tile: int, size: int, repeats: int, bright: float = 1.0, dark: float = 0.06) -> dict:
     from spikeview.bench.guided import Sequence, score
     from spikeview.guided.config import GuidedConfig
     from spikeview.guided.observation import EXPOSURE_LEVEL, Observation, exposed_eta
     from spikeview.guided.sampler import GuidedSampler
 
     t0 = time.perf_counter()
-    cap = natural_scene(size)
+    cap = natural_scene(size, bright=bright, dark=dark)
     center = 45
     seq = Sequence(cap)
     eta = exposed_eta(seq.eta, seq.white, EXPOSURE_LEVEL)
@@ -104,35 +105,45 @@ def big_scene(tile: int, size: int, repeats: int) -> dict:
     obs = Observation.from_source(cap, center, p.window, alpha=seq.alpha, eta=eta, radius=p.temporal_radius)
     gt = cap.gt_at(center)
     print(f"  scene {size}²: simulated and observed in {time.perf_counter() - t0:.0f} s", flush=True)
+    from spikeview.guided import tiles
+
     smp = GuidedSampler(p)
-    outs, times = {}, {"whole": [], "tiled": []}
+    outs, times, plans = {}, {"whole": [], "tiled": [], "short kept": []}, {}
     for r in range(repeats):
-        for name, cfg in (("whole", p.replace(tile=0)), ("tiled", p.replace(tile=tile))):
-            out, wall, cpu = _timed(lambda cfg=cfg: smp.run(obs, cfg))
+        for name, cfg, pay in (("whole", p.replace(tile=0), tiles.PAY_WORK), ("tiled", p.replace(tile=tile), tiles.PAY_WORK),
+                               ("short kept", p.replace(tile=tile), 1.0)):
+            old, tiles.PAY_WORK = tiles.PAY_WORK, pay
+            try:
+                out, wall, cpu = _timed(lambda cfg=cfg: smp.run(obs, cfg))
+            finally:
+                tiles.PAY_WORK = old
             outs[name] = out
             times[name].append((wall, cpu, os.getloadavg()[0]))
-            if name == "tiled":
-                plan = smp.info.plan
-            print(f"  {name} run {r + 1}: {wall:.1f} s wall, {cpu:.1f} s CPU (load {os.getloadavg()[0]:.1f})", flush=True)
+            plans[name] = smp.info.plan
+            print(f"  {name} run {r + 1}: {wall:.1f} s wall, {cpu:.1f} s CPU (load {os.getloadavg()[0]:.1f}), mode {smp.info.mode}", flush=True)
+    plan = plans["tiled"]
     qw, qt = score(outs["whole"], gt), score(outs["tiled"], gt)
+    qs = score(outs["short kept"], gt)
     tm = plan.tile_map
     seam = {}
     if tm is not None:  # gradient across the tile borders against the gradient everywhere, whole and tiled
         from spikeview.guided.tiles import tile_spans
 
         edges = [a for a, _ in tile_spans(size, tm.size)[1:]]
-        for name, img in outs.items():
+        for name, img in outs.items():  # noqa: B007
             g = img.mean(axis=-1) if img.ndim == 3 else img
             gx, gy = np.abs(np.diff(g, axis=1)), np.abs(np.diff(g, axis=0))
             border = np.concatenate([gx[:, [e - 1 for e in edges]].ravel(), gy[[e - 1 for e in edges], :].ravel()])
             seam[name] = float(border.mean() / np.concatenate([gx.ravel(), gy.ravel()]).mean())
     med = {k: (statistics.median(w for w, _, _ in v), statistics.median(c for _, c, _ in v)) for k, v in times.items()}
-    return {"size": size, "center": center, "psnr_whole": qw[0], "ssim_whole": qw[1], "psnr_tiled": qt[0], "ssim_tiled": qt[1],
+    short = {"psnr": qs[0], "ssim": qs[1], "dpsnr": qs[0] - qw[0], "dssim": qs[1] - qw[1], "wall": med["short kept"][0],
+             "cpu": med["short kept"][1], "tiles": plans["short kept"].reasons.get("tiles", "")}
+    return {"size": size, "center": center, "exposure": [bright, dark], "psnr_whole": qw[0], "ssim_whole": qw[1], "psnr_tiled": qt[0], "ssim_tiled": qt[1],
             "dpsnr": qt[0] - qw[0], "dssim": qt[1] - qw[1], "times": times,
             "wall_whole": med["whole"][0], "cpu_whole": med["whole"][1], "wall_tiled": med["tiled"][0],
             "cpu_tiled": med["tiled"][1], "tiles": plan.reasons.get("tiles", ""),
             "tile_map": None if tm is None else tm.as_dict(), "frame_sigma": [255 * float(s) for s in plan.sigma],
-            "max_abs_diff": float(np.abs(outs["tiled"] - outs["whole"]).max()), "border_gradient": seam}
+            "max_abs_diff": float(np.abs(outs["tiled"] - outs["whole"]).max()), "border_gradient": seam, "short_kept": short}
 
 
 def seams() -> list[dict]:
@@ -151,12 +162,12 @@ def seams() -> list[dict]:
         for precision in ("float32", "auto"):
             p = GuidedConfig(precision=precision)
             whole = smp.run(obs, p)
-            old = tiles.MAX_AREA
-            tiles.MAX_AREA = 3000  # 9 rectangles
+            old = tiles.MAX_AREA, tiles.TileMap.pays
+            tiles.MAX_AREA, tiles.TileMap.pays = 3000, lambda self: True  # tiled on purpose, in 9 rectangles
             try:
                 tiled = smp.run(obs, p.replace(tile=64))
             finally:
-                tiles.MAX_AREA = old
+                tiles.MAX_AREA, tiles.TileMap.pays = old
             gray = tiled.mean(axis=-1) if tiled.ndim == 3 else tiled
             edges = [a for a, _ in tiles.tile_spans(160, 64)[1:]]
             gx = np.abs(np.diff(gray, axis=1))
@@ -206,16 +217,22 @@ def write_report(res: dict, out: Path) -> None:
         L += [f"| {r['scene']} | {r['center']} | {r['psnr_whole']:.2f} | {r['psnr_tiled']:.2f} | {r['ssim_whole']:.4f} | "
               f"{r['ssim_tiled']:.4f} | {r['wall_whole']:.1f} / {r['wall_tiled']:.1f} | {r['tiles']} |" for r in h["rows"]]
         L += [""]
-    if res.get("big"):
-        b = res["big"]
-        L += [f"## {b['size']}×{b['size']} natural scene, bright left to dark right (astronaut, static, pooled ±3 windows)", "",
+    for b in res.get("big") or []:
+        bright, dark = b.get("exposure", [1.0, 0.06])
+        L += [f"## {b['size']}×{b['size']} natural scene, exposure ×{bright:g} (left) to ×{dark:g} (right) "
+              f"(astronaut, static, pooled ±3 windows{'; the left part clipped' if bright > 1 else ''})", "",
               f"Tile line: `{b['tiles']}`; frame TFP σ {', '.join(f'{s:.1f}' for s in b['frame_sigma'])} /255.", "",
               "| | PSNR (dB) | SSIM | wall (s, median) | CPU (s, median) |", "|---|---|---|---|---|",
               f"| whole frame (`tile = 0`) | {b['psnr_whole']:.2f} | {b['ssim_whole']:.4f} | {b['wall_whole']:.1f} | {b['cpu_whole']:.1f} |",
-              f"| tiles of {res['tile']} px | {b['psnr_tiled']:.2f} | {b['ssim_tiled']:.4f} | {b['wall_tiled']:.1f} | {b['cpu_tiled']:.1f} |",
+              f"| tiles of {res['tile']} px (the default) | {b['psnr_tiled']:.2f} | {b['ssim_tiled']:.4f} | {b['wall_tiled']:.1f} | {b['cpu_tiled']:.1f} |",
+              *([f"| tiles, short tiles kept (`PAY_WORK = 1`) | {b['short_kept']['psnr']:.2f} | {b['short_kept']['ssim']:.4f} | "
+                 f"{b['short_kept']['wall']:.1f} | {b['short_kept']['cpu']:.1f} |", "",
+                 f"Short tiles kept: `{b['short_kept']['tiles']}`; ΔPSNR {b['short_kept']['dpsnr']:+.3f} dB, ΔSSIM "
+                 f"{b['short_kept']['dssim']:+.4f} against the whole frame."] if b.get("short_kept") else []),
               "", f"Gradient across the tile borders / everywhere: whole {b['border_gradient'].get('whole', float('nan')):.3f}, "
-              f"tiled {b['border_gradient'].get('tiled', float('nan')):.3f} (no seam: the tiled ratio is the whole frame's).",
-              "", f"ΔPSNR {b['dpsnr']:+.3f} dB, ΔSSIM {b['dssim']:+.4f}; time saved {100 * (1 - b['wall_tiled'] / b['wall_whole']):.0f}% "
+              f"tiled {b['border_gradient'].get('tiled', float('nan')):.3f}, short tiles kept "
+              f"{b['border_gradient'].get('short kept', float('nan')):.3f} (no seam: the same ratio as the whole frame's).",
+              "", f"Default against the whole frame: ΔPSNR {b['dpsnr']:+.3f} dB, ΔSSIM {b['dssim']:+.4f}; time saved {100 * (1 - b['wall_tiled'] / b['wall_whole']):.0f}% "
               f"wall, {100 * (1 - b['cpu_tiled'] / b['cpu_whole']):.0f}% CPU (runs interleaved: "
               + "; ".join(f"{k} " + ", ".join(f"{w:.1f} s @ load {ld:.1f}" for w, _, ld in v) for k, v in b["times"].items()) + ").", ""]
     if res.get("memory"):
@@ -237,6 +254,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-seams", dest="seams", action="store_false")
     ap.add_argument("--big-size", type=int, default=1000)
     ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--memory-sizes", type=int, nargs="*", default=[256, 1000, 2000])
     ap.add_argument("--out", type=Path, default=None)
     a = ap.parse_args(argv)
     t_start = time.time()
@@ -250,13 +268,14 @@ def main(argv: list[str] | None = None) -> int:
                                    ["rocket", "page_bright"] if a.quick else None)
     if a.big:
         print("natural scene", flush=True)
-        res["big"] = big_scene(a.tile, 256 if a.quick else a.big_size, 1 if a.quick else a.repeats)
+        res["big"] = [big_scene(a.tile, 256 if a.quick else a.big_size, 1 if a.quick else a.repeats, bright, dark)
+                      for bright, dark in ((1.0, 0.06), (8.0, 0.05))]
     if a.memory:
         res["memory"] = []
         with tempfile.TemporaryDirectory() as d:
             for size in ((256,) if a.quick else (1000, 2000)):
                 path = simulate(size, Path(d))
-                for extra in ([], ["--tile", "0"]):
+                for extra in ([], ["--tile", "0"]) if size in a.memory_sizes else ():
                     r = peak_rss(path, extra)
                     r["capture"] = f"{size}×{size}"
                     res["memory"].append(r)
@@ -271,6 +290,8 @@ def main(argv: list[str] | None = None) -> int:
             for key in ("seams", "held_out", "big", "memory"):
                 if key not in res and key in last:
                     res[key] = last[key]
+            done = {r["capture"] for r in res.get("memory", [])}
+            res["memory"] = res.get("memory", []) + [r for r in last.get("memory", []) if r["capture"] not in done]
         (out / "tiles.json").write_text(json.dumps(res, indent=1), encoding="utf-8")
         write_report(res, out / "tiles.md")
         print(f"wrote {out / 'tiles.md'}")

@@ -157,7 +157,8 @@ def test_sampler_cancel_inside_the_first_prior_pass(monkeypatch, color):
 
 @COLOR
 def test_tiled_run_reports_the_whole_frame_every_step_and_cancels_between_steps(color, monkeypatch):
-    monkeypatch.setattr(tiles, "MAX_AREA", 4096)  # a uniform frame is tiled only above this area (memory)
+    monkeypatch.setattr(tiles, "MAX_AREA", 4096)  # several rectangles
+    monkeypatch.setattr(tiles.TileMap, "pays", lambda self: True)  # all tiles full: tiled on purpose
     obs = _obs((64, 160), "RGGB" if color else None)
     smp = GuidedSampler(prior=_net(color))
     p = GuidedConfig(precision="float32", steps=2, tile=64)

@@ -85,11 +85,17 @@ def test_tile_map_follows_the_noise_of_each_tile(cfa):
 
 
 @pytest.mark.parametrize("cfa", ["RGGB", None], ids=["bayer", "mono"])
-def test_a_short_tile_joins_the_frames_ladder_late(cfa):
+def test_a_short_tile_joins_the_frames_ladder_late(cfa, monkeypatch):
     rates = np.full((64, 128), 0.3)
     rates[:, 64:] = 0.99  # bright: less noise, but still above the target
     obs = _obs(rates, cfa, ticks=80)
     p = GuidedConfig(tile=64, noise_target=1.0 / 255.0, precision="float32", steps=4)
+    # short tiles that leave out too little of the work take the whole ladder (the margins would cost more)
+    worth = make_plan(obs, p).tile_map
+    assert worth.counts()["short"] == (1 if worth.work() <= tiles.PAY_WORK else 0)
+    if worth.counts()["short"] == 0:
+        assert worth.work_if_short > tiles.PAY_WORK and "all full" in worth.summary()
+    monkeypatch.setattr(tiles, "PAY_WORK", 1.0)
     tm = make_plan(obs, p).tile_map
     dark, bright = tm.tiles
     assert dark.kind == "full" and dark.join == 0
@@ -121,6 +127,7 @@ def test_tiled_uniform_scene_matches_the_whole_frame_everywhere(cfa, monkeypatch
     p = GuidedConfig(precision="float32", steps=3)
     whole = smp.run(obs, p)
     monkeypatch.setattr(tiles, "MAX_AREA", 2000)  # cut the frame into 2×2 rectangles of one tile each
+    monkeypatch.setattr(tiles.TileMap, "pays", lambda self: True)  # all tiles full: tiled on purpose
     seen = []
     orig = tiles._rectangles
     monkeypatch.setattr(tiles, "_rectangles", lambda *a: seen.append(orig(*a)) or seen[-1])
