@@ -175,10 +175,26 @@ def frame_ladder(plan: Any, p: Any, channels: int, sigma_max: float) -> tuple[An
     return sched, sigma_obs, sigma_add
 
 
+def _frame_variance(obs: Any, use_mosaic: bool, use_cast: bool) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """``(var (C, H, W), κ (channels,), gain (C,))``: the per-pixel variance of the start estimate the
+    frame's noise model gives (:func:`~spikeview.guided.observation.estimate_sigma` before its mean),
+    the frame's noise scale κ and the cast gain (one pass over the frame instead of one per tile)."""
+    import torch
+
+    from spikeview.ops.noise import demosaic_variance
+
+    kappa = np.asarray(obs.noise_scale(), dtype=np.float64)
+    var = obs.variance()
+    if obs.cfa is None or not use_mosaic:
+        return var[None], (kappa if kappa.size == 1 else None), np.ones(1)
+    v = demosaic_variance(torch.from_numpy(var)[None, None], obs.cfa)[0].numpy()
+    gain = (obs.alpha / obs.eta) if (use_cast and obs.alpha is not None) else np.ones(3)
+    return v, kappa, np.asarray(gain, dtype=np.float64)
+
+
 def plan_tiles(obs: Any, plan: Any, p: Any, size: int | None = None) -> TileMap:
     """The per-tile decisions for ``obs`` under the frame's ``plan`` and settings ``p`` (see the module docstring)."""
     from spikeview.guided.config import SIGMA_MAX
-    from spikeview.guided.observation import estimate_sigma
 
     size = int(size or p.tile)
     h, w = obs.shape
@@ -188,9 +204,15 @@ def plan_tiles(obs: Any, plan: Any, p: Any, size: int | None = None) -> TileMap:
     n = int(p.steps)
     levels = sched.sigmas[:n].max(axis=1)  # the level of each step (largest over channels)
     tm = TileMap((h, w), size, len(ys), len(xs), ladder=n)
+    var, kappa, gain = _frame_variance(obs, plan.mosaic, plan.cast)
     for y0, y1 in ys:
         for x0, x1 in xs:
-            sc = np.atleast_1d(estimate_sigma(obs.crop(y0, y1, x0, x1), plan.mosaic, plan.cast)).astype(float)
+            # estimate_sigma of the tile alone: the frame's demosaicked variance rescaled by the tile's own
+            # noise scale κ (the variance is linear in κ per channel), averaged over the tile
+            ratio = obs.crop(y0, y1, x0, x1).noise_scale() / kappa if kappa is not None else np.ones(1)
+            if ratio.size != var.shape[0]:
+                ratio = np.full(var.shape[0], float(np.mean(ratio)))
+            sc = np.sqrt(ratio * var[:, y0:y1, x0:x1].reshape(var.shape[0], -1).mean(axis=1, dtype=np.float64)) * gain
             s = float(sc.max())
             t = Tile(y0, y1, x0, x1, "full", s, sigma_c=tuple(sc.tolist()))
             told = s * float(p.sigma_scale)
