@@ -66,6 +66,10 @@ class GuidedPanel(QtWidgets.QWidget):
                                                            "float32": "float32 (reference)",
                                                            "float32-fast": "float32, NNPACK",
                                                            "bfloat16-mixed": "bfloat16 at high noise"})
+        # the combo's longest text must not set the panel's width (with the Tiles button beside it the window no
+        # longer fitted a 1366-pixel screen): the full text shows when the list opens
+        self.precision.setSizeAdjustPolicy(QtWidgets.QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
+        self.precision.setMinimumContentsLength(14)
         self.tiles_btn = QtWidgets.QToolButton(text="Tiles", objectName="tile_map_toggle", checkable=True)
         self.tiles_btn.toggled.connect(lambda _on: self._draw_tiles())
         self._tile_map: dict[str, Any] | None = None
