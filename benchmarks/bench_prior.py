@@ -29,6 +29,12 @@ Usage::
     python benchmarks/bench_prior.py              # speed and memory (~5 min quiet), writes benchmarks/results/prior.{md,json}
     python benchmarks/bench_prior.py --quality    # plus the PSNR/SSIM cost of each candidate (+ several minutes)
     python benchmarks/bench_prior.py --quick      # 256² frames, 1000² pass, 2–3 repeats, no writing (~1.5 min quiet)
+    python benchmarks/bench_prior.py --quality-json benchmarks/results/prior.json --no-compile --repeats 3
+                                                  # speed only, quality rows kept (~6 min quiet)
+
+An **AVX2-only CPU** is played by this one in a child process with ``ONEDNN_MAX_CPU_ISA=AVX2
+ATEN_CPU_CAPABILITY=avx2`` (set before torch loads; ``auto`` then resolves as on an AVX2 CPU): its
+guided frames against today's path in the same child (``--no-avx2`` skips it).
 """
 
 from __future__ import annotations
@@ -49,14 +55,19 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 FLAGS = ("avx2", "avx512f", "avx512_bf16", "avx512_vnni", "amx_tile", "amx_bf16", "amx_int8")
-#: candidates measured for quality: name -> (guided.precision, layers in bf16, bf16 on steps with σ >= threshold)
+#: candidates measured for quality: name -> (guided.precision, layers in bf16, bf16 on steps with σ >= threshold);
+#: the default 6 steps run at σ = 50, 31.5, 19.9, 12.6, 7.9, 5 /255; bf16 layers carry the bias correction
+#: of their rounded weights (float32 bias, FFDNetDenoiser._layers)
 CANDIDATES = {
     "float32-fast (NNPACK)": ("float32-fast", None, None),
-    "bf16 hidden, σ ≥ 45/255 (1 of 6 steps)": ("bfloat16-mixed", "bfloat16", 45 / 255),
     "bf16 hidden, σ ≥ 30/255 (2 of 6 steps)": ("bfloat16-mixed", "bfloat16", 30 / 255),
     "bf16 hidden, σ ≥ 18/255 (3 of 6 steps)": ("bfloat16-mixed", "bfloat16", 18 / 255),
+    "bf16 hidden, σ ≥ 12/255 (4 of 6 steps)": ("bfloat16-mixed", "bfloat16", 12 / 255),
     "bf16 hidden, all but the last step": ("bfloat16-mixed", "bfloat16", 6 / 255),
-    "bf16 all layers, every step (blunt)": ("bfloat16-mixed", "bfloat16-all", 0.0),
+    "bf16 hidden, every step": ("bfloat16-mixed", "bfloat16", 0.0),
+    "bf16 all layers, σ ≥ 18/255 (3 of 6 steps; the default)": ("bfloat16-mixed", "bfloat16-all", 18 / 255),
+    "bf16 all layers, σ ≥ 12/255 (4 of 6 steps)": ("bfloat16-mixed", "bfloat16-all", 12 / 255),
+    "bf16 all layers, all but the last step": ("bfloat16-mixed", "bfloat16-all", 6 / 255),
 }
 
 
@@ -138,6 +149,7 @@ def bench_pass(size: int, repeats: int, compile_ok: bool) -> dict:
     s = 25.0 / 255.0
     ng = torch.inference_mode
     fns = {"eager float32 (today)": lambda: _nog(ng, reference_forward, net, x, s),
+           "channels-last float32, unfused (before)": lambda: _unfused(ng, net, x, s, "float32"),
            "channels-last float32": lambda: _nog(ng, net, x, s, "float32"),
            "NNPACK float32 (float32-fast)": lambda: _nog(ng, net, x, s, "float32-fast"),
            "bf16 hidden layers": lambda: _nog(ng, net, x, s, "bfloat16"),
@@ -179,6 +191,18 @@ def _nog(ctx, f, *a):
         return f(*a)
 
 
+def _unfused(ctx, net, *a):
+    """The pass with oneDNN's fused conv + ReLU on packed weights turned off (F.conv2d, then ReLU)."""
+    from spikeview.guided.priors import ffdnet
+
+    real = ffdnet.fused_ok
+    ffdnet.fused_ok = lambda: False
+    try:
+        return _nog(ctx, net, *a)
+    finally:
+        ffdnet.fused_ok = real
+
+
 # ------------------------------------------------------------------------------ 2. guided frame
 def simulate(size: int, folder: Path) -> Path:
     """A demo capture of ``size``² (200 ticks) written by the CLI, as a user would."""
@@ -203,7 +227,7 @@ def user_observation(path: Path, center: int = 100):
     return Observation.from_source(src, center, params.window, alpha=state.alpha, eta=params.eta), params
 
 
-def bench_frame(path: Path, repeats: int) -> dict:
+def bench_frame(path: Path, repeats: int, variants: tuple[str, ...] = ("float32", "float32-fast", "bfloat16-mixed")) -> dict:
     import numpy as np
 
     from spikeview.guided.precision import resolve_precision
@@ -221,14 +245,50 @@ def bench_frame(path: Path, repeats: int) -> dict:
             outs[name] = sampler.run(obs, p)
         return f
 
-    fns = {"eager float32 (today)": run("ref", ref, params.replace(precision="float32")),
-           "--precision float32": run("float32", smp, params.replace(precision="float32")),
-           "--precision float32-fast": run("float32-fast", smp, params.replace(precision="float32-fast")),
-           "--precision bfloat16-mixed": run("bfloat16-mixed", smp, params.replace(precision="bfloat16-mixed"))}
+    fns = {"eager float32 (today)": run("ref", ref, params.replace(precision="float32"))}
+    for v in variants:
+        fns[f"--precision {v}" + (" (auto)" if v == auto else "")] = run(v, smp, params.replace(precision=v))
     res = interleaved(fns, repeats)
-    diff = {f"{k} vs today": float(np.abs(outs[k] - outs["ref"]).max()) for k in ("float32", "float32-fast", "bfloat16-mixed")}
+    diff = {f"{k} vs today": float(np.abs(outs[k] - outs["ref"]).max()) for k in variants}
     return {"size": obs.shape[0], "rows": res, "max_abs_diff": diff, "auto": auto, "steps": params.steps,
             "mode": smp.info.mode}
+
+
+# ----------------------------------------------------------------------------- 2b. AVX2-only
+AVX2_ENV = {"ONEDNN_MAX_CPU_ISA": "AVX2", "ATEN_CPU_CAPABILITY": "avx2"}
+
+
+def run_avx2(repeats: int, quick: bool) -> dict:
+    """The guided frames again in a child process whose oneDNN and ATen are capped at AVX2 (this CPU
+    playing an AVX2-only one): today's eager float32 path against what ``auto`` resolves to there."""
+    with tempfile.TemporaryDirectory() as d:
+        out = Path(d) / "avx2.json"
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--isa-child", str(out), "--repeats", str(repeats)] + (["--quick"] if quick else [])
+        r = subprocess.run(cmd, env={**os.environ, **AVX2_ENV}, capture_output=True, text=True)
+        if r.returncode != 0 or not out.exists():
+            return {"error": (r.stderr or r.stdout).strip().splitlines()[-1:] or ["no output"]}
+        return json.loads(out.read_text(encoding="utf-8"))
+
+
+def isa_child(out: Path, repeats: int, quick: bool) -> int:
+    import torch
+
+    from spikeview.guided.precision import cpu_summary, resolve_precision
+
+    torch.set_num_threads(2)
+    auto, why = resolve_precision("auto")
+    res = {"env": {k: os.environ.get(k, "") for k in AVX2_ENV}, "capability": cpu_summary()["capability"],
+           "onednn_bf16": cpu_summary()["onednn_bf16"], "auto": auto, "auto_reason": why, "load_before": os.getloadavg()[0],
+           "frames": []}
+    work = Path(tempfile.mkdtemp(prefix="bench_prior_avx2_"))
+    try:
+        for size in ((256,) if quick else (256, 1000)):
+            res["frames"].append(bench_frame(simulate(size, work), 3 * repeats if size <= 256 else repeats, variants=(auto,)))
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    res["load_after"] = os.getloadavg()[0]
+    out.write_text(json.dumps(res, indent=1), encoding="utf-8")
+    return 0
 
 
 # --------------------------------------------------------------------------------- 3. quality
@@ -315,6 +375,20 @@ def write_report(res: dict, out: Path) -> None:
         for k, v in f["rows"].items():
             L.append(f"| {k} | {v['wall']:.2f} | {v['min']:.2f} | {v['cpu']:.2f} | {base / v['wall']:.2f}× |")
         L += ["", "Max abs pixel difference vs today: " + ", ".join(f"{k} {v:.2g}" for k, v in f["max_abs_diff"].items()) + ".", ""]
+    av = res.get("avx2")
+    if av:
+        L += ["## AVX2-only: the same CPU capped at AVX2 (child process, `ONEDNN_MAX_CPU_ISA=AVX2 ATEN_CPU_CAPABILITY=avx2`)", ""]
+        if "error" in av:
+            L += [f"Not measured: {av['error']}.", ""]
+        else:
+            L += [f"torch CPU capability {av['capability']}, oneDNN bf16 {av['onednn_bf16']}: `auto` resolves to **{av['auto']}** "
+                  f"({av['auto_reason']}). 1-min load {av['load_before']:.1f} before, {av['load_after']:.1f} after; × in the same child run.", ""]
+            for f in av["frames"]:
+                base = f["rows"]["eager float32 (today)"]["wall"]
+                L += [f"| {f['size']}×{f['size']} guided frame | median wall s | min s | CPU s | × today |", "|---|---|---|---|---|"]
+                for k, v in f["rows"].items():
+                    L.append(f"| {k} | {v['wall']:.2f} | {v['min']:.2f} | {v['cpu']:.2f} | {base / v['wall']:.2f}× |")
+                L.append("")
     q = res.get("quality")
     if q:
         L += [f"## Quality of the mixed-precision candidates (held-out bench scenes, {q['size']}×{q['size']}, {q['frames']} windows each)", "",
@@ -368,7 +442,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=None, help="folder for prior.md/prior.json (default benchmarks/results; "
                     "--quick writes nothing unless given)")
     ap.add_argument("--report-only", type=Path, default=None, help="re-write prior.md from a prior.json")
+    ap.add_argument("--no-avx2", dest="avx2", action="store_false", help="skip the AVX2-only run (this CPU capped by "
+                    "ONEDNN_MAX_CPU_ISA=AVX2 ATEN_CPU_CAPABILITY=avx2 in a child process)")
+    ap.add_argument("--isa-child", type=Path, default=None, help=argparse.SUPPRESS)  # the AVX2 child: JSON out
     a = ap.parse_args(argv)
+    if a.isa_child is not None:
+        return isa_child(a.isa_child, a.repeats or 3, quick=a.quick)
     if a.report_only is not None:
         write_report(json.loads(a.report_only.read_text(encoding="utf-8")), a.report_only.with_suffix(".md"))
         print(f"wrote {a.report_only.with_suffix('.md')}")
@@ -390,9 +469,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         res["frames"] = []
         for size in ((256,) if a.quick else (256, 1000)):
-            r = bench_frame(simulate(size, work), rep)
+            r = bench_frame(simulate(size, work), 3 * rep if size <= 256 else rep)  # 256²: < 0.5 s a run, noisy
             res["frames"].append(r)
             print(f"frame {size}: " + ", ".join(f"{k} {v['wall']:.2f}s" for k, v in r["rows"].items()), flush=True)
+        if a.avx2:
+            res["avx2"] = run_avx2(a.repeats or 3, a.quick)
+            for f in res["avx2"].get("frames", []):
+                print(f"AVX2 frame {f['size']}: " + ", ".join(f"{k} {v['wall']:.2f}s" for k, v in f["rows"].items()), flush=True)
         if a.quality_json is not None:
             q = json.loads(a.quality_json.read_text(encoding="utf-8"))
             res["quality"] = q.get("quality", q)
