@@ -200,7 +200,9 @@ def write_report(res: dict, out: Path) -> None:
     L = ["# Per-tile plan: step-synchronous tiles against the whole frame", "",
          f"`python benchmarks/bench_tiles.py --tile {res['tile']}` — {m['model']}, {m['cpus']} CPUs, flags "
          f"{' '.join(m['flags'])}, torch {m['torch']}; load {m['load_before']:.1f} → {res['load_after']:.1f}; "
-         f"{res['minutes']:.0f} min. Sampler: the default recipe (`GuidedConfig()`), `tile = {res['tile']}` against `tile = 0`.", ""]
+         f"{res['minutes']:.0f} min. Sampler: the default recipe (`GuidedConfig()`), `tile = {res['tile']}` against `tile = 0`."
+         + (f" Sections {', '.join(res['kept'])}: from earlier runs of this script in this session, before the last two commits to tiles.py (neither changes a full tile or the whole-frame path; tiles.json keeps them)."
+            if res.get("kept") else ""), ""]
     if res.get("seams"):
         L += ["## Seams (uniform noise 160², tile 64, cut into 9 rectangles, vs the whole frame)", "",
               "| stream | precision | max \\|tiled − whole\\| (/255, every pixel) | mean (/255) | gradient at tile borders / inside |",
@@ -290,6 +292,7 @@ def main(argv: list[str] | None = None) -> int:
             for key in ("seams", "held_out", "big", "memory"):
                 if key not in res and key in last:
                     res[key] = last[key]
+                    res.setdefault("kept", []).append(key)
             done = {r["capture"] for r in res.get("memory", [])}
             res["memory"] = res.get("memory", []) + [r for r in last.get("memory", []) if r["capture"] not in done]
         (out / "tiles.json").write_text(json.dumps(res, indent=1), encoding="utf-8")
