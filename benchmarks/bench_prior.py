@@ -174,16 +174,69 @@ def bench_pass(size: int, repeats: int, compile_ok: bool) -> dict:
             fns["torch.compile float32 (channels-last)"] = compiled
         except Exception as e:  # noqa: BLE001 - inductor raises many kinds; the row is then left out with the reason
             extra["compile_error"] = f"{type(e).__name__}: {str(e).splitlines()[0][:160]}"
+    ort_pass, why = onnx_pass(net, x, s)
+    if ort_pass is not None:
+        fns["ONNX Runtime float32 (optional, not used)"] = ort_pass
+    else:
+        extra["onnx"] = why
     with torch.inference_mode():
         ref = reference_forward(net, x, s)
         diffs = {"channels-last float32": float((net(x, s, "float32") - ref).abs().max()),
                  "NNPACK float32 (float32-fast)": float((net(x, s, "float32-fast") - ref).abs().max()),
                  "bf16 hidden layers": float((net(x, s, "bfloat16") - ref).abs().max()),
                  "bf16 all layers": float((net(x, s, "bfloat16-all") - ref).abs().max())}
+        if ort_pass is not None:
+            diffs["ONNX Runtime float32 (optional, not used)"] = float((ort_pass() - ref).abs().max())
         if "torch.compile float32 (channels-last)" in fns:
             diffs["torch.compile float32 (channels-last)"] = float((fns["torch.compile float32 (channels-last)"]() - ref).abs().max())
     res = interleaved(fns, repeats)
     return {"size": size, "rows": res, "max_abs_diff": diffs, **extra}
+
+
+def onnx_pass(net, x, s):
+    """One FFDNet pass with its conv stack in ONNX Runtime (CPU, float32, 2 threads), when the
+    ``onnxruntime`` and ``onnx`` packages are installed (not a dependency): ``(callable, "")`` or
+    ``(None, why not)``. The noise map, pixel (un)shuffle and ``x − residual`` stay in torch."""
+    import importlib.util
+
+    if importlib.util.find_spec("onnxruntime") is None or importlib.util.find_spec("onnx") is None:
+        return None, "onnxruntime/onnx not installed (pip install onnxruntime onnx to measure it)"
+    import torch
+    import torch.nn.functional as F
+
+    class Body(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.w = [w.detach() for w in net.weight]
+            self.b = [b.detach() for b in net.bias]
+
+        def forward(self, f):
+            for i, (w, b) in enumerate(zip(self.w, self.b)):
+                f = F.conv2d(f, w, b, padding=1)
+                if i < len(self.w) - 1:
+                    f = F.relu(f)
+            return f
+
+    try:
+        import onnxruntime as ort
+
+        with torch.no_grad():
+            feats = torch.cat((net._noise_map(s, x, (0, 0)), F.pixel_unshuffle(x, 2)), dim=1)
+        path = Path(tempfile.mkdtemp(prefix="bench_prior_onnx_")) / "ffdnet_body.onnx"
+        torch.onnx.export(Body(), (feats,), str(path), input_names=["x"], output_names=["y"], opset_version=17, dynamo=False)
+        so = ort.SessionOptions()
+        so.intra_op_num_threads, so.inter_op_num_threads = 2, 1
+        sess = ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
+    except Exception as e:  # noqa: BLE001 - export/runtime raise many kinds; the row is left out with the reason
+        return None, f"{type(e).__name__}: {str(e).splitlines()[0][:160] if str(e) else ''}"
+
+    def run():
+        with torch.no_grad():
+            f = torch.cat((net._noise_map(s, x, (0, 0)), F.pixel_unshuffle(x, 2)), dim=1)
+            r = torch.from_numpy(sess.run(None, {"x": f.numpy()})[0])
+            return x - F.pixel_shuffle(r, 2)
+
+    return run, ""
 
 
 def _nog(ctx, f, *a):
@@ -367,6 +420,8 @@ def write_report(res: dict, out: Path) -> None:
             L.append(f"\ntorch.compile warm-up (first call, compiling): {p['compile_warmup_s']:.1f} s.")
         if "compile_error" in p:
             L.append(f"\ntorch.compile unavailable: {p['compile_error']}.")
+        if "onnx" in p:
+            L.append(f"\nONNX Runtime not measured in this run: {p['onnx']}.")
         L.append("")
     for f in res["frames"]:
         base = f["rows"]["eager float32 (today)"]["wall"]

@@ -196,7 +196,8 @@ def test_plan_prints_the_precision_and_the_sampler_uses_it(cfa, monkeypatch):
     assert seen[0] == prec.MIXED_LAYERS and seen[-1] == "float32"
     seen.clear()
     f32 = smp.run(obs, cfg.replace(precision="float32"))
-    assert set(seen) == {"float32"} and np.abs(f32 - out).max() > 0
+    # bfloat16 on the high-noise steps moves the frame, but by far less than one 8-bit level on average
+    assert set(seen) == {"float32"} and 0 < np.abs(f32 - out).max() < 0.01 and np.abs(f32 - out).mean() < 1e-3
 
 
 @pytest.mark.parametrize("cfa", ["RGGB", None], ids=["bayer", "mono"])

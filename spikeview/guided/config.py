@@ -135,7 +135,7 @@ class GuidedConfig(Config):
         precision: arithmetic of the FFDNet prior (:mod:`spikeview.guided.precision`): ``"auto"``
             (the fastest path within 0.1 dB / 0.005 SSIM of float32 on the bench, from the CPU's
             features), ``"float32"`` (the reference pixels), ``"float32-fast"`` (NNPACK's fast
-            float32 convolution) or ``"bfloat16-mixed"`` (bfloat16 hidden layers on high-noise steps).
+            float32 convolution) or ``"bfloat16-mixed"`` (bfloat16 layers, bias-corrected, on high-noise steps).
         tile: per-tile plan and step-synchronous sampling (:mod:`spikeview.guided.tiles`): a frame
             larger than this is cut into tiles of about this many pixels (>= 64), each skipped,
             shortened or fully sampled by its own noise (128, the default: a 1000×1000 frame in 64
