@@ -186,7 +186,8 @@ def sampler_params(recipe: Recipe, state: SequenceState) -> Any:
 
 def reconstruct_windows(source: Any, centers: Iterable[int], recipe: Recipe, state: SequenceState | None = None, *,
                         roi: tuple[int, int, int, int] | None = None, callback: Callback | None = None,
-                        cancel: Any = None, sampler: Any = None, infos: list | None = None) -> Iterator[np.ndarray]:
+                        cancel: Any = None, sampler: Any = None, infos: list | None = None,
+                        first_observation: Any = None) -> Iterator[np.ndarray]:
     """The recipe's frames at each centre tick (see the module docstring).
 
     Args:
@@ -200,6 +201,9 @@ def reconstruct_windows(source: Any, centers: Iterable[int], recipe: Recipe, sta
             (:class:`~spikeview.errors.Cancelled`).
         sampler: a :class:`~spikeview.guided.sampler.GuidedSampler` to reuse (keeps the prior loaded).
         infos: guided only: the run info of every frame is appended.
+        first_observation: guided only: the first centre's :class:`~spikeview.guided.observation.Observation` if
+            the caller built it already (for its plan); used only when it matches (see
+            :func:`spikeview.guided.video.reconstruct_sequence`).
 
     Yields:
         float32 frames ``(H, W, 3)`` (``(H, W)`` for monochrome): TFP/TFI in [0, 1] unless
@@ -223,7 +227,8 @@ def reconstruct_windows(source: Any, centers: Iterable[int], recipe: Recipe, sta
                 def cb(fi: int, _n: int, step: int, total: int, preview: np.ndarray, _g0: int = g0) -> None:
                     callback(fi + _g0, n, step, total, preview * scale)
             for frame in reconstruct_sequence(source, centers[g0:g0 + KEYFRAME], params, alpha=state.alpha, callback=cb,
-                                              cancel=cancel, sampler=sampler, infos=infos, roi=roi, resolve=False):
+                                              cancel=cancel, sampler=sampler, infos=infos, roi=roi, resolve=False,
+                                              first=first_observation if g0 == 0 else None):
                 yield frame * scale
         return
     from spikeview.classical.reconstruct import reconstruct_frames
@@ -253,12 +258,14 @@ def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str
                    step: int | None = None, callback: Callback | None = None, cancel: Any = None,
                    sampler: Any = None, progress: Callable[[int, int], Any] | None = None,
                    overwrite: bool = False, source_name: str | None = None, inputs: Sequence[Any] = (),
-                   extra_outputs: Sequence[Any] = (), announce: Callable[[str], Any] | None = None) -> list[Path]:
+                   extra_outputs: Sequence[Any] = (), announce: Callable[[str], Any] | None = None,
+                   first_observation: Any = None) -> list[Path]:
     """Reconstruct ``centers`` and write them to ``out`` (format from its suffix), with the recipe in the metadata.
 
     Nothing existing is replaced without ``overwrite``, and never the source or one of ``inputs``
     (checked for ``out`` and ``extra_outputs``, e.g. the preset written beside it, before any work);
-    ``announce`` gets one sentence about a large output's size first.
+    ``announce`` gets one sentence about a large output's size first; ``first_observation`` is the first window's
+    observation if the caller built it already (see :func:`reconstruct_windows`).
 
     Returns:
         The files written (one for MP4/npy, one per frame for EXR/PNG patterns).
@@ -277,7 +284,7 @@ def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str
                           params=recipe.to_dict())
     infos = _FirstOnly()
     frames = reconstruct_windows(source, centers, recipe, state, roi=roi, callback=callback, cancel=cancel, sampler=sampler,
-                                 infos=infos)
+                                 infos=infos, first_observation=first_observation)
     cfg, expose = exposure_mapping(recipe, state, out)
     head = expose(next(frames))
     plan = getattr(infos[0], "plan", None) if infos else None

@@ -47,15 +47,16 @@ def add_args(p: argparse.ArgumentParser) -> None:
     batch.add_args(p)
 
 
-def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre: int, state: Any) -> list[str]:
-    """One sentence for every flag the user gave that cannot act on this run (and why)."""
+def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre: int, state: Any) -> tuple[list[str], Any]:
+    """One sentence for every flag the user gave that cannot act on this run (and why), and the first
+    window's observation when the plan was printed (the run reuses it; ``None`` otherwise)."""
     given = given_flags(args)
     notes = []
     if recipe.run.method != "guided":
         for path in sorted(given):
             if path.startswith("guided."):
                 notes.append(f"{BY_PATH[path].flag} applies to --method guided only; it is ignored by --method {recipe.run.method}.")
-        return notes
+        return notes, None
     from spikeview.guided import Observation, make_plan
     from spikeview.guided.knobs import knob_status
     from spikeview.pipeline import sampler_params
@@ -68,7 +69,7 @@ def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre
     for path, why in knob_status(cfg, plan).items():
         if why and path in given:
             notes.append(f"{BY_PATH[path].flag} has no effect here: {why}.")
-    return notes
+    return notes, obs
 
 
 def run(args: argparse.Namespace) -> int:
@@ -98,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
             "from the preset" if getattr(args, "preset", None) and state.white is not None and
             recipe.export.white != state.white else "the 99.9th percentile of the sequence's rates")
         print(white_point_line(recipe, state, how), file=sys.stderr)
-        for note in inactive_notes(recipe, args, src, centres[0], state):
+        notes, first = inactive_notes(recipe, args, src, centres[0], state)
+        for note in notes:
             print(f"note: {note}", file=sys.stderr)
         if out.suffix.lower() == ".mp4" and recipe.run.at is None and recipe.run.range is None:
             print(f"note: no --at or --range, so the video holds one frame (the window at tick {centres[0]}); pass "
@@ -115,7 +117,8 @@ def run(args: argparse.Namespace) -> int:
 
             write_sequence(src, recipe, centres, out, state=state, step=step, callback=on_step,
                            overwrite=bool(getattr(args, "overwrite", False)), inputs=[getattr(args, "preset", None)],
-                           extra_outputs=[preset_path(out)], announce=lambda text: print(text, file=sys.stderr))
+                           extra_outputs=[preset_path(out)], announce=lambda text: print(text, file=sys.stderr),
+                           first_observation=first)
         _write_preset(out, recipe, src)
     print(f"wrote {len(centres)} frame{'s' if len(centres) != 1 else ''} to {out}; settings in {preset_path(out)}")
     return 0

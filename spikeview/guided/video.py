@@ -115,7 +115,7 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
                          alpha: np.ndarray | list[float] | None = None, callback: SequenceCallback | None = None,
                          cancel: Any = None, sampler: GuidedSampler | None = None,
                          infos: list | None = None, roi: tuple[int, int, int, int] | None = None,
-                         resolve: bool = True) -> Iterator[np.ndarray]:
+                         resolve: bool = True, first: Observation | None = None) -> Iterator[np.ndarray]:
     """Guided frames at each centre tick (see the module docstring).
 
     Args:
@@ -133,6 +133,9 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
             the CFA phase is kept); frames are the region's size.
         resolve: estimate α when ``alpha`` is None (False: ``alpha=None`` means no colour cast, as
             :func:`spikeview.pipeline.prepare_sequence` decided).
+        first: the first centre's observation when the caller built it already (the CLI prints its
+            plan before the run): used when it is that window's, at these settings (its neighbours'
+            counting and alignment are not done twice), else ignored.
 
     Yields:
         ``(H, W, 3)`` float32 frames in [0, 1] (``(H, W)`` for monochrome).
@@ -146,8 +149,11 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
     cache = WindowCache(4 * p.temporal_radius + 4)  # neighbouring windows are shared by consecutive frames
     for fi, c in enumerate(centers):
         want_prev = prev is not None and p.reuse is not False
-        obs = Observation.from_source(source, c, p.window, alpha=a, eta=p.eta, previous=want_prev,
-                                      radius=p.temporal_radius, cache=cache)
+        if fi == 0 and first is not None and _same_window(first, c, p, a):
+            obs = first
+        else:
+            obs = Observation.from_source(source, c, p.window, alpha=a, eta=p.eta, previous=want_prev,
+                                          radius=p.temporal_radius, cache=cache)
         if roi is not None:
             obs = _crop_to_roi(obs, roi)
         plan = make_plan(obs, p)
@@ -170,6 +176,16 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
             infos.append(smp.info)
         prev = out
         yield out
+
+
+def _same_window(obs: Observation, center: int, p: GuidedConfig, alpha: np.ndarray | None) -> bool:
+    """Whether ``obs`` is what :meth:`Observation.from_source` builds for ``center`` at these settings
+    (no previous window: the first frame of a sequence has none)."""
+    pooling = obs.pooling
+    same_alpha = (obs.alpha is None) if alpha is None or obs.cfa is None else (
+        obs.alpha is not None and np.array_equal(obs.alpha, np.asarray(alpha, dtype=np.float64).reshape(-1)))
+    return (obs.center == int(center) and obs.window == p.window and obs.eta == p.eta and obs.previous is None
+            and pooling is not None and pooling.radius == p.temporal_radius and same_alpha)
 
 
 def _resample_region(smp: GuidedSampler, obs: Observation, p: GuidedConfig, box: tuple[int, int, int, int],
