@@ -230,12 +230,14 @@ def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     from spikeview.guided.plan import make_plan
     from spikeview.cfa import crop_roi
     from spikeview.pipeline import guided_scale, reconstruct_windows, sampler_params
+    from spikeview.guided.video import _crop_to_roi
 
     p = req.params
     recipe = req.recipe.with_values({"run.method": "guided"})
     state = sequence_state(req.source, recipe, req.alpha, ctx)
     cfg = sampler_params(recipe, state)
-    obs = window_observation(req.source, req.tick, cfg, state.alpha, req.roi)
+    whole = window_observation(req.source, req.tick, cfg, state.alpha, None)  # the run reuses it (built once)
+    obs = whole if req.roi is None else _crop_to_roi(whole, req.roi)
     plan = make_plan(obs, cfg)
     origin = crop_roi(np.zeros((req.source.height, req.source.width), np.uint8), req.roi)[1][::-1] if req.roi else (0, 0)
     ctx.report(GuidedUpdate("plan", req.run, total=cfg.steps * cfg.chains, text=str(plan), knobs=knob_status(cfg, plan),
@@ -271,7 +273,7 @@ def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
 
         sampler = ctx.state["sampler"] = GuidedSampler(cfg)
     image = next(reconstruct_windows(req.source, [req.tick], recipe, state, roi=req.roi,
-                                     callback=callback, cancel=ctx.cancelled, sampler=sampler))
+                                     callback=callback, cancel=ctx.cancelled, sampler=sampler, first_observation=whole))
     ctx.check()
     image = np.asarray(image, dtype=np.float32)
     psnr, ssim = score(image)
