@@ -74,8 +74,8 @@ def test_tile_map_follows_the_noise_of_each_tile(cfa):
             assert t.kind == "full" and t.steps == 6 and t.join == 0
     assert tm.grid().tolist() == [[0, 2, 2], [0, 2, 2]]
     line = plan.reasons["tiles"]
-    assert line.startswith("96×192 in 6 tiles of 64 px: 2 skipped (noise below target), 0 short, 4 full")
-    assert "67% of the whole frame's prior work" in line and "96×192 in" in str(plan)
+    assert line.startswith("192×96 in 6 tiles of 64 px: 2 skipped (noise below target), 0 short, 4 full")
+    assert "67% of the whole frame's prior work" in line and "192×96 in" in str(plan)
     assert tm.as_dict()["counts"] == counts and len(tm.as_dict()["tiles"]) == 6
     off = make_plan(obs, GuidedConfig(tile=0))
     assert off.tile_map is None and "off" in off.reasons["tiles"]
@@ -189,7 +189,7 @@ def test_output_metadata_records_the_tile_map(cfa, tmp_path):
                                    "guided.precision": "float32", "guided.temporal_radius": 0})
     write_sequence(src, recipe, [20], tmp_path / "f.npy")
     plan = read_export_metadata(tmp_path / "f.npy")["plan"]
-    assert plan["tiles"].startswith("64×192 in 3 tiles of 64 px: 1 skipped (noise below target), 0 short, 2 full")
+    assert plan["tiles"].startswith("192×64 in 3 tiles of 64 px: 1 skipped (noise below target), 0 short, 2 full")
     assert plan["precision"]
     write_sequence(src, recipe.with_values({"guided.tile": 0}), [20], tmp_path / "g.npy")
     assert read_export_metadata(tmp_path / "g.npy")["plan"]["tiles"].startswith("off (guided.tile = 0)")

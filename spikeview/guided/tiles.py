@@ -118,9 +118,9 @@ class TileMap:
         return sum(t.area * t.steps for t in self.tiles if t.kind != "skipped") / total
 
     def summary(self) -> str:
-        """``"1000×1000 in 64 tiles of 125 px: 21 skipped (noise below target), 30 short, 13 full; prior work 41%"``."""
+        """``"1000×1000 (width × height) in 64 tiles of 125 px: 21 skipped (noise below target), 30 short, 13 full; prior work 41%"``."""
         c = self.counts()
-        return (f"{self.shape[0]}×{self.shape[1]} in {len(self.tiles)} tiles of {self.size} px: {c['skipped']} skipped "
+        return (f"{self.shape[1]}×{self.shape[0]} in {len(self.tiles)} tiles of {self.size} px: {c['skipped']} skipped "
                 f"(noise below target), {c['short']} short, {c['full']} full; "
                 f"{100 * self.work():.0f}% of the whole frame's prior work" + (f" ({self.note})" if self.note else ""))
 
