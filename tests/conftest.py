@@ -50,3 +50,19 @@ def window(qtbot, settings):
     w.show()
     yield w
     w.close()
+
+
+@pytest.fixture
+def count_observations(monkeypatch):
+    """The centre ticks of every :meth:`Observation.from_source` call made while the test runs, in order."""
+    from spikeview.guided.observation import Observation
+
+    calls: list[int] = []
+    orig = Observation.from_source.__func__
+
+    def counted(cls, source, center, *a, **k):
+        calls.append(int(center))
+        return orig(cls, source, center, *a, **k)
+
+    monkeypatch.setattr(Observation, "from_source", classmethod(counted))
+    return calls

@@ -10,19 +10,6 @@ from spikeview.cli.main import main
 from spikeview.guided.observation import Observation
 
 
-@pytest.fixture
-def count_observations(monkeypatch):
-    calls: list[int] = []
-    orig = Observation.from_source.__func__
-
-    def counted(cls, source, center, *a, **k):
-        calls.append(int(center))
-        return orig(cls, source, center, *a, **k)
-
-    monkeypatch.setattr(Observation, "from_source", classmethod(counted))
-    return calls
-
-
 @pytest.mark.parametrize("cfa", ["RGGB", "none"])
 def test_the_printed_plan_s_observation_is_the_run_s(tmp_path, capsys, count_observations, cfa):
     dat = tmp_path / "c.dat"

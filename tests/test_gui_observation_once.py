@@ -13,7 +13,6 @@ import spikeview.guided.video as video
 from spikeview.gui import jobs
 from spikeview.gui.model import default_params
 from spikeview.gui.workers import JobContext
-from spikeview.guided.observation import Observation
 from spikeview.io.source import ArraySource
 from spikeview.recipe import Recipe
 
@@ -35,16 +34,9 @@ def run_job(src, roi):
 
 @pytest.mark.parametrize("roi", [None, (8, 6, 24, 30)], ids=["whole", "roi"])
 @pytest.mark.parametrize("cfa", [None, "RGGB"], ids=["mono", "bayer"])
-def test_the_guided_job_builds_the_window_once(cfa, roi, monkeypatch):
+def test_the_guided_job_builds_the_window_once(cfa, roi, monkeypatch, count_observations):
     src = capture(cfa)
-    calls: list[int] = []
-    orig = Observation.from_source.__func__
-
-    def counted(cls, source, center, *a, **k):
-        calls.append(int(center))
-        return orig(cls, source, center, *a, **k)
-
-    monkeypatch.setattr(Observation, "from_source", classmethod(counted))
+    calls = count_observations
     once = run_job(src, roi)
     assert calls == [TICK]
     monkeypatch.setattr(video, "_same_window", lambda *a: False)  # the old way: the run builds it again
