@@ -42,43 +42,16 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from _common import cpu_model  # noqa: E402  (benchmarks/_common.py)
+from _common import cpu_model, synthetic_capture as _capture  # noqa: E402  (benchmarks/_common.py)
+
+
+def synthetic_capture(folder: Path, size: int, ticks: int, seed: int = 0) -> Path:
+    """A moving RGGB scene as a plain .dat with sidecar (benchmarks/_common.py)."""
+    return _capture(folder, size, ticks, "RGGB", seed)
+
 
 
 # ------------------------------------------------------------------------------------ data
-def synthetic_capture(folder: Path, size: int, ticks: int, seed: int = 0) -> Path:
-    """Write a moving colour scene as a plain .dat file with a sidecar; returns its path.
-
-    Integrate-and-fire of a smooth colour pattern that slides by 2 pixels per 10 ticks, RGGB,
-    a green-heavy spectral response (like real sensors), random initial phase. Good enough for a
-    display benchmark (the reconstruction's quality is not measured here) and far cheaper than
-    simulating a 1000×1000 scene.
-    """
-    from spikeview.cfa import channel_map
-    from spikeview.io import StreamInfo, write_plain, write_sidecar
-
-    rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:size, 0:size].astype(np.float32) / size
-    cmap = channel_map("RGGB", size, size)
-    gains = np.array([0.45, 0.8, 0.35], np.float32)[cmap]
-    v = rng.random((size, size), dtype=np.float32)
-    spikes = np.empty((ticks, size, size), np.uint8)
-    for t in range(ticks):
-        shift = 0.2 * t / size
-        r = 0.5 + 0.45 * np.sin(2 * np.pi * (3 * (xx + shift) + yy))
-        g = 0.5 + 0.45 * np.sin(2 * np.pi * (2 * (yy - shift) + 0.3))
-        b = 0.5 + 0.45 * np.cos(2 * np.pi * (4 * (xx + yy) + shift))
-        scene = np.where(cmap == 0, r, np.where(cmap == 1, g, b))
-        v += scene * gains
-        fire = v >= 1.0
-        v -= fire
-        spikes[t] = fire
-    path = folder / f"bench_{size}.dat"
-    write_plain(path, spikes)
-    write_sidecar(path, StreamInfo(width=size, height=size, n_frames=ticks, cfa="RGGB", format="plain", flip_vertical=True))
-    return path
-
-
 # ------------------------------------------------------------------------------------ helpers
 def machine() -> str:
     model = cpu_model(platform.processor() or "unknown CPU")

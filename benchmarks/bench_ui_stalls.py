@@ -54,7 +54,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
-from _common import cpu_model, write_report  # noqa: E402
+from _common import cpu_model, synthetic_capture, write_report  # noqa: E402
 
 SCENARIOS = ("idle", "burst", "open_first", "open", "playback", "export", "guided")
 BURST_MS = 20
@@ -62,41 +62,6 @@ TIMER_MS = 5
 
 
 # ------------------------------------------------------------------------------------ data
-def synthetic_capture(folder: Path, size: int, ticks: int, cfa: str | None, seed: int = 0) -> Path:
-    """A moving scene as a plain ``.dat`` with sidecar (integrate-and-fire; RGGB or monochrome)."""
-    from spikeview.cfa import channel_map
-    from spikeview.io import write_plain
-
-    name = f"ui_{size}_{cfa or 'mono'}_{ticks}.dat"
-    path = folder / name
-    if path.exists() and Path(str(path) + ".toml").exists():
-        return path
-    rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:size, 0:size].astype(np.float32) / size
-    if cfa is not None:
-        cmap = channel_map(cfa, size, size)
-        gains = np.array([0.45, 0.8, 0.35], np.float32)[cmap]
-    else:
-        cmap, gains = None, np.float32(0.7)
-    v = rng.random((size, size), dtype=np.float32)
-    spikes = np.empty((ticks, size, size), np.uint8)
-    for t in range(ticks):
-        shift = 0.2 * t / size
-        r = 0.5 + 0.45 * np.sin(2 * np.pi * (3 * (xx + shift) + yy))
-        if cmap is None:
-            scene = r
-        else:
-            g = 0.5 + 0.45 * np.sin(2 * np.pi * (2 * (yy - shift) + 0.3))
-            b = 0.5 + 0.45 * np.cos(2 * np.pi * (4 * (xx + yy) + shift))
-            scene = np.where(cmap == 0, r, np.where(cmap == 1, g, b))
-        v += scene * gains
-        fire = v >= 1.0
-        v -= fire
-        spikes[t] = fire
-    write_plain(path, spikes, flip_vertical=True, cfa=cfa)
-    return path
-
-
 def load() -> list[float]:
     try:
         return [round(x, 2) for x in os.getloadavg()]
