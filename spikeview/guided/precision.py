@@ -122,7 +122,9 @@ def _auto(s: dict[str, object]) -> tuple[str, str]:
         return "bfloat16-mixed", f"native bfloat16 ({feats}); within 0.1 dB / 0.005 SSIM of float32 on the bench"
     # NNPACK (float32-fast) measured no faster than oneDNN channels-last on a quiet machine (1.0x at
     # 1000², 0.68x at 256²; BENCHMARKS.md): auto keeps the reference float32 path without native bf16
-    return "float32", f"{feats}; no native bfloat16, and no faster float32 path than oneDNN channels-last was measured"
+    # (ONNX Runtime's float32 conv stack measured 1.26-1.32x less time than the fused oneDNN path at 1000²,
+    # 0.9-1.1x at 256-512² under load: not a dependency; benchmarks/bench_prior.py measures it when installed)
+    return "float32", f"{feats}; no native bfloat16: float32 with oneDNN's fused channels-last convolutions"
 
 
 def resolve_precision(requested: str, summary: dict[str, object] | None = None) -> tuple[str, str]:
