@@ -382,6 +382,40 @@ def bench_quality(frames: int, size: int, scenes: list[str] | None) -> dict:
     return {"scenes": held, "size": size, "frames": frames, "rows": out, "seconds": time.perf_counter() - t0}
 
 
+def bench_quality_mono(size: int, scenes: list[str] | None) -> dict:
+    """The default (``auto``) against ``float32`` on **monochrome** captures of the held-out scenes (the
+    gray FFDNet, 15 layers of 64 features): Δ PSNR/SSIM per scene (2 windows), against the scene's
+    ground truth averaged over colour (both paths are scored against the same image)."""
+    import numpy as np
+
+    from spikeview.bench.data import SCENES, TUNE_SCENES, make_capture
+    from spikeview.bench.guided import Sequence, score
+    from spikeview.guided.config import GuidedConfig
+    from spikeview.guided.precision import resolve_precision
+    from spikeview.guided.sampler import GuidedSampler
+
+    held = scenes or [n for n in SCENES if n not in TUNE_SCENES]
+    smp = GuidedSampler(GuidedConfig())
+    auto = resolve_precision("auto")[0]
+    per: dict[str, list] = {}
+    t0 = time.perf_counter()
+    for k, name in enumerate(held):
+        cap = make_capture(name, size, n_ticks=200, seed=k, window=10, cfa="none")
+        seq = Sequence(cap)
+        for c in (65, 135):
+            gt = cap.gt_at(c)
+            gt = gt if gt.ndim == 2 else gt.mean(axis=-1)
+            obs = seq.observation(c)
+            a = score(smp.run(obs, GuidedConfig(precision="float32")), gt)
+            q = score(smp.run(obs, GuidedConfig(precision=auto)), gt)
+            per.setdefault(name, []).append((q[0] - a[0], q[1] - a[1]))
+    d = {sc: (float(np.mean([x for x, _ in v])), float(np.mean([y for _, y in v]))) for sc, v in per.items()}
+    return {"precision": auto, "scenes": held, "size": size, "per_scene": d,
+            "dpsnr_mean": float(np.mean([x for x, _ in d.values()])), "dssim_mean": float(np.mean([y for _, y in d.values()])),
+            "dpsnr_worst": min(x for x, _ in d.values()), "dssim_worst": min(y for _, y in d.values()),
+            "worst_scene": min(d, key=lambda sc: d[sc][0]), "seconds": time.perf_counter() - t0}
+
+
 # ---------------------------------------------------------------------------------- 4. memory
 def peak_rss(path: Path, precision: str) -> dict:
     """Peak RSS (MB) and wall seconds of ``spikeview reconstruct PATH --method guided --at 100`` in a child."""
@@ -455,6 +489,13 @@ def write_report(res: dict, out: Path) -> None:
             L.append(f"| {k} | {v['dpsnr_mean']:+.3f} | {v['dssim_mean']:+.4f} | {v['dpsnr_worst']:+.3f} | {v['dssim_worst']:+.4f} | "
                      f"{v['worst_scene']} | {'yes' if ok else 'no'} |")
         L.append("")
+    qm = res.get("quality_mono")
+    if qm:
+        L += [f"### The default on monochrome captures (gray FFDNet; held-out scenes, {qm['size']}×{qm['size']}, 2 windows each)", "",
+              f"`--precision {qm['precision']}` (auto) − float32 on the same windows, against the ground truth averaged over colour: "
+              f"ΔPSNR mean {qm['dpsnr_mean']:+.3f}, worst {qm['dpsnr_worst']:+.3f} dB ({qm['worst_scene']}); ΔSSIM mean "
+              f"{qm['dssim_mean']:+.4f}, worst {qm['dssim_worst']:+.4f}. Per scene: "
+              + ", ".join(f"{sc} {v[0]:+.3f} dB / {v[1]:+.4f}" for sc, v in qm["per_scene"].items()) + ".", ""]
     big = [f for f in res["frames"] if f["size"] >= 1000]
     if big:
         f = big[0]
@@ -542,6 +583,10 @@ def main(argv: list[str] | None = None) -> int:
             for k, v in res["quality"]["rows"].items():
                 print(f"quality {k}: ΔPSNR mean {v['dpsnr_mean']:+.3f} worst {v['dpsnr_worst']:+.3f} ({v['worst_scene']}), "
                       f"ΔSSIM mean {v['dssim_mean']:+.4f} worst {v['dssim_worst']:+.4f}", flush=True)
+        res["quality_mono"] = bench_quality_mono(128 if a.quick else 256, ["rocket", "page_bright"] if a.quick else None)
+        qm = res["quality_mono"]
+        print(f"quality mono ({qm['precision']}): ΔPSNR mean {qm['dpsnr_mean']:+.3f} worst {qm['dpsnr_worst']:+.3f} "
+              f"({qm['worst_scene']}), ΔSSIM mean {qm['dssim_mean']:+.4f} worst {qm['dssim_worst']:+.4f}", flush=True)
         if a.memory:
             res["memory"] = []
             sizes = (256,) if a.quick else ((1000, 2000) if a.big else (1000,))
