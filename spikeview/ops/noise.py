@@ -24,12 +24,11 @@ from __future__ import annotations
 import math
 
 import torch
-import torch.nn.functional as F
 
 from spikeview.errors import ParameterError
 from spikeview.ops._checks import cfa_masks, check_cfa, check_image, check_positive_int
 from spikeview.ops.cast import _alpha_gain, _check_eta, estimate_alpha
-from spikeview.ops.mosaic import _kernels
+from spikeview.ops.mosaic import bilinear_filter
 
 
 def _check_prior(prior: float) -> float:
@@ -102,8 +101,7 @@ def demosaic_variance(v: torch.Tensor, cfa: str) -> torch.Tensor:
     """
     name = check_cfa(cfa)
     check_image(v, 1, "v", min_size=2)
-    z = v * cfa_masks(name, v.shape[-2], v.shape[-1], v)
-    return F.conv2d(F.pad(z, (1, 1, 1, 1), mode="reflect"), _kernels(z, squared=True), groups=3)
+    return bilinear_filter(v * cfa_masks(name, v.shape[-2], v.shape[-1], v), squared=True)
 
 
 def effective_sigma(
