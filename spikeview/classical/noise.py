@@ -80,7 +80,9 @@ def haar_noise_variance(plane: np.ndarray, keep: float = 0.9) -> float | None:
 
 def trim_factor(keep: float) -> float:
     """``E[z² · 1{z² <= q}]`` for ``z ~ N(0, 1)`` and ``q`` the ``keep`` quantile of ``z²``."""
-    from scipy.stats import norm
+    import math
 
-    a = float(norm.ppf(0.5 + keep / 2.0))
-    return keep - 2.0 * a * float(norm.pdf(a))
+    from scipy.special import ndtri  # the normal quantile, without importing scipy.stats (0.3 s)
+
+    a = float(ndtri(0.5 + keep / 2.0))
+    return keep - 2.0 * a * math.exp(-0.5 * a * a) / math.sqrt(2.0 * math.pi)

@@ -45,7 +45,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtri  # chi2.ppf(1 - a, k) = chdtri(k, a), without importing scipy.stats (0.3 s)
 
 from spikeview.classical.noise import choose_demosaic
 from spikeview.errors import ParameterError
@@ -159,7 +159,7 @@ def changed_blocks(obs: Observation, alpha: float = 1e-3) -> np.ndarray | None:
     for i in range(bh):
         for j in range(bw):
             blk = z[i * BLOCK:(i + 1) * BLOCK, j * BLOCK:(j + 1) * BLOCK]
-            out[i, j] = float(blk.sum()) > chi2.ppf(1.0 - alpha, blk.size)
+            out[i, j] = float(blk.sum()) > chdtri(blk.size, alpha)
     return out
 
 
