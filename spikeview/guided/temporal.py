@@ -208,9 +208,10 @@ def _tile_sum(x: np.ndarray, t: int) -> np.ndarray:
 
 
 def _tile_chi(g0: np.ndarray, gk: np.ndarray, pad: int, dy: int, dx: int, tile: int, noise: float,
-              cap: float, v0: np.ndarray | None = None) -> np.ndarray:
+              cap: float, v0: np.ndarray | None = None, vk: np.ndarray | None = None) -> np.ndarray:
     """Per tile: SSD between ``g0`` and the edge-padded ``gk`` read at ``(y + dy, x + dx)``, over the
-    noise-only SSD ``Σ noise·(v(g₀) + v(g_k))`` with ``v`` = :func:`_binvar` (``v0``: ``v(g₀)`` precomputed).
+    noise-only SSD ``Σ noise·(v(g₀) + v(g_k))`` with ``v`` = :func:`_binvar` (``v0``: ``v(g₀)``, ``vk``:
+    ``v`` of the padded ``gk``, precomputed by callers that read many shifts: the same numbers).
     Each call checks the job's Cancel (the motion search and the match test are hundreds of calls: seconds at 1000×1000)."""
     from spikeview.errors import check_cancelled
 
@@ -219,7 +220,8 @@ def _tile_chi(g0: np.ndarray, gk: np.ndarray, pad: int, dy: int, dx: int, tile: 
     s = gk[pad + dy:pad + dy + h, pad + dx:pad + dx + w]
     d = g0 - s
     v0 = _binvar(g0, cap) if v0 is None else v0
-    return _tile_sum(d * d, tile) / (noise * _tile_sum(v0 + _binvar(s, cap), tile) + 1e-6)
+    vs = _binvar(s, cap) if vk is None else vk[pad + dy:pad + dy + h, pad + dx:pad + dx + w]
+    return _tile_sum(d * d, tile) / (noise * _tile_sum(v0 + vs, tile) + 1e-6)
 
 
 def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, kappa: float,
@@ -244,6 +246,7 @@ def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, ka
     grid = [i * step for i in range(-n, n + 1)]
     pad = int(np.ceil(max_speed * max(abs(k) for k in ks))) + 1
     padded = {k: np.pad(guides[k], pad, mode="edge") for k in ks}
+    vpad = {k: _binvar(padded[k], cap) for k in ks}  # elementwise, so slicing it equals v of the slice
     memo: dict[tuple[int, int, int], np.ndarray] = {}
     v0 = _binvar(g0, cap)
 
@@ -251,7 +254,7 @@ def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, ka
         key = (k, dy, dx)
         if key not in memo:
             factor = ADJACENT_DISPERSION if abs(k) == 1 else 1.0
-            memo[key] = _tile_chi(g0, padded[k], pad, dy, dx, tile, factor * kappa * kernel_energy, cap, v0)
+            memo[key] = _tile_chi(g0, padded[k], pad, dy, dx, tile, factor * kappa * kernel_energy, cap, v0, vpad[k])
         return memo[key]
 
     best_cost = best_v = None
@@ -288,10 +291,11 @@ def match_quality(raw0: np.ndarray, rawk: np.ndarray, shifts: np.ndarray, tile: 
     """
     pad = int(np.abs(shifts).max(initial=0)) + 1
     padded = np.pad(rawk, pad, mode="edge")
+    v0, vk = _binvar(raw0, cap), _binvar(padded, cap)
     out = np.empty(shifts.shape[:2])
     for dy, dx in {tuple(v) for v in shifts.reshape(-1, 2).tolist()}:
         sel = (shifts[..., 0] == dy) & (shifts[..., 1] == dx)
-        out[sel] = _tile_chi(raw0, padded, pad, dy, dx, tile, noise, cap)[sel]
+        out[sel] = _tile_chi(raw0, padded, pad, dy, dx, tile, noise, cap, v0, vk)[sel]
     return out
 
 
