@@ -129,13 +129,13 @@ def test_cancel_stops_the_plan(cfa, monkeypatch):
 
     src = capture(cfa)
     ctx, reports = context()
-    original = plan_module.estimate_sigma
+    original = plan_module.start_variance
 
     def hooked(*args, **kwargs):  # Cancel pressed as the plan starts its noise estimate
         ctx.cancelled.set()
         return original(*args, **kwargs)
 
-    monkeypatch.setattr(plan_module, "estimate_sigma", hooked)
+    monkeypatch.setattr(plan_module, "start_variance", hooked)
     with pytest.raises(Cancelled, match="planning"):
         jobs.guided_job(request(src), ctx)
     assert reports == [] and "sampler" not in ctx.state

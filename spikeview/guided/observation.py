@@ -21,6 +21,8 @@ Haar detail of each Bayer plane, :func:`haar_noise_variance`) to the model's mea
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -275,18 +277,15 @@ class Observation:
         return (binomial_variance(self.local_rate(), self.effective_window) * kappa[self.channel_map()]).astype(np.float32)
 
 
-def estimate_sigma(obs: Observation, use_mosaic: bool = True, use_cast: bool = True) -> np.ndarray:
-    """Per-channel noise σ of the bilinear-demosaicked, colour-corrected TFP estimate Y₀.
+def start_variance(obs: Observation, use_mosaic: bool = True, use_cast: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """``(var, gain)``: the per-pixel variance of the bilinear-demosaicked TFP estimate Y₀ before the
+    colour correction, ``(C, H, W)`` float32 (``C`` = 3, or 1 for monochrome / ``use_mosaic=False``), and
+    the correction gains α_c/η ``(C,)`` (ones without a cast): σ² of a pixel of Y₀ is ``var · gain²``.
 
     Propagates :meth:`Observation.variance` (binomial model scaled to the data) through bilinear
-    demosaicking (:func:`spikeview.ops.noise.demosaic_variance`) and the correction gains α_c/η,
-    then takes the RMS over pixels. Monochrome (or ``use_mosaic=False``): RMS of the photosite σ.
-
-    Returns:
-        ``(3,)`` (or ``(1,)``) float64 σ in [0, 1] image units.
+    demosaicking (:func:`spikeview.ops.noise.demosaic_variance`). :func:`estimate_sigma` averages it over
+    the frame, the per-tile plan (:func:`spikeview.guided.tiles.plan_tiles`) over each tile.
     """
-    import math
-
     import torch
 
     from spikeview.errors import check_cancelled
@@ -295,7 +294,25 @@ def estimate_sigma(obs: Observation, use_mosaic: bool = True, use_cast: bool = T
     check_cancelled("while planning")
     var = obs.variance()
     if obs.cfa is None or not use_mosaic:
-        return np.array([math.sqrt(float(var.mean()))])
+        return var[None], np.ones(1)
     v = demosaic_variance(torch.from_numpy(var)[None, None], obs.cfa)[0].numpy()
     gain = (obs.alpha / obs.eta) if (use_cast and obs.alpha is not None) else np.ones(3)
-    return np.sqrt(v.reshape(3, -1).mean(axis=1)) * gain
+    return v, np.asarray(gain, dtype=np.float64)
+
+
+def sigma_of(var: np.ndarray, gain: np.ndarray) -> np.ndarray:
+    """Per-channel σ (float64, ``(C,)``) of a :func:`start_variance` map: the RMS over its pixels × gain."""
+    if var.shape[0] == 1:
+        return np.array([math.sqrt(float(var[0].mean()))]) * gain
+    return np.sqrt(var.reshape(var.shape[0], -1).mean(axis=1)) * gain
+
+
+def estimate_sigma(obs: Observation, use_mosaic: bool = True, use_cast: bool = True) -> np.ndarray:
+    """Per-channel noise σ of the bilinear-demosaicked, colour-corrected TFP estimate Y₀: the RMS over
+    pixels of :func:`start_variance` times the correction gains α_c/η. Monochrome (or
+    ``use_mosaic=False``): RMS of the photosite σ.
+
+    Returns:
+        ``(3,)`` (or ``(1,)``) float64 σ in [0, 1] image units.
+    """
+    return sigma_of(*start_variance(obs, use_mosaic, use_cast))

@@ -50,7 +50,7 @@ from scipy.special import chdtri  # chi2.ppf(1 - a, k) = chdtri(k, a), without i
 from spikeview.classical.noise import choose_demosaic
 from spikeview.errors import ParameterError
 from spikeview.guided.config import GuidedConfig
-from spikeview.guided.observation import Observation, estimate_sigma
+from spikeview.guided.observation import Observation, sigma_of, start_variance
 from spikeview.ops.pyramid import max_levels
 
 #: block size (pixels) of the region-level change test
@@ -237,7 +237,8 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
         levels, r["levels"] = p.levels, f"as set (a {obs.shape[0]}x{obs.shape[1]} frame allows up to {top})"
 
     # --- diffusion
-    sigma = estimate_sigma(obs, mosaic, cast)
+    var, gain = start_variance(obs, mosaic, cast)  # per pixel: the tile plan averages it per tile
+    sigma = sigma_of(var, gain)
     smax = float(sigma.max())
     auto_fallback = "tfp" if smax <= p.noise_target / 4 else "baseline"
     fallback = p.fallback or auto_fallback
@@ -284,7 +285,7 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
         from spikeview.guided.tiles import plan_tiles
 
         probe = Plan(mosaic, cast, levels, diffusion, fallback, False, None, sigma, {}, quantise, demosaic)
-        tile_map = plan_tiles(obs, probe, p)
+        tile_map = plan_tiles(obs, probe, p, variance=(var, gain))
         r["tiles"] = tile_map.summary()
     elif not p.tile:
         r["tiles"] = "off (guided.tile = 0): the whole frame at once"

@@ -175,26 +175,15 @@ def frame_ladder(plan: Any, p: Any, channels: int, sigma_max: float) -> tuple[An
     return sched, sigma_obs, sigma_add
 
 
-def _frame_variance(obs: Any, use_mosaic: bool, use_cast: bool) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """``(var (C, H, W), κ (channels,), gain (C,))``: the per-pixel variance of the start estimate the
-    frame's noise model gives (:func:`~spikeview.guided.observation.estimate_sigma` before its mean),
-    the frame's noise scale κ and the cast gain (one pass over the frame instead of one per tile)."""
-    import torch
+def plan_tiles(obs: Any, plan: Any, p: Any, size: int | None = None,
+               variance: tuple[np.ndarray, np.ndarray] | None = None) -> TileMap:
+    """The per-tile decisions for ``obs`` under the frame's ``plan`` and settings ``p`` (see the module docstring).
 
-    from spikeview.ops.noise import demosaic_variance
-
-    kappa = np.asarray(obs.noise_scale(), dtype=np.float64)
-    var = obs.variance()
-    if obs.cfa is None or not use_mosaic:
-        return var[None], (kappa if kappa.size == 1 else None), np.ones(1)
-    v = demosaic_variance(torch.from_numpy(var)[None, None], obs.cfa)[0].numpy()
-    gain = (obs.alpha / obs.eta) if (use_cast and obs.alpha is not None) else np.ones(3)
-    return v, kappa, np.asarray(gain, dtype=np.float64)
-
-
-def plan_tiles(obs: Any, plan: Any, p: Any, size: int | None = None) -> TileMap:
-    """The per-tile decisions for ``obs`` under the frame's ``plan`` and settings ``p`` (see the module docstring)."""
+    ``variance``: the frame's :func:`~spikeview.guided.observation.start_variance` map and gains when the
+    caller has them (:func:`~spikeview.guided.plan.make_plan` does), else computed here.
+    """
     from spikeview.guided.config import SIGMA_MAX
+    from spikeview.guided.observation import start_variance
 
     size = int(size or p.tile)
     h, w = obs.shape
@@ -204,7 +193,10 @@ def plan_tiles(obs: Any, plan: Any, p: Any, size: int | None = None) -> TileMap:
     n = int(p.steps)
     levels = sched.sigmas[:n].max(axis=1)  # the level of each step (largest over channels)
     tm = TileMap((h, w), size, len(ys), len(xs), ladder=n)
-    var, kappa, gain = _frame_variance(obs, plan.mosaic, plan.cast)
+    var, gain = variance if variance is not None else start_variance(obs, plan.mosaic, plan.cast)
+    kappa = np.asarray(obs.noise_scale(), dtype=np.float64)  # the frame's noise scale: tiles rescale by their own
+    if var.shape[0] == 1 and kappa.size != 1:
+        kappa = None
     for y0, y1 in ys:
         for x0, x1 in xs:
             # estimate_sigma of the tile alone: the frame's demosaicked variance rescaled by the tile's own
