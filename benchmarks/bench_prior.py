@@ -50,6 +50,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -599,14 +600,20 @@ def main(argv: list[str] | None = None) -> int:
                     print(f"memory {size} {precision}: {r['peak_mb']:.0f} MB, {r['wall_s']:.1f} s, {r['plan']}", flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+    out = a.out if a.out is not None else (None if a.quick else ROOT / "benchmarks" / "results")
+    return save_results(res, out, "prior", write_report, t_start)
+
+
+def save_results(res: dict, out: Path | None, name: str, write: Any, t_start: float) -> int:
+    """Note the load and minutes in ``res``, write ``out/<name>.json`` and ``write(res, out/<name>.md)``
+    (nothing when ``out`` is None), print the load line; returns the exit status 0."""
     res["load_after"] = os.getloadavg()[0]
     res["minutes"] = (time.time() - t_start) / 60
-    out = a.out if a.out is not None else (None if a.quick else ROOT / "benchmarks" / "results")
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-        (out / "prior.json").write_text(json.dumps(res, indent=1), encoding="utf-8")
-        write_report(res, out / "prior.md")
-        print(f"wrote {out / 'prior.md'}")
+        (out / f"{name}.json").write_text(json.dumps(res, indent=1), encoding="utf-8")
+        write(res, out / f"{name}.md")
+        print(f"wrote {out / f'{name}.md'}")
     print(f"load {res['machine']['load_before']:.1f} -> {res['load_after']:.1f}, {res['minutes']:.1f} min")
     return 0
 

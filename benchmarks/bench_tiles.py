@@ -37,7 +37,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_prior import machine, simulate  # noqa: E402
+from bench_prior import machine, save_results, simulate  # noqa: E402
 
 
 def _cpu() -> float:
@@ -282,11 +282,8 @@ def main(argv: list[str] | None = None) -> int:
                     r["capture"] = f"{size}×{size}"
                     res["memory"].append(r)
                     print(f"  memory {size} {r['args']}: {r['peak_mb']:.0f} MB, {r['wall_s']:.1f} s, rc {r['rc']}, {r['tiles']}", flush=True)
-    res["load_after"] = os.getloadavg()[0]
-    res["minutes"] = (time.time() - t_start) / 60
     out = a.out if a.out is not None else (None if a.quick else ROOT / "benchmarks" / "results")
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
         if (out / "tiles.json").exists():  # parts not run this time keep their last figures
             last = json.loads((out / "tiles.json").read_text(encoding="utf-8"))
             for key in ("seams", "held_out", "big", "memory"):
@@ -295,11 +292,7 @@ def main(argv: list[str] | None = None) -> int:
                     res.setdefault("kept", []).append(key)
             done = {r["capture"] for r in res.get("memory", [])}
             res["memory"] = res.get("memory", []) + [r for r in last.get("memory", []) if r["capture"] not in done]
-        (out / "tiles.json").write_text(json.dumps(res, indent=1), encoding="utf-8")
-        write_report(res, out / "tiles.md")
-        print(f"wrote {out / 'tiles.md'}")
-    print(f"load {res['machine']['load_before']:.1f} -> {res['load_after']:.1f}, {res['minutes']:.1f} min")
-    return 0
+    return save_results(res, out, "tiles", write_report, t_start)
 
 
 if __name__ == "__main__":
