@@ -418,20 +418,27 @@ def bench_quality_mono(size: int, scenes: list[str] | None) -> dict:
 
 
 # ---------------------------------------------------------------------------------- 4. memory
-def peak_rss(path: Path, precision: str) -> dict:
-    """Peak RSS (MB) and wall seconds of ``spikeview reconstruct PATH --method guided --at 100`` in a child."""
+def run_cli(path: Path, extra: list[str], row: str) -> dict:
+    """``spikeview reconstruct PATH --method guided --at 100 EXTRA`` in a child process: its peak RSS (MB),
+    wall seconds and exit status, and the plan's row starting with ``row`` (as printed)."""
     with tempfile.TemporaryDirectory() as d:
         out = Path(d) / "frame.npy"
         code = ("import resource, subprocess, sys, time; t = time.perf_counter(); "
                 "r = subprocess.run(sys.argv[1:], capture_output=True, text=True); "
                 "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, time.perf_counter() - t, r.returncode); "
-                "sys.stderr.write(r.stderr[-2000:])")
+                "sys.stderr.write(r.stderr[-3000:])")
         cmd = [sys.executable, "-c", code, sys.executable, "-m", "spikeview", "reconstruct", str(path), "--method", "guided",
-               "--at", "100", "--precision", precision, "--out", str(out), "--overwrite"]
+               "--at", "100", "--out", str(out), "--overwrite", *extra]
         r = subprocess.run(cmd, capture_output=True, text=True)
         kb, wall, rc = r.stdout.split()
-        plan_line = next((ln.strip() for ln in r.stderr.splitlines() if ln.strip().startswith("precision")), "")
-        return {"precision": precision, "peak_mb": int(kb) / 1024, "wall_s": float(wall), "rc": int(rc), "plan": plan_line}
+        line = next((ln.strip() for ln in r.stderr.splitlines() if ln.strip().startswith(row)), "")
+        return {"peak_mb": int(kb) / 1024, "wall_s": float(wall), "rc": int(rc), "row": line}
+
+
+def peak_rss(path: Path, precision: str) -> dict:
+    """Peak RSS (MB) and wall seconds of ``spikeview reconstruct PATH --method guided --at 100`` in a child."""
+    r = run_cli(path, ["--precision", precision], "precision")
+    return {"precision": precision, "peak_mb": r["peak_mb"], "wall_s": r["wall_s"], "rc": r["rc"], "plan": r["row"]}
 
 
 # ---------------------------------------------------------------------------------- report

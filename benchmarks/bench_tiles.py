@@ -26,7 +26,6 @@ import json
 import os
 import resource
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -37,7 +36,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_prior import machine, save_results, simulate  # noqa: E402
+from bench_prior import machine, run_cli, save_results, simulate  # noqa: E402
 
 
 def _cpu() -> float:
@@ -179,20 +178,10 @@ def seams() -> list[dict]:
 
 
 def peak_rss(path: Path, extra: list[str]) -> dict:
-    with tempfile.TemporaryDirectory() as d:
-        out = Path(d) / "frame.npy"
-        code = ("import resource, subprocess, sys, time; t = time.perf_counter(); "
-                "r = subprocess.run(sys.argv[1:], capture_output=True, text=True); "
-                "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, time.perf_counter() - t, r.returncode); "
-                "sys.stderr.write(r.stderr[-3000:])")
-        cmd = [sys.executable, "-c", code, sys.executable, "-m", "spikeview", "reconstruct", str(path), "--method", "guided",
-               "--at", "100", "--out", str(out), "--overwrite", *extra]
-        load = os.getloadavg()[0]
-        r = subprocess.run(cmd, capture_output=True, text=True)
-        kb, wall, rc = r.stdout.split()
-        line = next((ln.strip() for ln in r.stderr.splitlines() if ln.strip().startswith("tiles")), "")
-        return {"args": " ".join(extra) or "(defaults)", "peak_mb": int(kb) / 1024, "wall_s": float(wall), "rc": int(rc),
-                "tiles": line, "load": load}
+    load = os.getloadavg()[0]
+    r = run_cli(path, extra, "tiles")
+    return {"args": " ".join(extra) or "(defaults)", "peak_mb": r["peak_mb"], "wall_s": r["wall_s"], "rc": r["rc"],
+            "tiles": r["row"], "load": load}
 
 
 def write_report(res: dict, out: Path) -> None:
