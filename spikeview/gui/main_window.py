@@ -414,7 +414,8 @@ class MainWindow(QtWidgets.QMainWindow):
         """Show the settings dialog for a file without a sidecar (non-blocking, live preview)."""
         initial = dict(initial or {"cfa": "RGGB", "flip_vertical": True})
         msg = (f"{path.name} has no sidecar saying how to read it. Check the size, the colour filter and the flip: "
-               "the preview updates as you go (a wrong CFA or flip shows as wrong colours and unequal greens).")
+               "the preview updates as you go (a wrong width shears the rows, a wrong flip turns the picture upside down, "
+               "a wrong colour filter gives wrong colours).")
         if note:
             msg += f"\n{note}"
         dlg = StreamSettingsDialog(f"Open {path.name}", lambda **kw: core.open_file(path, **kw), initial, candidates or [], msg,
