@@ -74,13 +74,14 @@ class Controller(QtCore.QObject):
     def __init__(self, session: Session, parent: QtCore.QObject | None = None):
         super().__init__(parent)
         self.session = session
-        # Preview, TFI and export workers run at a lower OS priority (nice 5) than the GUI thread: on a
-        # loaded machine they otherwise took the cores from it and the window froze for 100+ ms
-        # (benchmarks/bench_gui.py --stall). The guided worker keeps its own setting.
+        # Every worker runs at a lower OS priority (nice 5) than the GUI thread: on a loaded machine they
+        # otherwise took the cores from it and the window froze for 100+ ms (benchmarks/bench_gui.py --stall).
         self.preview = Worker("spikeview-preview", priority=("frames", "degradation", "rates", "alpha"), parent=self,
                               nice=WORKER_NICE)
-        # the sampler leaves one core to the window: a single torch thread, at a lower priority
-        self.guided = Worker("spikeview-guided", parent=self, nice=0, torch_threads=max(1, (os.cpu_count() or 2) - 1))
+        # the sampler uses every core, as the CLI does, at a lower OS priority than the window: its torch
+        # threads are started by the worker thread and inherit its nice value, so the GUI thread takes a
+        # core whenever it has work (benchmarks/bench_ui_stalls.py; one thread had made a 1000×1000 run 2× slower)
+        self.guided = Worker("spikeview-guided", parent=self, nice=WORKER_NICE, torch_threads=os.cpu_count() or 1)
         self.exporter = Worker("spikeview-export", parent=self, nice=WORKER_NICE)
         self.tfi = Worker("spikeview-tfi", parent=self, nice=WORKER_NICE)
         for w in (self.preview, self.guided, self.exporter, self.tfi):

@@ -204,7 +204,9 @@ def _tile_sum(x: np.ndarray, t: int) -> np.ndarray:
         p = np.zeros((th * t, tw * t), dtype=x.dtype)
         p[:h, :w] = x
         x = p
-    return x.reshape(th, t, tw, t).sum(axis=(1, 3), dtype=np.float64)
+    # rows of each tile first (contiguous runs), then the columns: the same float64 sums as
+    # ``sum(axis=(1, 3))`` at a quarter of the time (1000×1000: ~1100 calls per window's pooling)
+    return x.reshape(th, t, tw * t).sum(axis=1, dtype=np.float64).reshape(th, tw, t).sum(axis=2)
 
 
 def _tile_chi(g0: np.ndarray, gk: np.ndarray, pad: int, dy: int, dx: int, tile: int, noise: float,
