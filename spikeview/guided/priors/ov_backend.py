@@ -1,0 +1,143 @@
+"""OpenVINO's CPU runtime for the FFDNet conv stack in float32 (the optional extra ``openvino``).
+
+The 3×3 conv + ReLU stack of :class:`~spikeview.guided.priors.ffdnet.FFDNetDenoiser` (BatchNorm
+folded, the same float32 weights and biases) is built directly as an OpenVINO graph (``opset13``
+convolution + add + relu, no tracing, no file, no network) with dynamic batch, height and width, and
+compiled once per weights for the CPU with ``INFERENCE_PRECISION_HINT=f32``, the latency hint and
+torch's thread count. The rest of the pass (noise map, pixel (un)shuffle, ``x − residual``, strips)
+stays in torch.
+
+Why: on a 2-core AMD EPYC (AVX-512, AVX512-BF16, no AMX) one float32 pass at 1000² took 1.4–1.7×
+less time than torch's fused oneDNN channels-last path, interleaved in one process, and gave the
+same numbers there (max difference 0 at 256² and 1000², RGB and gray: OpenVINO's CPU plugin runs
+the same oneDNN convolution kernels); /work/notes/issue15_openvino.md, ``benchmarks/bench_prior.py``.
+OpenVINO's own bfloat16 was not faster than torch's on that CPU and its error was larger
+(1.3–1.8/255 RMS against 1.0/255 with the bias-corrected torch layers), so only float32 goes here.
+
+:func:`available` probes once (import, compile a tiny stack, compare with ``F.conv2d``); where
+it fails the prior keeps torch's path (:mod:`spikeview.guided.precision` decides which steps use
+this). A pass runs asynchronously and polls the job's cancel flag every few milliseconds, so Cancel
+still takes effect inside a pass.
+"""
+
+from __future__ import annotations
+
+import functools
+import threading
+
+import torch
+
+from spikeview.errors import check_cancelled
+
+__all__ = ["OVStack", "available", "stack_for", "version"]
+
+#: how often (ms) a running pass looks at the cancel flag
+POLL_MS = 20
+
+
+@functools.lru_cache(maxsize=1)
+def version() -> str:
+    """OpenVINO's version (``""`` where it is not installed or does not import)."""
+    try:
+        import openvino as ov
+
+        return str(ov.__version__).split("-")[0]
+    except Exception:  # noqa: BLE001 - a broken install raises anything from ImportError to OSError
+        return ""
+
+
+def _build(weights: list[torch.Tensor], biases: list[torch.Tensor]):
+    """The conv stack as an OpenVINO model: input ``(N, Cin, H, W)`` float32 (all dynamic but Cin)."""
+    import numpy as np
+    import openvino as ov
+    import openvino.opset13 as ops
+
+    x = ops.parameter([-1, int(weights[0].shape[1]), -1, -1], np.float32, name="feats")
+    y = x
+    last = len(weights) - 1
+    for i, (w, b) in enumerate(zip(weights, biases, strict=True)):
+        wc = ops.constant(w.detach().to(torch.float32).contiguous().numpy())
+        bc = ops.constant(b.detach().to(torch.float32).reshape(1, -1, 1, 1).contiguous().numpy())
+        y = ops.add(ops.convolution(y, wc, [1, 1], [1, 1], [1, 1], [1, 1]), bc)
+        if i < last:
+            y = ops.relu(y)
+    return ov.Model([y], [x], "ffdnet_stack")
+
+
+class OVStack:
+    """One compiled float32 conv stack (any batch/height/width); ``run`` is thread-safe (one infer
+    request per thread)."""
+
+    def __init__(self, weights: list[torch.Tensor], biases: list[torch.Tensor], threads: int | None = None):
+        import openvino as ov
+
+        self.threads = int(threads or torch.get_num_threads())
+        core = ov.Core()
+        self.compiled = core.compile_model(_build(weights, biases), "CPU", {
+            "INFERENCE_PRECISION_HINT": "f32", "PERFORMANCE_HINT": "LATENCY", "INFERENCE_NUM_THREADS": self.threads})
+        self._local = threading.local()
+
+    def _request(self):
+        req = getattr(self._local, "req", None)
+        if req is None:
+            req = self._local.req = self.compiled.create_infer_request()
+        return req
+
+    def run(self, feats: torch.Tensor) -> torch.Tensor:
+        """The stack on ``feats`` ``(N, Cin, h, w)`` float32 (any memory format) → ``(N, Cout, h, w)``
+        (a new tensor). Raises :class:`~spikeview.errors.Cancelled` within :data:`POLL_MS` of the
+        job's Cancel."""
+        import numpy as np
+        import openvino as ov
+
+        req = self._request()
+        # the request reads this memory without owning it: ``x`` stays referenced until the pass is over
+        x = feats.detach().to(torch.float32).contiguous().numpy()
+        req.set_input_tensor(0, ov.Tensor(x, shared_memory=True))
+        req.start_async()
+        try:
+            while not req.wait_for(POLL_MS):
+                check_cancelled("inside a prior pass (OpenVINO)")
+        except BaseException:
+            req.cancel()
+            try:
+                req.wait()
+            except Exception:  # noqa: BLE001 - a cancelled request may report its cancellation
+                pass
+            raise
+        out = torch.from_numpy(np.array(req.get_output_tensor(0).data, copy=True))
+        del x
+        return out
+
+
+def stack_for(model) -> OVStack | None:
+    """The compiled stack of ``model`` (an :class:`FFDNetDenoiser`; cached on it per weights
+    version and thread count), or None where OpenVINO is not :func:`available`."""
+    if not available():
+        return None
+    key = (tuple((w.data_ptr(), w._version) for w in model.weight), torch.get_num_threads())
+    cached = model.__dict__.get("_ov_stack")
+    if cached is None or cached[0] != key:
+        cached = (key, OVStack(list(model.weight), list(model.bias)))
+        model.__dict__["_ov_stack"] = cached
+    return cached[1]
+
+
+@functools.lru_cache(maxsize=1)
+def available() -> bool:
+    """OpenVINO is installed, compiles a small conv stack for this CPU and gives ``F.conv2d``'s
+    numbers (within 1e-5; checked once per process)."""
+    if not version():
+        return False
+    try:
+        import torch.nn.functional as F
+
+        g = torch.Generator().manual_seed(0)
+        ws = [torch.randn(6, 5, 3, 3, generator=g) * 0.3, torch.randn(4, 6, 3, 3, generator=g) * 0.3]
+        bs = [torch.randn(6, generator=g), torch.randn(4, generator=g)]
+        x = torch.rand(1, 5, 7, 9, generator=g)
+        ref = F.conv2d(F.relu(F.conv2d(x, ws[0], bs[0], padding=1)), ws[1], bs[1], padding=1)
+        got = OVStack(ws, bs, threads=1).run(x)
+        return tuple(got.shape) == tuple(ref.shape) and bool(torch.allclose(got, ref, atol=1e-5, rtol=1e-5))
+    except Exception:  # noqa: BLE001 - any failure to build/compile/run means: use torch
+        return False
