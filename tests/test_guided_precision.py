@@ -144,11 +144,17 @@ def test_edited_weights_are_not_served_from_the_cache():
 
 def test_auto_follows_the_cpu():
     assert prec.resolve_precision("auto", BF16_CPU)[0] == ("bfloat16-mixed" if prec.AUTO_BF16 else "float32")
-    assert prec.resolve_precision("auto", AVX2_CPU)[0] == "float32"
+    # no AVX-512: NNPACK's fast float32 (half the time of oneDNN's AVX2 kernels); a cap plays such a CPU
+    assert prec.resolve_precision("auto", AVX2_CPU)[0] == "float32-fast"
+    capped = dict(BF16_CPU, onednn_bf16=False, onednn_max_isa="AVX2")
+    assert prec.resolve_precision("auto", capped)[0] == "float32-fast"
+    # AVX-512 without bf16 (e.g. Skylake-X): oneDNN's AVX-512 float32 was as fast as NNPACK, and exact
+    assert prec.resolve_precision("auto", dict(BF16_CPU, avx512_bf16=False, onednn_bf16=False))[0] == "float32"
+    assert prec.resolve_precision("auto", dict(capped, onednn_max_isa="AVX512_CORE"))[0] == "float32"
     choice, why = prec.resolve_precision("auto", BARE_CPU)
     assert choice == "float32" and "no native bfloat16" in why
     assert prec.resolve_precision("float32-fast", BARE_CPU)[0] == "float32"
-    for p in ("float32", "bfloat16-mixed"):
+    for p in ("float32", "bfloat16-mixed", "float32-fast"):
         choice, why = prec.resolve_precision(p, AVX2_CPU)
         assert choice == p and f"set by precision={p}" in why
 

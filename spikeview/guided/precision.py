@@ -7,7 +7,8 @@
 * ``"float32-fast"`` — float32 with NNPACK's fast convolution algorithms (built into torch's CPU
   wheels for x86-64 with AVX2; max difference ~1e-5 per pass, well below one 8-bit level); on a quiet
   AMD EPYC (AVX-512) it was no faster than oneDNN channels-last at 1000² and 1.5× slower at 256²
-  (BENCHMARKS.md), so ``auto`` does not pick it; ``"float32"`` where torch lacks NNPACK;
+  (BENCHMARKS.md), but on the same CPU capped at AVX2 it took half the time of oneDNN's AVX2 kernels:
+  ``auto`` picks it on CPUs without AVX-512; ``"float32"`` where torch lacks NNPACK;
 * ``"bfloat16-mixed"`` — every FFDNet layer in bfloat16 (oneDNN's fused convolution + ReLU, float32
   accumulation, float32 biases that absorb the mean error of the rounded weights) on the steps whose
   noise level is at least :data:`MIXED_BF16_SIGMA`, ``float32`` below it — in OpenVINO's float32 CPU
@@ -141,12 +142,24 @@ def describe(precision: str) -> str:
                                f"({backend_label()})")}.get(precision, precision)
 
 
+def avx512_usable(s: dict[str, object]) -> bool:
+    """oneDNN runs AVX-512 here: the CPU has AVX512F and no ``ONEDNN_MAX_CPU_ISA`` cap holds it below."""
+    isa = str(s.get("onednn_max_isa", "ALL"))
+    return bool(s.get("avx512f")) and (isa == "ALL" or any(t in isa for t in ("AVX512", "AMX", "AVX10")))
+
+
 def _auto(s: dict[str, object]) -> tuple[str, str]:
     feats = ", ".join(k for k in ("amx_bf16", "avx512_bf16", "avx512f", "avx2") if s.get(k)) or "no AVX2"
     if AUTO_BF16 and native_bf16(s):
         return "bfloat16-mixed", f"native bfloat16 ({feats}); within 0.1 dB / 0.005 SSIM of float32 on the bench"
-    # NNPACK (float32-fast) measured no faster than oneDNN channels-last on a quiet machine (1.0x at
-    # 1000², 0.68x at 256²; BENCHMARKS.md): auto keeps the reference float32 path without native bf16
+    if s.get("nnpack") and not avx512_usable(s):
+        # an AVX2-only CPU: NNPACK's fast (Winograd/FFT) float32 convolutions took 1.6-2.0x less time per
+        # 1000² pass than oneDNN's AVX2 kernels (this EPYC capped with ONEDNN_MAX_CPU_ISA=AVX2; NNPACK has
+        # AVX2 kernels only, so the cap does not touch it), the same numbers within 1e-5 and 0.000 dB on
+        # the bench (benchmarks/bench_prior.py, AVX2 section)
+        return "float32-fast", f"{feats}; no AVX-512 and no native bfloat16: NNPACK's fast float32 convolutions"
+    # with AVX-512, NNPACK (float32-fast, AVX2 kernels) measured no faster than oneDNN channels-last on a
+    # quiet machine (1.0x at 1000², 0.68x at 256²; BENCHMARKS.md): auto keeps the reference float32 path
     # (ONNX Runtime's float32 conv stack measured 1.26-1.32x less time than the fused oneDNN path at 1000²,
     # 0.9-1.1x at 256-512² under load: not a dependency; benchmarks/bench_prior.py measures it when installed;
     # OpenVINO's float32 serves bfloat16-mixed's float32 steps, but ``float32`` stays torch's reference path)
