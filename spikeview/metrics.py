@@ -58,12 +58,14 @@ def ssim(x: np.ndarray, ref: np.ndarray, data_range: float) -> float:
     win = min(WIN, min(a.shape[-2:]) - (1 - min(a.shape[-2:]) % 2))
     if win < 3:
         return float("nan")
-    k = torch.full((1, 1, win, win), 1.0 / (win * win), dtype=torch.float64)
     n = win * win
     cov_norm = n / (n - 1.0)
 
     def filt(v: torch.Tensor) -> torch.Tensor:
-        return F.conv2d(v, k)  # 'valid': exactly the pixels skimage keeps after cropping the border
+        # the window's mean, 'valid': exactly the pixels skimage keeps after cropping the border
+        # (average pooling: the same numbers as a float64 7×7 box convolution within 1e-15, ~10× faster,
+        # which at 1000×1000 RGB took 3.4 s per guided step of the app)
+        return F.avg_pool2d(v, win, stride=1)
 
     ux, uy = filt(a), filt(b)
     vx = cov_norm * (filt(a * a) - ux * ux)
