@@ -66,7 +66,8 @@ def _build(weights: list[torch.Tensor], biases: list[torch.Tensor]):
 
 class OVStack:
     """One compiled float32 conv stack (any batch/height/width); ``run`` is thread-safe (one infer
-    request per thread)."""
+    request, one pass at a time: a request kept per thread in ``threading.local`` was destroyed while
+    its thread's Python state was torn down, and the app crashed on quitting after a guided run)."""
 
     def __init__(self, weights: list[torch.Tensor], biases: list[torch.Tensor], threads: int | None = None):
         import openvino as ov
@@ -75,13 +76,13 @@ class OVStack:
         core = ov.Core()
         self.compiled = core.compile_model(_build(weights, biases), "CPU", {
             "INFERENCE_PRECISION_HINT": "f32", "PERFORMANCE_HINT": "LATENCY", "INFERENCE_NUM_THREADS": self.threads})
-        self._local = threading.local()
+        self._lock = threading.Lock()
+        self._req = None
 
     def _request(self):
-        req = getattr(self._local, "req", None)
-        if req is None:
-            req = self._local.req = self.compiled.create_infer_request()
-        return req
+        if self._req is None:
+            self._req = self.compiled.create_infer_request()
+        return self._req
 
     def run(self, feats: torch.Tensor) -> torch.Tensor:
         """The stack on ``feats`` ``(N, Cin, h, w)`` float32 (any memory format) → ``(N, Cout, h, w)``
@@ -90,22 +91,23 @@ class OVStack:
         import numpy as np
         import openvino as ov
 
-        req = self._request()
         # the request reads this memory without owning it: ``x`` stays referenced until the pass is over
         x = feats.detach().to(torch.float32).contiguous().numpy()
-        req.set_input_tensor(0, ov.Tensor(x, shared_memory=True))
-        req.start_async()
-        try:
-            while not req.wait_for(POLL_MS):
-                check_cancelled("inside a prior pass (OpenVINO)")
-        except BaseException:
-            req.cancel()
+        with self._lock:
+            req = self._request()
+            req.set_input_tensor(0, ov.Tensor(x, shared_memory=True))
+            req.start_async()
             try:
-                req.wait()
-            except Exception:  # noqa: BLE001 - a cancelled request may report its cancellation
-                pass
-            raise
-        out = torch.from_numpy(np.array(req.get_output_tensor(0).data, copy=True))
+                while not req.wait_for(POLL_MS):
+                    check_cancelled("inside a prior pass (OpenVINO)")
+            except BaseException:
+                req.cancel()
+                try:
+                    req.wait()
+                except Exception:  # noqa: BLE001 - a cancelled request may report its cancellation
+                    pass
+                raise
+            out = torch.from_numpy(np.array(req.get_output_tensor(0).data, copy=True))
         del x
         return out
 
