@@ -6,11 +6,14 @@ What it measures (one process, ``torch.set_num_threads(2)``; the machine is shar
 1. **one FFDNet pass** (RGB, σ = 25/255, no autograd) at 256² and 1000² for:
    ``eager float32`` (today's path: NCHW, the reference), ``channels-last float32`` (the float32
    path now: channels-last, strips), ``torch.compile`` (the channels-last body compiled with
-   inductor; its warm-up reported separately; skipped without a C++ compiler), ``bf16 hidden
-   layers`` (first/last layer float32) and ``bf16 all layers``;
+   inductor; its warm-up reported separately; skipped without a C++ compiler), ``OpenVINO float32``
+   (``float32-openvino``, the optional extra: what ``auto`` runs on its float32 steps where it is
+   installed; left out with the reason otherwise), ``bf16 hidden layers`` (first/last layer float32)
+   and ``bf16 all layers``;
 2. **one guided frame** (the CLI's default recipe on a simulated demo capture of that size: gray-world
    α, white point, exposure, plan; ``GuidedSampler.run`` only, no start-up) for today's float32
-   path, ``--precision float32`` and ``--precision auto`` (what this CPU resolves it to);
+   path, ``--precision float32`` and ``--precision auto`` (what this CPU resolves it to), and ``auto``
+   with its float32 steps in torch (OpenVINO turned off) where OpenVINO is installed;
 3. **quality** (``--quality``; ``--quality-json FILE`` reuses earlier rows): the held-out scenes of ``spikeview bench``
    (:mod:`spikeview.bench.data`, 256×256, 2 windows each) reconstructed with the default recipe under
    each mixed-precision candidate (which layers in bf16, how many final steps float32), PSNR/SSIM
@@ -89,6 +92,7 @@ def machine() -> dict:
     flags = cpu_flags()
     return {"model": model, "cpus": os.cpu_count(), "flags": [f for f in FLAGS if f in flags], "torch": torch.__version__,
             "capability": cpu_summary()["capability"], "onednn_bf16": cpu_summary()["onednn_bf16"],
+            "openvino": cpu_summary().get("openvino", ""),
             "compiler": shutil.which(os.environ.get("CXX", "g++")) or shutil.which("cc") or "", "load_before": os.getloadavg()[0]}
 
 
@@ -156,6 +160,12 @@ def bench_pass(size: int, repeats: int, compile_ok: bool) -> dict:
            "bf16 hidden layers": lambda: _nog(ng, net, x, s, "bfloat16"),
            "bf16 all layers": lambda: _nog(ng, net, x, s, "bfloat16-all")}
     extra = {}
+    from spikeview.guided.priors import ov_backend
+
+    if ov_backend.available():
+        fns[OV_ROW] = lambda: _nog(ng, net, x, s, "float32-openvino")
+    else:
+        extra["openvino"] = "openvino not installed or not working here (pip install spikeview[openvino] to measure it)"
     if compile_ok:
         import torch.nn.functional as F
 
@@ -186,6 +196,8 @@ def bench_pass(size: int, repeats: int, compile_ok: bool) -> dict:
                  "NNPACK float32 (float32-fast)": float((net(x, s, "float32-fast") - ref).abs().max()),
                  "bf16 hidden layers": float((net(x, s, "bfloat16") - ref).abs().max()),
                  "bf16 all layers": float((net(x, s, "bfloat16-all") - ref).abs().max())}
+        if OV_ROW in fns:
+            diffs[OV_ROW] = float((net(x, s, "float32-openvino") - ref).abs().max())
         if ort_pass is not None:
             diffs["ONNX Runtime float32 (optional, not used)"] = float((ort_pass() - ref).abs().max())
         if "torch.compile float32 (channels-last)" in fns:
@@ -238,6 +250,26 @@ def onnx_pass(net, x, s):
             return x - F.pixel_shuffle(r, 2)
 
     return run, ""
+
+
+#: the pass row of OpenVINO's float32 conv stack (spikeview.guided.priors.ov_backend)
+OV_ROW = "OpenVINO float32 (float32-openvino; auto's float32 steps)"
+#: the frame row of auto with its float32 steps in torch (OpenVINO turned off)
+TORCH_AUTO_ROW = "--precision auto, float32 steps in torch (no OpenVINO)"
+
+
+def _torch_only(f):
+    """``f`` with OpenVINO turned off (``ov_backend.available`` says no): torch runs every float32 step."""
+    from spikeview.guided.priors import ov_backend
+
+    def g():
+        real = ov_backend.available
+        ov_backend.available = lambda: False
+        try:
+            return f()
+        finally:
+            ov_backend.available = real
+    return g
 
 
 def _nog(ctx, f, *a):
@@ -299,11 +331,17 @@ def bench_frame(path: Path, repeats: int, variants: tuple[str, ...] = ("float32"
             outs[name] = sampler.run(obs, p)
         return f
 
+    from spikeview.guided.priors import ov_backend
+
     fns = {"eager float32 (today)": run("ref", ref, params.replace(precision="float32"))}
     for v in variants:
         fns[f"--precision {v}" + (" (auto)" if v == auto else "")] = run(v, smp, params.replace(precision=v))
+    if auto == "bfloat16-mixed" and auto in variants and ov_backend.available():
+        fns[TORCH_AUTO_ROW] = _torch_only(run("torch-auto", smp, params.replace(precision=auto)))
     res = interleaved(fns, repeats)
     diff = {f"{k} vs today": float(np.abs(outs[k] - outs["ref"]).max()) for k in variants}
+    if "torch-auto" in outs:
+        diff["auto with OpenVINO vs auto in torch"] = float(np.abs(outs[auto] - outs["torch-auto"]).max())
     return {"size": obs.shape[0], "rows": res, "max_abs_diff": diff, "auto": auto, "steps": params.steps,
             "mode": smp.info.mode}
 
@@ -446,7 +484,8 @@ def write_report(res: dict, out: Path) -> None:
     m = res["machine"]
     L = ["# FFDNet prior: precision and backend (benchmarks/bench_prior.py)", "",
          f"Machine: {m['model']}, {m['cpus']} CPUs, flags {' '.join(m['flags']) or '(none of ' + ', '.join(FLAGS) + ')'}; "
-         f"torch {m['torch']} (CPU capability {m['capability']}, oneDNN bf16 {m['onednn_bf16']}); 2 threads. "
+         f"torch {m['torch']} (CPU capability {m['capability']}, oneDNN bf16 {m['onednn_bf16']}); "
+         f"OpenVINO {m.get('openvino') or 'not installed'}; 2 threads. "
          f"1-min load {m['load_before']:.1f} before, {res['load_after']:.1f} after. Command: `{res['command']}`; "
          f"{res['minutes']:.1f} min.", "",
          "Medians of interleaved repeats after a warm-up; × = eager float32 (today) / this, in the same run. "
@@ -464,6 +503,8 @@ def write_report(res: dict, out: Path) -> None:
             L.append(f"\ntorch.compile unavailable: {p['compile_error']}.")
         if "onnx" in p:
             L.append(f"\nONNX Runtime not measured in this run: {p['onnx']}.")
+        if "openvino" in p:
+            L.append(f"\nOpenVINO not measured in this run: {p['openvino']}.")
         L.append("")
     for f in res["frames"]:
         base = f["rows"]["eager float32 (today)"]["wall"]
