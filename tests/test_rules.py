@@ -202,6 +202,10 @@ def test_chunks_across_a_keyframe_give_the_frames_of_one_chunk(tmp_path, monkeyp
     from spikeview.cluster.store import check_store
     from spikeview.io.plain import write_plain
 
+    # imported before the patch: BatchJob's default keyframe is bound when spikeview.cluster.run is first
+    # imported, and a first import under the patch left it at 3 for every later test of the process
+    import spikeview.cluster.run  # noqa: F401
+
     monkeypatch.setattr(pipeline, "KEYFRAME", 3)
     monkeypatch.setattr("spikeview.cluster._compute.DEFAULT_KEYFRAME", 3, raising=False)
     monkeypatch.setattr("spikeview.cluster.reconstruct.DEFAULT_KEYFRAME", 3, raising=False)
