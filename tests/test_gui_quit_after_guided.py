@@ -21,7 +21,8 @@ CHILD = textwrap.dedent("""
     from spikeview.gui.main_window import MainWindow
 
     app = make_application()
-    w = MainWindow()
+    # settings of this run only (never the user's): a file in the test's folder
+    w = MainWindow(settings=QtCore.QSettings("settings.ini", QtCore.QSettings.Format.IniFormat))
     w.show()
     w.open_demo(size=int(sys.argv[1]), n_ticks=120)
     state = {"started": False}

@@ -37,65 +37,87 @@ CAPTURE_FILTER = "Spike captures (*.dat *.bin *.raw *.npy *.npz);;All files (*)"
 
 
 class NotificationBar(QtWidgets.QFrame):
-    """A slim, non-modal message strip with optional action buttons (errors, finished exports)."""
+    """A slim, non-modal message strip with optional action buttons (errors, finished exports).
+
+    The strip keeps one line's height whether or not it shows a message, so a message arriving or
+    going never re-lays out the window: showing it in a bar that appeared and vanished resized every
+    dock and repainted every view, ~30 ms of the GUI thread at 1000×1000 (50–111 ms stalls at the end
+    of an export on a loaded machine; issue 15). A text longer than the strip is elided; the whole
+    text is in the tooltip and in :meth:`text`."""
 
     def __init__(self, parent: QtWidgets.QWidget | None = None):
         super().__init__(parent)
         self.setObjectName("notification")
-        self.setFrameShape(QtWidgets.QFrame.Shape.StyledPanel)
+        self.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
         self.label = QtWidgets.QLabel()
-        self.label.setWordWrap(True)
         self.label.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
-        # at most three lines (the whole text is in the tooltip): a long message must not push the docks
-        # and the status bar off a 768-pixel-high screen
-        self.label.setMaximumHeight(3 * self.label.fontMetrics().lineSpacing() + 4)
-        self.label.setSizePolicy(QtWidgets.QSizePolicy.Policy.Preferred, QtWidgets.QSizePolicy.Policy.Maximum)
+        self.label.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored, QtWidgets.QSizePolicy.Policy.Fixed)
+        self.label.setMinimumWidth(50)
         self.buttons = QtWidgets.QHBoxLayout()
-        close = QtWidgets.QToolButton(text="✕")
+        self.close_button = close = QtWidgets.QToolButton(text="✕")
         close.setAutoRaise(True)
         close.setToolTip("Dismiss")
         close.clicked.connect(self.dismiss)
-        self.setSizePolicy(QtWidgets.QSizePolicy.Policy.Expanding, QtWidgets.QSizePolicy.Policy.Preferred)
-        #: the tool-bar action that holds this bar (visibility goes through it), set by the window
+        self.setSizePolicy(QtWidgets.QSizePolicy.Policy.Expanding, QtWidgets.QSizePolicy.Policy.Fixed)
+        #: the tool-bar action that holds this bar (set by the window; always visible: see the class docstring)
         self.action: QtGui.QAction | None = None
         lay = QtWidgets.QHBoxLayout(self)
         lay.setContentsMargins(8, 1, 4, 1)
         lay.addWidget(self.label, 1)
         lay.addLayout(self.buttons)
         lay.addWidget(close)
+        # one line, the height of a push button (the tallest thing the strip holds)
+        self.setFixedHeight(max(QtWidgets.QPushButton("Open").sizeHint().height(), self.label.fontMetrics().lineSpacing()) + 2)
         self.kind = ""
+        self._text = ""
+        self._paint("")
 
-    def show_message(self, text: str, kind: str = "info", actions: list[tuple[str, Any]] | None = None) -> None:
+    def _paint(self, kind: str) -> None:
+        colour = {"error": "#5a1f1f", "warning": "#574515", "info": "#1f3a57", "success": "#1f4a2a"}.get(kind, "#333")
+        bg = f"background: {colour}; border-radius: 3px;" if kind else "background: transparent;"
+        self.setStyleSheet(f"#notification {{ {bg} }} QLabel {{ color: #f0f0f0; }}")
+        self.close_button.setVisible(bool(kind))
+
+    def _clear_buttons(self) -> None:
         while self.buttons.count():
             w = self.buttons.takeAt(0).widget()
             if w is not None:
                 w.deleteLater()
+
+    def show_message(self, text: str, kind: str = "info", actions: list[tuple[str, Any]] | None = None) -> None:
+        self._clear_buttons()
         for text_, slot in actions or []:
             b = QtWidgets.QPushButton(text_)
             b.clicked.connect(slot)
             self.buttons.addWidget(b)
-        colour = {"error": "#5a1f1f", "warning": "#574515", "info": "#1f3a57", "success": "#1f4a2a"}.get(kind, "#333")
-        self.setStyleSheet(f"#notification {{ background: {colour}; border-radius: 3px; }} QLabel {{ color: #f0f0f0; }}")
-        self.label.setText(text)
+        self.kind = kind or "info"
+        self._text = text
+        self._paint(self.kind)
         self.label.setToolTip(text)
-        self.kind = kind
-        self._set_shown(True)
+        self._elide()
 
     def dismiss(self) -> None:
         self.kind = ""
-        self._set_shown(False)
+        self._text = ""
+        self._clear_buttons()
+        self._paint("")
+        self.label.setToolTip("")
+        self.label.setText("")
 
-    def _set_shown(self, on: bool) -> None:
-        if self.action is not None:
-            self.action.setVisible(on)
-        else:
-            self.setVisible(on)
+    def _elide(self) -> None:
+        fm = self.label.fontMetrics()
+        self.label.setText(fm.elidedText(" ".join(self._text.split()), QtCore.Qt.TextElideMode.ElideRight, max(50, self.label.width())))
+
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:  # noqa: N802 - Qt's name
+        super().resizeEvent(event)
+        self._elide()
 
     def is_shown(self) -> bool:
-        return self.action.isVisible() if self.action is not None else self.isVisible()
+        return bool(self.kind) and self.isVisible()
 
     def text(self) -> str:
-        return self.label.text() if self.is_shown() else ""
+        return self._text if self.kind else ""
+
 
 
 class MainWindow(QtWidgets.QMainWindow):
@@ -147,7 +169,6 @@ class MainWindow(QtWidgets.QMainWindow):
         bar.setMovable(False)
         bar.setFloatable(False)
         self.notice.action = bar.addWidget(self.notice)
-        self.notice.action.setVisible(False)
         bar.toggleViewAction().setVisible(False)
         self.addToolBar(QtCore.Qt.ToolBarArea.BottomToolBarArea, bar)
 
