@@ -13,8 +13,9 @@
   accumulation, float32 biases that absorb the mean error of the rounded weights) on the steps whose
   noise level is at least :data:`MIXED_BF16_SIGMA`, ``float32`` below it — in OpenVINO's float32 CPU
   runtime where the optional extra ``openvino`` is installed and works (:func:`float_backend`; the same
-  oneDNN sums as torch's path, measured identical, and 1.4–1.7× less time per pass at 1000²), torch's
-  fused oneDNN channels-last path otherwise; ``x − residual`` and the data step stay float32 in torch;
+  oneDNN sums as torch's path, measured identical, and 1.2–1.5× less time per pass at 1000², from
+  reusing its buffers where torch page-faults fresh ones: :mod:`spikeview.guided.priors.ov_backend`),
+  torch's fused oneDNN channels-last path otherwise; ``x − residual`` and the data step stay float32 in torch;
 * ``"auto"`` (default) — the fastest of these that stays within 0.1 dB PSNR and 0.005 SSIM of
   float32 on the held-out scenes of ``spikeview bench``, for what this CPU offers
   (:func:`resolve_precision`).

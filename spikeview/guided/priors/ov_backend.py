@@ -7,12 +7,16 @@ compiled once per weights for the CPU with ``INFERENCE_PRECISION_HINT=f32``, the
 torch's thread count. The rest of the pass (noise map, pixel (un)shuffle, ``x − residual``, strips)
 stays in torch.
 
-Why: on a 2-core AMD EPYC (AVX-512, AVX512-BF16, no AMX) one float32 pass at 1000² took 1.4–1.7×
-less time than torch's fused oneDNN channels-last path, interleaved in one process, and gave the
-same numbers there (max difference 0 at 256² and 1000², RGB and gray: OpenVINO's CPU plugin runs
-the same oneDNN convolution kernels); /work/notes/issue15_openvino.md, ``benchmarks/bench_prior.py``.
-OpenVINO's own bfloat16 was not faster than torch's on that CPU and its error was larger
-(1.3–1.8/255 RMS against 1.0/255 with the bias-corrected torch layers), so only float32 goes here.
+Why: on a 2-core AMD EPYC (AVX-512, AVX512-BF16, no AMX) one float32 RGB pass at 1000² took
+1.2–1.5× less time (and 1.2–1.3× less CPU) than torch's fused oneDNN channels-last path, interleaved
+in one process, with the same numbers (max difference 0 at 256² and 1000², RGB and gray: OpenVINO's
+CPU plugin runs the same oneDNN ``brgconv`` kernels); no gain at 256². The gain is memory, not
+arithmetic: torch allocates every layer's output afresh, and glibc serves a 51 MB strip by ``mmap``,
+so a torch pass takes ~270,000 page faults; OpenVINO reuses its buffers. With glibc's mmap threshold
+raised (``MALLOC_MMAP_THRESHOLD_``) torch's pass is as fast (0.99 vs 1.00 s). OpenVINO's own
+bfloat16 was not faster than torch's on that CPU and its error was larger (1.3–1.8/255 RMS against
+1.0/255 with the bias-corrected torch layers), so only float32 goes here. Figures:
+``benchmarks/bench_prior.py`` (the OpenVINO rows).
 
 :func:`available` probes once (import, compile a tiny stack, compare with ``F.conv2d``); where
 it fails the prior keeps torch's path (:mod:`spikeview.guided.precision` decides which steps use
