@@ -52,6 +52,31 @@ class _Spy:
         monkeypatch.setattr(ov_backend.OVStack, "run", run)
 
 
+@pytest.fixture(autouse=True)
+def _every_size(monkeypatch):
+    """These tests use small frames: let OpenVINO serve every size (the size rule has its own test)."""
+    monkeypatch.setattr(ffdnet, "OV_MIN_LAYER_BYTES", 0)
+
+
+def test_small_volumes_stay_in_torch(monkeypatch):
+    """OpenVINO only where a layer's output outgrows the allocator's reuse (its gain there is page faults)."""
+    needs_openvino()
+    net = _net(True)
+    spy = _Spy(monkeypatch)
+    small, big = torch.rand(1, 3, 16, 16), torch.rand(1, 3, 40, 40)
+    # the rule, scaled down: a 20×20×96 float32 layer output is 153,600 bytes
+    monkeypatch.setattr(ffdnet, "OV_MIN_LAYER_BYTES", 8 * 8 * 96 * 4)
+    with torch.no_grad():
+        a = net(small, 0.1, "float32-openvino")
+        assert spy.calls == 0
+        b = net(big, 0.1, "float32-openvino")
+        assert spy.calls == 1
+        assert (a - net(small, 0.1, "float32")).abs().max() <= TOL and (b - net(big, 0.1, "float32")).abs().max() <= TOL
+    # the real rule: a 256² frame's layers stay in torch, a 1000² frame's strips go to OpenVINO
+    monkeypatch.setattr(ffdnet, "OV_MIN_LAYER_BYTES", 32 << 20)
+    assert 1 * 128 * 128 * 96 * 4 <= ffdnet.OV_MIN_LAYER_BYTES < 1 * (ffdnet.STRIP_ROWS + 2 * net.n_layers) * 500 * 96 * 4
+
+
 def _no_openvino(monkeypatch):
     monkeypatch.setattr(ov_backend, "available", lambda: False)
 
@@ -154,7 +179,7 @@ def test_plan_and_metadata_name_the_backend(cfa, tmp_path, monkeypatch):
     src = make_source("texture", 24, 24, ticks=40, cfa=cfa)
     obs = Observation.from_source(src, 20, 10, alpha=np.array([1.6, 1.0, 2.0]) if cfa else None, eta=2.0)
     label = prec.backend_label()
-    assert label == (f"OpenVINO {ov_backend.version()}" if ov_backend.available() else "torch oneDNN")
+    assert label == (f"OpenVINO {ov_backend.version()} from ~600×600, torch below" if ov_backend.available() else "torch oneDNN")
     plan = make_plan(obs, GuidedConfig(precision="bfloat16-mixed"))
     assert f"float32 below ({label})" in plan.reasons["precision"] and label in str(plan)
     # the output's metadata records the plan's precision row, backend included

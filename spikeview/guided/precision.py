@@ -127,11 +127,13 @@ def float_backend() -> str:
 
 
 def backend_label(backend: str | None = None) -> str:
-    """The float32 steps' backend as the plan prints it (``"OpenVINO 2026.4.1"`` or ``"torch oneDNN"``)."""
+    """The float32 steps' backend as the plan prints it (``"OpenVINO 2026.4.1 from ~600×600, torch below"``
+    or ``"torch oneDNN"``)."""
     from spikeview.guided.priors import ov_backend
 
     backend = float_backend() if backend is None else backend
-    return f"OpenVINO {ov_backend.version()}" if backend == "openvino" else "torch oneDNN"
+    # OpenVINO serves frames whose layers outgrow the allocator's reuse (ffdnet.OV_MIN_LAYER_BYTES)
+    return f"OpenVINO {ov_backend.version()} from ~600×600, torch below" if backend == "openvino" else "torch oneDNN"
 
 
 def describe(precision: str) -> str:

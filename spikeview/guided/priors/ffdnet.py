@@ -62,6 +62,12 @@ _BN_EPS = 1e-5  # torch.nn.BatchNorm2d default, used when the weights were train
 LAYER_PRECISIONS = ("float32", "float32-fast", "float32-openvino", "bfloat16", "bfloat16-all")
 #: half-resolution rows per strip of the no-grad path (a 96-feature float32 strip of 500 columns is 50 MB)
 STRIP_ROWS = 256
+#: ``float32-openvino`` runs OpenVINO only where one layer's float32 output (of a strip) is larger than
+#: this. Its gain is buffer reuse: torch allocates every layer's output afresh, and above glibc's mmap
+#: threshold (at most 32 MiB) each allocation is new pages, ~270k page faults per 1000² pass; below it
+#: torch reuses freed memory and OpenVINO was no faster (256² frame 0.31 s with it, 0.29 s without;
+#: benchmarks/results/prior.md). About a 600×600 frame and up; the numbers are the same either way.
+OV_MIN_LAYER_BYTES = 32 << 20
 
 
 def _pack(weight: torch.Tensor) -> torch.Tensor:
@@ -306,7 +312,9 @@ class FFDNetDenoiser(nn.Module):
         # float32-openvino: the conv stack in OpenVINO's float32 CPU runtime where it is installed and works
         # (spikeview.guided.priors.ov_backend), otherwise (and with autograd) the float32 path below
         stack = None
-        if precision == "float32-openvino" and not grad and x.dtype == torch.float32:
+        hidden = int(self.weight[0].shape[0])
+        layer_bytes = feats.shape[0] * min(feats.shape[2], STRIP_ROWS + 2 * self.n_layers) * feats.shape[3] * hidden * 4
+        if precision == "float32-openvino" and not grad and x.dtype == torch.float32 and layer_bytes > OV_MIN_LAYER_BYTES:
             from spikeview.guided.priors import ov_backend
 
             stack = ov_backend.stack_for(self)
