@@ -19,6 +19,9 @@ CHILD = textwrap.dedent("""
     from PySide6 import QtCore
     from spikeview.gui.app import make_application
     from spikeview.gui.main_window import MainWindow
+    from spikeview.guided.priors import ffdnet
+
+    ffdnet.OV_MIN_LAYER_BYTES = 0  # OpenVINO (where installed) on this small frame too, as on a full-size one
 
     app = make_application()
     # settings of this run only (never the user's): a file in the test's folder
