@@ -136,14 +136,14 @@ def test_the_probe_says_no_when_openvino_is_missing_or_broken(monkeypatch):
     monkeypatch.setitem(sys.modules, "openvino", None)  # "import openvino" raises ImportError
     assert ov_backend.version.__wrapped__() == ""
     monkeypatch.setattr(ov_backend, "version", lambda: "")
-    assert ov_backend.available.__wrapped__() is False
+    assert ov_backend._probe.__wrapped__() is False
 
     def broken(self, *a, **k):
         raise RuntimeError("no CPU plugin")
 
     monkeypatch.setattr(ov_backend, "version", lambda: "9.9.9")
     monkeypatch.setattr(ov_backend.OVStack, "__init__", broken)
-    assert ov_backend.available.__wrapped__() is False
+    assert ov_backend._probe.__wrapped__() is False
 
 
 def test_float32_stays_torch(monkeypatch):
@@ -212,3 +212,26 @@ def test_sampler_frame_is_the_torch_frame(cfa, monkeypatch):
     with_torch = GuidedSampler(prior=net).run(obs, cfg)
     assert spy.calls == calls
     assert np.abs(with_ov - with_torch).max() <= 1e-4
+
+
+@CFA
+def test_a_failure_during_a_run_falls_back_to_torch(cfa, monkeypatch):
+    """OpenVINO failing inside a pass (out of memory, an unusual CPU…) costs time, never the run: that pass
+    and every later one run in torch (the same numbers), with one warning; the plan then names torch."""
+    needs_openvino()
+    monkeypatch.setattr(ov_backend, "_gave_up", None)
+    net = _net(cfa is not None)
+    x = torch.rand(1, net.channels, 24, 20, generator=torch.Generator().manual_seed(6))
+
+    def broken(stack, feats):
+        raise RuntimeError("std::bad_alloc")
+
+    monkeypatch.setattr(ov_backend.OVStack, "run", broken)
+    with torch.no_grad():
+        ref = net(x, 0.1, "float32")
+        with pytest.warns(ov_backend.OpenVINOFallbackWarning, match="bad_alloc"):
+            got = net(x, 0.1, "float32-openvino")
+        assert (got - ref).abs().max() <= TOL
+        assert not ov_backend.available() and ov_backend.stack_for(net) is None
+        assert (net(x, 0.1, "float32-openvino") - ref).abs().max() <= TOL  # no second warning (-W error)
+    assert prec.float_backend() == "torch"

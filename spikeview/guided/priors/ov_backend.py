@@ -33,7 +33,7 @@ import torch
 
 from spikeview.errors import check_cancelled
 
-__all__ = ["OVStack", "available", "stack_for", "version"]
+__all__ = ["OVStack", "OpenVINOFallbackWarning", "available", "give_up", "stack_for", "version"]
 
 #: how often (ms) a running pass looks at the cancel flag
 POLL_MS = 20
@@ -116,23 +116,52 @@ class OVStack:
         return out
 
 
+class OpenVINOFallbackWarning(RuntimeWarning):
+    """OpenVINO failed during a run: the prior's float32 steps run in torch from then on (the same numbers)."""
+
+
+#: why OpenVINO was given up in this process (``None``: it was not)
+_gave_up: str | None = None
+
+
+def give_up(error: BaseException) -> None:
+    """OpenVINO failed while compiling the real weights or running a pass (out of memory, an unusual
+    CPU…): warn once and let torch run every later float32 step of the process (the numbers are the
+    same, only the time differs; the pass that failed is recomputed in torch by the caller)."""
+    global _gave_up
+    if _gave_up is None:
+        _gave_up = f"{type(error).__name__}: {error}"
+        import warnings
+
+        warnings.warn(f"OpenVINO failed ({_gave_up}); the prior's float32 steps run in torch from now on "
+                      "(the same numbers, more time).", OpenVINOFallbackWarning, stacklevel=3)
+
+
 def stack_for(model) -> OVStack | None:
     """The compiled stack of ``model`` (an :class:`FFDNetDenoiser`; cached on it per weights
-    version and thread count), or None where OpenVINO is not :func:`available`."""
+    version and thread count), or None where OpenVINO is not :func:`available` (or failed to compile it)."""
     if not available():
         return None
     key = (tuple((w.data_ptr(), w._version) for w in model.weight), torch.get_num_threads())
     cached = model.__dict__.get("_ov_stack")
     if cached is None or cached[0] != key:
-        cached = (key, OVStack(list(model.weight), list(model.bias)))
+        try:
+            cached = (key, OVStack(list(model.weight), list(model.bias)))
+        except Exception as e:  # noqa: BLE001 - whatever OpenVINO raises, torch computes the same numbers
+            give_up(e)
+            return None
         model.__dict__["_ov_stack"] = cached
     return cached[1]
 
 
-@functools.lru_cache(maxsize=1)
 def available() -> bool:
     """OpenVINO is installed, compiles a small conv stack for this CPU and gives ``F.conv2d``'s
-    numbers (within 1e-5; checked once per process)."""
+    numbers (within 1e-5; checked once per process), and has not failed since (:func:`give_up`)."""
+    return _gave_up is None and _probe()
+
+
+@functools.lru_cache(maxsize=1)
+def _probe() -> bool:
     if not version():
         return False
     try:
