@@ -121,9 +121,18 @@ def _stdout_closed() -> bool:
     return gone
 
 
+def _format_warning(message, category, filename, lineno, line=None) -> str:  # noqa: ANN001 - warnings' signature
+    """A warning as the CLI's other messages: one line, no source path (e.g. a colour channel without spikes,
+    OpenVINO giving up mid-run)."""
+    return f"spikeview: warning: {message}\n"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the process exit status (0 ok, 1 failed, 2 bad usage, 130 interrupted)."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    import warnings
+
+    warnings.formatwarning = _format_warning
     from spikeview.cli.commands import COMMANDS
 
     # `spikeview` alone or `spikeview FILE` opens the app.
