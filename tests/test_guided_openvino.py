@@ -56,6 +56,7 @@ class _Spy:
 def _every_size(monkeypatch):
     """These tests use small frames: let OpenVINO serve every size (the size rule has its own test)."""
     monkeypatch.setattr(ffdnet, "OV_MIN_LAYER_BYTES", 0)
+    monkeypatch.setattr(ffdnet, "OV_STRIP_BYTES", 0)  # OpenVINO's strips follow STRIP_ROWS here
 
 
 def test_small_volumes_stay_in_torch(monkeypatch):
@@ -235,3 +236,28 @@ def test_a_failure_during_a_run_falls_back_to_torch(cfa, monkeypatch):
         assert not ov_backend.available() and ov_backend.stack_for(net) is None
         assert (net(x, 0.1, "float32-openvino") - ref).abs().max() <= TOL  # no second warning (-W error)
     assert prec.float_backend() == "torch"
+
+
+def test_openvino_strips_are_sized_by_bytes(monkeypatch):
+    """OpenVINO reuses its buffers, so its strips are as tall as OV_STRIP_BYTES allows (fewer halos to
+    recompute): a whole 1000² frame in one call, a wide one in strips; the numbers do not change."""
+    needs_openvino()
+    net = _net(False)
+    spy = _Spy(monkeypatch)
+    x = torch.rand(1, 1, 2 * 40, 24, generator=torch.Generator().manual_seed(8))  # 40 feature rows of 12 columns
+    monkeypatch.setattr(ffdnet, "STRIP_ROWS", 1)
+    row = 12 * int(net.weight[0].shape[0]) * 4
+    with torch.no_grad():
+        ref = net(x, 0.1, "float32")
+        monkeypatch.setattr(ffdnet, "OV_STRIP_BYTES", (5 + 2 * net.n_layers) * row)  # strips of 5 rows: 8 calls
+        a = net(x, 0.1, "float32-openvino")
+        assert spy.calls == 8
+        monkeypatch.setattr(ffdnet, "OV_STRIP_BYTES", 1 << 30)  # the whole volume: 1 call
+        b = net(x, 0.1, "float32-openvino")
+        assert spy.calls == 9
+    assert (a - ref).abs().max() <= TOL and (b - ref).abs().max() <= TOL
+    # the real rule: a 1000² RGB frame (500 feature columns) in one volume, a 2000² one in ~256-row strips
+    monkeypatch.undo()
+    rgb = 96 * 4
+    assert ffdnet.OV_STRIP_BYTES // (500 * rgb) - 2 * 12 >= 500 - 2 * 12
+    assert ffdnet.OV_STRIP_BYTES // (1000 * rgb) - 2 * 12 <= 300

@@ -68,6 +68,11 @@ STRIP_ROWS = 256
 #: torch reuses freed memory and OpenVINO was no faster (256² frame 0.31 s with it, 0.29 s without;
 #: benchmarks/results/prior.md). About a 600×600 frame and up; the numbers are the same either way.
 OV_MIN_LAYER_BYTES = 32 << 20
+#: OpenVINO's strips are as tall as keeps one layer's float32 output under this (and at least
+#: :data:`STRIP_ROWS`): it reuses its buffers, so a 1000² frame runs as one volume (0.86 s a pass
+#: against 0.93 s in 256-row strips, whose halos are recomputed), and a 2000² one in ~256-row strips
+#: (memory stays within the 2 GB of a 2000² frame)
+OV_STRIP_BYTES = 100 << 20
 
 
 def _pack(weight: torch.Tensor) -> torch.Tensor:
@@ -313,7 +318,8 @@ class FFDNetDenoiser(nn.Module):
         # (spikeview.guided.priors.ov_backend), otherwise (and with autograd) the float32 path below
         stack = None
         hidden = int(self.weight[0].shape[0])
-        layer_bytes = feats.shape[0] * min(feats.shape[2], STRIP_ROWS + 2 * self.n_layers) * feats.shape[3] * hidden * 4
+        row_bytes = feats.shape[0] * feats.shape[3] * hidden * 4  # one row of one layer's float32 output
+        layer_bytes = row_bytes * min(feats.shape[2], STRIP_ROWS + 2 * self.n_layers)
         if precision == "float32-openvino" and not grad and x.dtype == torch.float32 and layer_bytes > OV_MIN_LAYER_BYTES:
             from spikeview.guided.priors import ov_backend
 
@@ -323,11 +329,12 @@ class FFDNetDenoiser(nn.Module):
         if stack is not None:
             try:
                 ov_feats = feats.contiguous()
-                if ov_feats.shape[2] <= STRIP_ROWS + 2 * self.n_layers:
+                rows = max(STRIP_ROWS, OV_STRIP_BYTES // row_bytes - 2 * self.n_layers)
+                if ov_feats.shape[2] <= rows + 2 * self.n_layers:
                     check_cancelled("inside a prior pass")
                     residual = stack.run(ov_feats)
                 else:
-                    residual = self._strips(ov_feats, [], stack=stack)
+                    residual = self._strips(ov_feats, [], stack=stack, rows=rows)
                 out = xp - F.pixel_shuffle(residual.to(x.dtype), 2)
                 return out[..., :h, :w]
             except Cancelled:
@@ -436,20 +443,21 @@ class FFDNetDenoiser(nn.Module):
         return feats
 
     def _strips(self, feats: torch.Tensor, layers: list[tuple[torch.Tensor, torch.Tensor]], fast: bool = False,
-                stack=None) -> torch.Tensor:
-        """:meth:`_body` strip by strip (no autograd): ``STRIP_ROWS`` rows plus a halo of one row per
-        layer on each side, so every kept row sees exactly the inputs it sees in the whole volume
-        (``stack``: an :class:`~spikeview.guided.priors.ov_backend.OVStack` runs each strip instead)."""
+                stack=None, rows: int | None = None) -> torch.Tensor:
+        """:meth:`_body` strip by strip (no autograd): ``rows`` (default :data:`STRIP_ROWS`) rows plus a halo
+        of one row per layer on each side, so every kept row sees exactly the inputs it sees in the whole
+        volume (``stack``: an :class:`~spikeview.guided.priors.ov_backend.OVStack` runs each strip instead)."""
         n, _, hh, ww = feats.shape
+        step = int(rows or STRIP_ROWS)
         halo = self.n_layers
         if stack is None:
             w_last = layers[-1][0]
             out = torch.empty((n, w_last.shape[0], hh, ww), dtype=w_last.dtype, device=feats.device)
         else:
             out = torch.empty((n, 4 * self.channels, hh, ww), dtype=torch.float32, device=feats.device)
-        for a in range(0, hh, STRIP_ROWS):
+        for a in range(0, hh, step):
             check_cancelled("between the strips of a prior pass")
-            b = min(a + STRIP_ROWS, hh)
+            b = min(a + step, hh)
             a0, b0 = max(a - halo, 0), min(b + halo, hh)
             piece = stack.run(feats[:, :, a0:b0]) if stack is not None else self._body(feats[:, :, a0:b0], layers, inplace=True, fast=fast)
             out[:, :, a:b] = piece[:, :, a - a0:a - a0 + (b - a)]
