@@ -123,19 +123,24 @@ def test_cancel_stops_the_alignment_of_the_neighbours(cfa, monkeypatch):
     assert reports == [] and "sampler" not in ctx.state
 
 
+def cancel_on_call(monkeypatch, module, name: str, ctx) -> None:
+    """Replace ``module.name`` by a wrapper that sets the job's Cancel flag, then runs the original."""
+    original = getattr(module, name)
+
+    def hooked(*args, **kwargs):
+        ctx.cancelled.set()
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(module, name, hooked)
+
+
 @pytest.mark.parametrize("cfa", [None, "RGGB"], ids=["mono", "bayer"])
 def test_cancel_stops_the_plan(cfa, monkeypatch):
     import spikeview.guided.plan as plan_module
 
     src = capture(cfa)
     ctx, reports = context()
-    original = plan_module.start_variance
-
-    def hooked(*args, **kwargs):  # Cancel pressed as the plan starts its noise estimate
-        ctx.cancelled.set()
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(plan_module, "start_variance", hooked)
+    cancel_on_call(monkeypatch, plan_module, "start_variance", ctx)  # Cancel pressed as the plan starts its noise estimate
     with pytest.raises(Cancelled, match="planning"):
         jobs.guided_job(request(src), ctx)
     assert reports == [] and "sampler" not in ctx.state
@@ -164,13 +169,7 @@ def test_cancel_stops_the_pooling_of_the_neighbours(cfa, monkeypatch):
 
     src = capture(cfa)
     ctx, reports = context()
-    original = temporal._box_same_colour
-
-    def hooked(*args, **kwargs):  # the pooling loop's first 3×3 sums: Cancel pressed here
-        ctx.cancelled.set()
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(temporal, "_box_same_colour", hooked)
+    cancel_on_call(monkeypatch, temporal, "_box_same_colour", ctx)  # the pooling loop's first 3×3 sums: Cancel pressed here
     with pytest.raises(Cancelled, match="pooling"):
         jobs.guided_job(request(src), ctx)
     assert reports == [] and "sampler" not in ctx.state

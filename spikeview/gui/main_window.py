@@ -59,8 +59,6 @@ class NotificationBar(QtWidgets.QFrame):
         close.setToolTip("Dismiss")
         close.clicked.connect(self.dismiss)
         self.setSizePolicy(QtWidgets.QSizePolicy.Policy.Expanding, QtWidgets.QSizePolicy.Policy.Fixed)
-        #: the tool-bar action that holds this bar (set by the window; always visible: see the class docstring)
-        self.action: QtGui.QAction | None = None
         lay = QtWidgets.QHBoxLayout(self)
         lay.setContentsMargins(8, 1, 4, 1)
         lay.addWidget(self.label, 1)
@@ -168,7 +166,7 @@ class MainWindow(QtWidgets.QMainWindow):
         bar.setObjectName("notification_bar")
         bar.setMovable(False)
         bar.setFloatable(False)
-        self.notice.action = bar.addWidget(self.notice)
+        bar.addWidget(self.notice)  # always shown: the strip keeps its height (NotificationBar)
         bar.toggleViewAction().setVisible(False)
         self.addToolBar(QtCore.Qt.ToolBarArea.BottomToolBarArea, bar)
 
