@@ -38,8 +38,11 @@ def add_args(p: argparse.ArgumentParser) -> None:
     when.add_argument("--at", type=int, metavar="T", help="reconstruct the one window centred on tick T")
     when.add_argument("--range", metavar="A:B[:STEP]",
                       help="windows centred on A, A+STEP, ... below B (STEP defaults to the window length)")
-    p.add_argument("--out", required=True, metavar="OUT",
-                   help="output: .npy, .mp4, or an .exr/.png pattern with a frame number such as frame_%%04d.exr")
+    p.add_argument("--out", metavar="OUT",
+                   help="output: .npy, .mp4, or an .exr/.png pattern with a frame number such as frame_%%04d.exr "
+                        "(default: INPUT's name, the method and the tick(s) in the current folder, e.g. big_guided_t100.exr "
+                        "for --at, big_tfp_0-2000.mp4 for --range; an existing file is never replaced without --overwrite: "
+                        "the next free name _2, _3, ... is taken)")
     p.add_argument("--preset", metavar="FILE",
                    help="a recipe TOML (written beside earlier outputs, or saved by the app) to re-run; flags given override it")
     add_overwrite_flag(p)
@@ -72,7 +75,34 @@ def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre
     return notes, obs
 
 
+def default_out(args: argparse.Namespace, recipe: Recipe) -> Path:
+    """The output when ``--out`` is not given: ``<INPUT stem>_<method>_t<T>.exr`` for one window,
+    ``<stem>_<method>_<A>-<B>.mp4`` for ``--range A:B[:STEP]``, in the current folder (the input's
+    folder may be read-only). A name whose output or preset exists is passed over for the next free
+    ``_2``, ``_3``, ... unless ``--overwrite`` is given: a run without ``--out`` never replaces a file."""
+    stem = Path(args.input).name.split(".")[0] or "spikeview"
+    method = recipe.run.method
+    if recipe.run.range is not None:
+        a, b = (recipe.run.range.split(":") + [""])[:2]
+        base, suffix = f"{stem}_{method}_{a or 0}-{b or 'end'}", ".mp4"
+    elif recipe.run.at is not None:
+        base, suffix = f"{stem}_{method}_t{recipe.run.at}", ".exr"
+    else:
+        base, suffix = f"{stem}_{method}", ".exr"
+    out = Path(base + suffix)
+    if getattr(args, "overwrite", False):
+        return out
+    n = 2
+    while out.exists() or preset_path(out).exists():
+        out = Path(f"{base}_{n}{suffix}")
+        n += 1
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.out is None:
+        args.out = str(default_out(args, recipe_from_args(args)))
+        print(f"no --out given: writing {args.out} in the current folder", file=sys.stderr)
     if batch.wants_zarr(args):  # a .zarr output: the chunked, resumable batch path
         return batch.run_zarr(args)
     from spikeview.export import describe_slow_motion, slow_motion_factor
