@@ -157,7 +157,13 @@ def stack_for(model) -> OVStack | None:
 def available() -> bool:
     """OpenVINO is installed, compiles a small conv stack for this CPU and gives ``F.conv2d``'s
     numbers (within 1e-5; checked once per process), and has not failed since (:func:`give_up`)."""
-    return _gave_up is None and _probe()
+    if _gave_up is not None:
+        return False
+    with _PROBE_LOCK:  # one probe per process, also when a start-up thread asks at the same time
+        return _probe()
+
+
+_PROBE_LOCK = threading.Lock()
 
 
 @functools.lru_cache(maxsize=1)
