@@ -52,6 +52,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from spikeview import _malloc
 from spikeview.errors import Cancelled, InputFileError, ParameterError, check_cancelled
 from spikeview.guided.priors.base import PriorUnavailableError
 
@@ -341,6 +342,9 @@ class FFDNetDenoiser(nn.Module):
                 raise
             except Exception as e:  # noqa: BLE001 - OpenVINO failed: this pass (and every later one) in torch
                 ov_backend.give_up(e)
+        if not grad and x.dtype == torch.float32 and precision == "float32" and layer_bytes > _malloc.GLIBC_DYNAMIC_MAX:
+            # layer outputs above glibc's mmap threshold: page-faulted afresh every layer unless the heap reuses them
+            _malloc.reuse_large_buffers()
         fmt = torch.contiguous_format if (grad or fast) else torch.channels_last
         # no autograd, channels-last float32/bfloat16: oneDNN's fused conv + ReLU on weights packed once
         packed = not grad and not fast and x.dtype == torch.float32 and fused_ok()
