@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
+import threading
 import traceback
 from pathlib import Path
 from types import TracebackType
@@ -71,6 +73,41 @@ def _excepthook(window: Any) -> Any:
     return hook
 
 
+def _quit_on_ctrl_c(app: Any, interrupted: list[bool]) -> Any:
+    """Ctrl-C in the terminal closes the app (as it stops every sub-command) instead of a KeyboardInterrupt
+    traceback reported as a bug while the window stays open.
+
+    Python runs its signal handlers only between bytecodes, never inside Qt's event loop, so a timer wakes the
+    interpreter a few times a second. Returns the function that undoes this (the previous handler back, the
+    timer gone); nothing is installed off the main thread or when SIGINT is ignored (a background job: it
+    stays ignored).
+    """
+    from PySide6 import QtCore
+
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is signal.SIG_IGN or previous is None:
+        return lambda: None
+
+    def on_sigint(signum: int, frame: Any) -> None:
+        interrupted.append(True)
+        QtCore.QTimer.singleShot(0, app.quit)  # also when the loop has not started yet (a demo still loading)
+
+    signal.signal(signal.SIGINT, on_sigint)
+    wake = QtCore.QTimer(app)
+    wake.setObjectName("sigint_wake")
+    wake.timeout.connect(lambda: None)
+    wake.start(200)
+
+    def undo() -> None:
+        signal.signal(signal.SIGINT, previous)
+        wake.stop()
+        wake.deleteLater()
+
+    return undo
+
+
 def run_app(path: str | os.PathLike[str] | None = None) -> int:
     """Open the main window on ``path`` (or the built-in demo) and run the event loop; returns the exit status."""
     app = make_application()
@@ -86,14 +123,22 @@ def run_app(path: str | os.PathLike[str] | None = None) -> int:
     except ImportError as e:  # pragma: no cover - pyusb missing: the rest of the app works
         window.statusBar().showMessage(f"Live capture is unavailable ({e}).", 10000)
     sys.excepthook = _excepthook(window)
+    interrupted: list[bool] = []
+    undo_ctrl_c = _quit_on_ctrl_c(app, interrupted)
     window.show()
     if path is None:
         window.open_demo()
     else:
         window.open_path(Path(path))
-    status = int(app.exec())
+    try:
+        status = int(app.exec())
+    finally:
+        undo_ctrl_c()
     window.close()  # after app.quit() the window may still be open: stop its workers, save the settings
     sys.excepthook = sys.__excepthook__
+    if interrupted:
+        print("spikeview: interrupted (Ctrl-C); the window was closed, its settings saved.", file=sys.stderr)
+        status = 130
     # Closing the last window posts a Quit event that exec() has returned before seeing; left queued, the
     # next event processing would deliver it and make every later event loop of this QApplication return
     # at once (a second window in the same process, or the next test, would freeze).
