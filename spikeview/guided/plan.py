@@ -230,11 +230,11 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     if p.levels > top:
         if not p.levels_cap:
             raise ParameterError(
-                f"GuidedConfig.levels = {p.levels} is too many for a {obs.shape[0]}x{obs.shape[1]} frame: use at most {top}."
+                f"GuidedConfig.levels = {p.levels} is too many for a {obs.shape[1]}x{obs.shape[0]} frame: use at most {top}."
             )
-        levels, r["levels"] = top, f"capped from {p.levels}: a {obs.shape[0]}x{obs.shape[1]} frame allows at most {top}"
+        levels, r["levels"] = top, f"capped from {p.levels}: a {obs.shape[1]}x{obs.shape[0]} frame allows at most {top}"
     else:
-        levels, r["levels"] = p.levels, f"as set (a {obs.shape[0]}x{obs.shape[1]} frame allows up to {top})"
+        levels, r["levels"] = p.levels, f"as set (a {obs.shape[1]}x{obs.shape[0]} frame allows up to {top})"
 
     # --- diffusion
     var, gain = start_variance(obs, mosaic, cast)  # per pixel: the tile plan averages it per tile
@@ -252,7 +252,7 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
                           f"(bright or long window)")
     else:
         diffusion = True
-        r["diffusion"] = f"TFP noise σ = {255 * smax:.1f}/255 is above the target {255 * p.noise_target:.2f}/255"
+        r["diffusion"] = f"TFP noise σ = {255 * smax:.2f}/255 is above the target {255 * p.noise_target:.2f}/255"
     if not diffusion:
         r["diffusion"] += f"; fallback {fallback}" + (" (set by fallback)" if p.fallback else "")
 
