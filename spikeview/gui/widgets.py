@@ -213,6 +213,21 @@ def subscribe(widget: QtCore.QObject, event: Any, callback: Any) -> None:
     widget.destroyed.connect(lambda *_, e=event, cb=callback: e.disconnect(cb))
 
 
+#: tooltip of a control that acts only through a colour filter, on a monochrome capture
+MONO_TIP = ("No effect on a monochrome capture (CFA none): without a colour filter there is nothing to demosaic and "
+            "no colour cast to correct.")
+
+
+def set_colour_only(controls: dict[QtWidgets.QWidget, str], source: Any) -> bool:
+    """Enable ``controls`` (control → its tooltip for a colour capture) for a capture with a colour filter (or
+    none open); disable them, saying why, for a monochrome one. Returns whether the capture has colour."""
+    colour = source is None or getattr(source, "cfa", None) is not None
+    for control, tip in controls.items():
+        control.setEnabled(colour)
+        control.setToolTip(tip if colour else MONO_TIP)
+    return colour
+
+
 class ParamSlider(QtWidgets.QWidget):
     """Label, slider and spin box for a numeric parameter; one drag = one undo step."""
 

@@ -21,6 +21,7 @@ from spikeview.gui.widgets import (
     ParamCheck,
     ParamSlider,
     ParamSpin,
+    set_colour_only,
     subscribe,
 )
 
@@ -70,6 +71,7 @@ class DegradationPanel(QtWidgets.QWidget):
         self.band_box.setVisible(False)
         self.k = ParamSlider(session, "k", label="k")
         self.eta = ParamSlider(session, "eta", label="η")
+        self.colour_only = {self.eta: self.eta.toolTip()}
         self.levels = ParamSlider(session, "levels", label="L")
         self.window = ParamSpin(session, "window")
         self.pyramid = ParamCheck(session, "show_pyramid", "per level")
@@ -129,6 +131,9 @@ class DegradationPanel(QtWidgets.QWidget):
     def _on_source(self) -> None:
         for p in list(self.panes.values()) + self.bands:
             p.set_image(None)
+        colour = set_colour_only(self.colour_only, self.session.source)
+        self.panes["mx"].set_title(TITLES["mx"] if colour else "M X (no mosaic: monochrome)")
+        self.panes["cmx"].set_title(TITLES["cmx"] if colour else "C M X (no cast: monochrome)")
 
     def _on_playback(self, playing: bool) -> None:
         if playing and self.last is not None:  # the preview stays on its tick while the stream plays: say so

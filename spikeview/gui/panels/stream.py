@@ -14,6 +14,7 @@ from spikeview.gui.widgets import (
     ParamCombo,
     ParamSlider,
     ParamSpin,
+    set_colour_only,
     subscribe,
     tool_button,
 )
@@ -136,6 +137,8 @@ class StreamPanel(QtWidgets.QWidget):
         self.curve = ParamCombo(session, "transfer", {"srgb": "sRGB", "gamma": "Gamma", "linear": "Linear"})
         self.demosaic = ParamCombo(session, "demosaic", {"bilinear": "Bilinear", "malvar2004": "Malvar 2004", "menon2007": "Menon 2007"})
         self.cast = ParamCheck(session, "colour_cast", "Colour cast")
+        #: controls that act only through a colour filter, with their tooltips for a colour capture
+        self.colour_only = {c: c.toolTip() for c in (self.demosaic, self.cast)}
         display = QtWidgets.QHBoxLayout()
         display.addWidget(self.black, 2)
         display.addWidget(self.white, 2)
@@ -172,6 +175,7 @@ class StreamPanel(QtWidgets.QWidget):
         for pane in (self.raw, self.tfp, self.tfi):
             pane.set_image(None)
         self.tfi_tick = None
+        set_colour_only(self.colour_only, s.source)
         self._on_tick(s.tick)
         self._on_marks(s.mark_in, s.mark_out)
         self._on_roi(s.roi)
