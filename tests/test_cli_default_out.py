@@ -39,3 +39,70 @@ def test_preset_only_in_the_way_also_moves_to_the_next_name(tmp_path, monkeypatc
     assert main(["reconstruct", str(src), "--cfa", "none", "--at", "20"]) == 0
     assert (tmp_path / "cap_tfp_t20.exr.preset.toml").read_text() == "# mine\n"
     assert (tmp_path / "cap_tfp_t20_2.exr").exists()
+
+
+def test_a_file_that_is_not_a_capture_is_named_before_any_default_output(tmp_path, monkeypatch, capsys):
+    (tmp_path / "pic.png").write_text("x")
+    monkeypatch.chdir(tmp_path)
+    assert main(["reconstruct", "pic.png", "--at", "10"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("spikeview: error: pic.png: not a spike file") and "writing" not in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pic.png"]
+
+
+@pytest.mark.parametrize("out", ["", "nofolder/", "."])
+def test_an_out_that_names_no_file_gets_one_sentence(tmp_path, monkeypatch, capsys, out):
+    src = tmp_path / "cap.npy"
+    np.save(src, (np.random.default_rng(3).random((40, 8, 8)) < 0.3).astype(np.uint8))
+    monkeypatch.chdir(tmp_path)
+    assert main(["reconstruct", str(src), "--cfa", "none", "--at", "20", "--out", out]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"spikeview: error: --out {out!r} names no file") and "\n" not in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cap.npy"]
+
+
+@pytest.mark.parametrize("cfa", ["none", "RGGB"])
+def test_several_png_frames_without_a_field_are_refused_before_the_white_point(tmp_path, capsys, cfa):
+    src = tmp_path / "cap.npy"
+    np.save(src, (np.random.default_rng(4).random((60, 8, 8)) < 0.3).astype(np.uint8))
+    assert main(["reconstruct", str(src), "--cfa", cfa, "--range", "10:50:10", "--out", str(tmp_path / "seq.png")]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("spikeview: error:") and "frame-number field" in err and "white point" not in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cap.npy"]
+
+
+@pytest.mark.parametrize("cfa", ["none", "RGGB"])
+def test_the_printed_plan_says_auto_when_the_precision_was_not_given(tmp_path, capsys, cfa):
+    src = tmp_path / "cap.npy"
+    np.save(src, (np.random.default_rng(5).random((40, 16, 16)) < 0.3).astype(np.uint8))
+    out = tmp_path / "g.exr"
+    assert main(["reconstruct", str(src), "--cfa", cfa, "--method", "guided", "--steps", "2", "--at", "20", "--out", str(out)]) == 0
+    row = next(ln for ln in capsys.readouterr().err.splitlines() if ln.strip().startswith("precision"))
+    assert "auto on this CPU" in row and "set by precision=" not in row, row
+    assert 'precision = "' in (tmp_path / "g.exr.preset.toml").read_text()  # the preset holds what auto resolved to
+    assert 'precision = "auto"' not in (tmp_path / "g.exr.preset.toml").read_text()
+
+
+@pytest.mark.parametrize("cfa", ["none", "RGGB"])
+def test_a_stopped_png_sequence_keeps_its_frames_and_their_preset(tmp_path, monkeypatch, capsys, cfa):
+    import spikeview.pipeline as pipeline
+
+    src = tmp_path / "cap.npy"
+    np.save(src, (np.random.default_rng(6).random((80, 8, 8)) < 0.3).astype(np.uint8))
+    original = pipeline.reconstruct_windows
+
+    def stops_after_two(*args, **kwargs):
+        for i, frame in enumerate(original(*args, **kwargs)):
+            if i == 2:
+                raise KeyboardInterrupt
+            yield frame
+
+    monkeypatch.setattr(pipeline, "reconstruct_windows", stops_after_two)
+    out = tmp_path / "f_%04d.png"
+    assert main(["reconstruct", str(src), "--cfa", cfa, "--range", "10:70:10", "--out", str(out)]) == 130
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["cap.npy", "f.png.preset.toml", "f_0000.png", "f_0001.png"], names
+    # and without any finished frame there is no preset
+    monkeypatch.setattr(pipeline, "reconstruct_windows", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt))
+    assert main(["reconstruct", str(src), "--cfa", cfa, "--range", "10:70:10", "--out", str(tmp_path / "h_%04d.png")]) == 130
+    assert not any(p.name.startswith("h") for p in tmp_path.iterdir())

@@ -50,9 +50,12 @@ def add_args(p: argparse.ArgumentParser) -> None:
     batch.add_args(p)
 
 
-def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre: int, state: Any) -> tuple[list[str], Any]:
+def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre: int, state: Any,
+                   asked_precision: str | None = None) -> tuple[list[str], Any]:
     """One sentence for every flag the user gave that cannot act on this run (and why), and the first
-    window's observation when the plan was printed (the run reuses it; ``None`` otherwise)."""
+    window's observation when the plan was printed (the run reuses it; ``None`` otherwise).
+    ``asked_precision``: ``guided.precision`` as given (``auto``), shown in the plan (the recipe holds
+    what it resolved to, the same arithmetic)."""
     given = given_flags(args)
     notes = []
     if recipe.run.method != "guided":
@@ -66,6 +69,8 @@ def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre
 
     # the plan of the settings the sampler runs (η at the sequence's exposure), as the app shows it
     cfg = sampler_params(recipe, state)
+    if asked_precision == "auto":
+        cfg = cfg.replace(precision="auto")
     obs = Observation.from_source(source, centre, cfg.window, alpha=state.alpha, eta=cfg.eta, radius=cfg.temporal_radius)
     plan = make_plan(obs, cfg)
     print(plan, file=sys.stderr)
@@ -100,9 +105,9 @@ def default_out(args: argparse.Namespace, recipe: Recipe) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.out is None:
+    chosen = args.out is None
+    if chosen:
         args.out = str(default_out(args, recipe_from_args(args)))
-        print(f"no --out given: writing {args.out} in the current folder", file=sys.stderr)
     if batch.wants_zarr(args):  # a .zarr output: the chunked, resumable batch path
         return batch.run_zarr(args)
     from spikeview.export import describe_slow_motion, slow_motion_factor
@@ -112,9 +117,14 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     _check_output_first(out, args)
     src = open_source_from_args(args, recipe)
+    if chosen:  # once the input is known to be a capture
+        print(f"no --out given: writing {out} in the current folder (--out NAME.png for an 8-bit sRGB image)", file=sys.stderr)
     with src:
         recipe = recipe.with_values({f"stream.{k}": v for k, v in StreamTable.from_info(src.info, getattr(args, "layout", None)).to_dict().items()})
         centres, step = window_centres(recipe, src.n_frames)
+        from spikeview.export import check_output_name
+
+        check_output_name(out, len(centres))  # e.g. several PNG frames without a %04d field: said first
         from spikeview.classical.windows import window_range
 
         window_range(centres[0], recipe.classical.window, src.n_frames)  # a window the stream cannot hold: said first
@@ -131,12 +141,13 @@ def run(args: argparse.Namespace) -> int:
         state = prepare_sequence(src, recipe)
         if warm is not None:
             warm.wait_precision()
+        asked_precision = recipe.guided.precision
         recipe = recipe_for_state(recipe, state)
         how = "set by --white" if "export.white" in given_flags(args) else (
             "from the preset" if getattr(args, "preset", None) and state.white is not None and
             recipe.export.white != state.white else "the 99.9th percentile of the sequence's rates")
         print(white_point_line(recipe, state, how), file=sys.stderr)
-        notes, first = inactive_notes(recipe, args, src, centres[0], state)
+        notes, first = inactive_notes(recipe, args, src, centres[0], state, asked_precision)
         for note in notes:
             print(f"note: {note}", file=sys.stderr)
         if out.suffix.lower() == ".mp4" and recipe.run.at is None and recipe.run.range is None:
@@ -150,14 +161,24 @@ def run(args: argparse.Namespace) -> int:
             warm.wait()
         guided = recipe.run.method == "guided"
         total = len(centres) * (max(1, recipe.guided.steps) if guided else 1)
+        begun = [0]  # the index of the latest frame begun: the frames before it are written
         with progress(total, f"{recipe.run.method} → {out.name}", unit="step" if guided else "frame") as bar:
             def on_step(fi: int, n: int, step_i: int, steps: int, preview: Any) -> None:
                 bar.update(1)
+                begun[0] = max(begun[0], fi)
 
-            write_sequence(src, recipe, centres, out, state=state, step=step, callback=on_step,
-                           overwrite=bool(getattr(args, "overwrite", False)), inputs=[getattr(args, "preset", None)],
-                           extra_outputs=[preset_path(out)], announce=lambda text: print(text, file=sys.stderr),
-                           first_observation=first)
+            try:
+                write_sequence(src, recipe, centres, out, state=state, step=step, callback=on_step,
+                               overwrite=bool(getattr(args, "overwrite", False)), inputs=[getattr(args, "preset", None)],
+                               extra_outputs=[preset_path(out)], announce=lambda text: print(text, file=sys.stderr),
+                               first_observation=first)
+            except BaseException:
+                if "%" in out.name and begun[0] > 0:  # a stopped sequence keeps its finished frames: and their recipe
+                    try:
+                        _write_preset(out, recipe, src)
+                    except Exception:  # noqa: BLE001 - the run's own error is the one to report
+                        pass
+                raise
         _write_preset(out, recipe, src)
     print(f"wrote {len(centres)} frame{'s' if len(centres) != 1 else ''} to {out}; settings in {preset_path(out)}")
     return 0
@@ -170,6 +191,10 @@ def _check_output_first(out: Path, args: argparse.Namespace) -> None:
     from spikeview.errors import ParameterError
     from spikeview.export import SUFFIXES
 
+    raw = str(getattr(args, "out", out) or "")
+    if not raw.strip() or out.is_dir() or raw.endswith(("/", "\\")):
+        raise ParameterError(f"--out {raw!r} names no file; give a file name such as frame.exr, clip.mp4 or "
+                             "frames/f_%04d.png (the folder must exist).")
     if out.suffix.lower() not in SUFFIXES:
         raise ParameterError(f"{out}: unknown export format {out.suffix or '(no suffix)'!r}; end the name with "
                              f"{', '.join(SUFFIXES[:-1])} or {SUFFIXES[-1]}.")

@@ -61,6 +61,7 @@ __all__ = [
     "ExportMetadata",
     "Exporter",
     "SUFFIXES",
+    "check_output_name",
     "describe_slow_motion",
     "export_frames",
     "open_exporter",
@@ -94,6 +95,16 @@ def _exporter_class(path: Path) -> type[Exporter]:
     raise ParameterError(
         f"{path}: unknown export format {suffix or '(no suffix)'!r}; end the name with .exr, .png, .mp4 or .npy."
     )
+
+
+def check_output_name(out: str | os.PathLike[str], n_frames: int) -> None:
+    """The format of ``out`` is known and its name fits ``n_frames`` frames (a frame-number field for
+    several EXR/PNG frames, none for MP4/npy): checked before any work, nothing written."""
+    from spikeview.export.base import check_frame_field
+
+    path = Path(out)
+    cls = _exporter_class(path)
+    check_frame_field(path, int(n_frames), cls.sequence, cls.format)
 
 
 def open_exporter(

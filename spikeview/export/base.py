@@ -66,6 +66,21 @@ def has_frame_field(path: str | os.PathLike[str]) -> bool:
     return True
 
 
+def check_frame_field(path: Path, n_frames: int, sequence: bool, fmt: str) -> None:
+    """A one-file-per-frame format (``sequence``) of several frames needs a frame-number field in its
+    name; a one-file format takes none (:class:`ParameterError` naming the fix otherwise)."""
+    field = has_frame_field(path)
+    if sequence and not field and n_frames > 1:
+        raise ParameterError(
+            f"{path}: a {n_frames}-frame {fmt.upper()} export writes one file per frame, "
+            f"so the name needs a frame-number field, e.g. {path.with_suffix('')}_%04d{path.suffix}."
+        )
+    if not sequence and field:
+        raise ParameterError(
+            f"{path}: one {fmt.upper()} file holds all frames, so its name takes no frame-number field; remove the %d part."
+        )
+
+
 def strip_frame_field(name: str) -> str:
     """``name`` without its frame-number field and the separator before it: ``f_%04d.exr`` → ``f.exr``."""
     return _FIELD_AND_SEPARATOR.sub("", name)
@@ -215,19 +230,7 @@ class Exporter(ABC):
         self.frames_written = 0
         self.paths: list[Path] = []
         self._state = "open"
-        field = has_frame_field(self.path)
-        if self.sequence:
-            if not field and self.n_frames > 1:
-                suffix = self.path.suffix
-                raise ParameterError(
-                    f"{self.path}: a {self.n_frames}-frame {self.format.upper()} export writes one file per frame, "
-                    f"so the name needs a frame-number field, e.g. {self.path.with_suffix('')}_%04d{suffix}."
-                )
-        elif field:
-            raise ParameterError(
-                f"{self.path}: one {self.format.upper()} file holds all frames, so its name takes no "
-                "frame-number field; remove the %d part."
-            )
+        check_frame_field(self.path, self.n_frames, self.sequence, self.format)
         check_output_folder(self.path)
         self.overwrite = bool(overwrite)
         protected = [*source_files(self.metadata.source), *(p for p in inputs if p)]
