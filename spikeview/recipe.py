@@ -264,7 +264,17 @@ class Recipe(Config):
                 value = check(path, value, (names or {}).get(path))
             table, field = path.split(".", 1)
             by_table.setdefault(table, {})[field] = value
-        new = {t: getattr(self, t).replace(**f) for t, f in by_table.items()}
+        new = {}
+        for t, f in by_table.items():
+            try:
+                new[t] = getattr(self, t).replace(**f)
+            except ParameterError as e:  # a table's own rule (e.g. guided.tile): named as the caller names it
+                msg = str(e)
+                for field in f:
+                    path = f"{t}.{field}"
+                    if names and names.get(path) and msg.startswith(path + " "):
+                        raise ParameterError(names[path] + msg[len(path):]) from None
+                raise
         return dataclasses.replace(self, **new)
 
     # --- TOML -------------------------------------------------------------------------------

@@ -84,3 +84,12 @@ def test_export_names_an_existing_output_before_the_slow_motion_line(tmp_path, c
     err = capsys.readouterr().err
     assert err.startswith("spikeview: error:") and "does not exist" in err, err
     assert main(["export", str(store), "--out", str(tmp_path / "c2.mp4")]) == 0
+
+
+def test_a_tables_own_rule_names_the_flag(tmp_path, capsys):
+    path = tmp_path / "s.npy"
+    np.save(path, (np.random.default_rng(0).random((40, 8, 8)) < 0.3).astype(np.uint8))
+    assert main(["reconstruct", str(path), "--cfa", "none", "--method", "guided", "--tile", "7", "--at", "20",
+                 "--out", str(tmp_path / "g.exr")]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("spikeview: error: --tile = 7 is out of range") and "guided.tile" not in err, err
