@@ -23,6 +23,15 @@ What it measures (one process, ``torch.set_num_threads(2)``; the machine is shar
    ``spikeview reconstruct big.dat --method guided --at 100`` on a 1000×1000 capture (and 2000×2000
    with ``--big``), per precision.
 
+**Fresh layer outputs**: float32 layer outputs over glibc's mmap threshold (32 MiB) were fresh mmapped pages
+every layer (~270,000 page faults per 1000² pass). The fused float32 path now writes them into two buffers
+per pass (``ffdnet.REUSE_BUFFERS``); NNPACK's first such pass switches glibc's heap reuse on for the process
+(:mod:`spikeview._malloc`). Today's eager baseline and the rows marked "fresh layer buffers (before)" run
+with both held off (``REUSE_BUFFERS`` False and :func:`spikeview._malloc.glibc_default`: requests over 32 MiB
+are fresh mmaps again, as in a process that never switched it on), so ``× today`` keeps its meaning and
+the gain is measured in the same run; the memory section adds ``--precision float32`` with the buffers'
+glibc side off (``SPIKEVIEW_MALLOC_TUNE=0``); the machine line records glibc's setting.
+
 Also recorded: ``lscpu`` model name and the flags that matter (avx2, avx512f, avx512_bf16,
 amx_bf16…), torch's CPU capability, the 1-minute load before and after, CPU seconds beside wall
 seconds (wall ≫ CPU/2 means other processes took the cores).
@@ -153,13 +162,15 @@ def bench_pass(size: int, repeats: int, compile_ok: bool) -> dict:
     x = torch.rand(1, 3, size, size, generator=g)
     s = 25.0 / 255.0
     ng = torch.inference_mode
-    fns = {"eager float32 (today)": lambda: _nog(ng, reference_forward, net, x, s),
+    fns = {"eager float32 (today)": _glibc_default(lambda: _nog(ng, reference_forward, net, x, s)),
            "channels-last float32, unfused (before)": lambda: _unfused(ng, net, x, s, "float32"),
            "channels-last float32": lambda: _nog(ng, net, x, s, "float32"),
            "NNPACK float32 (float32-fast)": lambda: _nog(ng, net, x, s, "float32-fast"),
            "bf16 hidden layers": lambda: _nog(ng, net, x, s, "bfloat16"),
            "bf16 all layers": lambda: _nog(ng, net, x, s, "bfloat16-all")}
     extra = {}
+    if _faults_matter(size, size):
+        fns[f"channels-last float32, {BEFORE}"] = _glibc_default(fns["channels-last float32"])
     from spikeview.guided.priors import ov_backend
 
     if ov_backend.available():
@@ -272,6 +283,35 @@ def _torch_only(f):
     return g
 
 
+#: the rows measured with fresh layer outputs, as before (ffdnet.REUSE_BUFFERS off, spikeview._malloc.glibc_default)
+BEFORE = "fresh layer buffers (before)"
+
+
+def _glibc_default(f):
+    """``f`` with large float32 layer outputs fresh mmapped pages again (page-faulted every layer), as before:
+    the fused path's two buffers off and glibc's heap reuse held off (:func:`spikeview._malloc.glibc_default`)."""
+    from spikeview import _malloc
+    from spikeview.guided.priors import ffdnet
+
+    def g():
+        old = ffdnet.REUSE_BUFFERS
+        ffdnet.REUSE_BUFFERS = False
+        try:
+            with _malloc.glibc_default():
+                return f()
+        finally:
+            ffdnet.REUSE_BUFFERS = old
+    return g
+
+
+def _faults_matter(h: int, w: int) -> bool:
+    """An ``h``×``w`` RGB frame's float32 layer strips outgrow glibc's dynamic mmap threshold (the heap reuse applies)."""
+    from spikeview import _malloc
+    from spikeview.guided.priors.ffdnet import STRIP_ROWS
+
+    return min(h // 2, STRIP_ROWS + 24) * (w // 2) * 96 * 4 > _malloc.GLIBC_DYNAMIC_MAX
+
+
 def _nog(ctx, f, *a):
     with ctx():
         return f(*a)
@@ -333,15 +373,23 @@ def bench_frame(path: Path, repeats: int, variants: tuple[str, ...] = ("float32"
 
     from spikeview.guided.priors import ov_backend
 
-    fns = {"eager float32 (today)": run("ref", ref, params.replace(precision="float32"))}
+    fns = {"eager float32 (today)": _glibc_default(run("ref", ref, params.replace(precision="float32")))}
     for v in variants:
         fns[f"--precision {v}" + (" (auto)" if v == auto else "")] = run(v, smp, params.replace(precision=v))
+    big = _faults_matter(*obs.shape[:2])
+    for v in (("float32", auto) if big else ()):  # the float32 torch paths with and without the heap reuse
+        if v in variants and v in ("float32", "float32-fast") and f"--precision {v}, {BEFORE}" not in fns:
+            fns[f"--precision {v}, {BEFORE}"] = _glibc_default(run(f"{v} before", smp, params.replace(precision=v)))
     if auto == "bfloat16-mixed" and auto in variants and ov_backend.available():
         fns[TORCH_AUTO_ROW] = _torch_only(run("torch-auto", smp, params.replace(precision=auto)))
+        if big:
+            fns[f"{TORCH_AUTO_ROW}, {BEFORE}"] = _glibc_default(_torch_only(run("torch-auto before", smp, params.replace(precision=auto))))
     res = interleaved(fns, repeats)
     diff = {f"{k} vs today": float(np.abs(outs[k] - outs["ref"]).max()) for k in variants}
     if "torch-auto" in outs:
         diff["auto with OpenVINO vs auto in torch"] = float(np.abs(outs[auto] - outs["torch-auto"]).max())
+    for k in [k for k in outs if k.endswith(" before")]:  # the heap reuse changes no pixel
+        diff[f"{k.removesuffix(' before')} with vs without heap reuse"] = float(np.abs(outs[k] - outs[k.removesuffix(" before")]).max())
     return {"size": obs.shape[0], "rows": res, "max_abs_diff": diff, "auto": auto, "steps": params.steps,
             "mode": smp.info.mode}
 
@@ -379,6 +427,9 @@ def isa_child(out: Path, repeats: int, quick: bool) -> int:
     finally:
         shutil.rmtree(work, ignore_errors=True)
     res["load_after"] = os.getloadavg()[0]
+    from spikeview import _malloc
+
+    res["malloc"] = _malloc.state()
     out.write_text(json.dumps(res, indent=1), encoding="utf-8")
     return 0
 
@@ -456,7 +507,7 @@ def bench_quality_mono(size: int, scenes: list[str] | None) -> dict:
 
 
 # ---------------------------------------------------------------------------------- 4. memory
-def run_cli(path: Path, extra: list[str], row: str) -> dict:
+def run_cli(path: Path, extra: list[str], row: str, env: dict | None = None) -> dict:
     """``spikeview reconstruct PATH --method guided --at 100 EXTRA`` in a child process: its peak RSS (MB),
     wall seconds and exit status, and the plan's row starting with ``row`` (as printed)."""
     with tempfile.TemporaryDirectory() as d:
@@ -467,16 +518,22 @@ def run_cli(path: Path, extra: list[str], row: str) -> dict:
                 "sys.stderr.write(r.stderr[-3000:])")
         cmd = [sys.executable, "-c", code, sys.executable, "-m", "spikeview", "reconstruct", str(path), "--method", "guided",
                "--at", "100", "--out", str(out), "--overwrite", *extra]
-        r = subprocess.run(cmd, capture_output=True, text=True)
+        r = subprocess.run(cmd, capture_output=True, text=True, env=None if env is None else {**os.environ, **env})
         kb, wall, rc = r.stdout.split()
         line = next((ln.strip() for ln in r.stderr.splitlines() if ln.strip().startswith(row)), "")
         return {"peak_mb": int(kb) / 1024, "wall_s": float(wall), "rc": int(rc), "row": line}
 
 
-def peak_rss(path: Path, precision: str) -> dict:
-    """Peak RSS (MB) and wall seconds of ``spikeview reconstruct PATH --method guided --at 100`` in a child."""
-    r = run_cli(path, ["--precision", precision], "precision")
-    return {"precision": precision, "peak_mb": r["peak_mb"], "wall_s": r["wall_s"], "rc": r["rc"], "plan": r["row"]}
+def peak_rss(path: Path, precision: str, env: dict | None = None) -> dict:
+    """Peak RSS (MB) and wall seconds of ``spikeview reconstruct PATH --method guided --at 100`` in a child
+    (``env``: extra environment variables, named in the row's precision column)."""
+    r = run_cli(path, ["--precision", precision], "precision", env)
+    label = precision + "".join(f" ({k}={v})" for k, v in (env or {}).items())
+    return {"precision": label, "peak_mb": r["peak_mb"], "wall_s": r["wall_s"], "rc": r["rc"], "plan": r["row"]}
+
+
+#: the CLI with glibc's heap reuse held off (spikeview._malloc): the float32 path's memory before it
+MALLOC_OFF = {"SPIKEVIEW_MALLOC_TUNE": "0"}
 
 
 # ---------------------------------------------------------------------------------- report
@@ -485,7 +542,8 @@ def write_report(res: dict, out: Path) -> None:
     L = ["# FFDNet prior: precision and backend (benchmarks/bench_prior.py)", "",
          f"Machine: {m['model']}, {m['cpus']} CPUs, flags {' '.join(m['flags']) or '(none of ' + ', '.join(FLAGS) + ')'}; "
          f"torch {m['torch']} (CPU capability {m['capability']}, oneDNN bf16 {m['onednn_bf16']}); "
-         f"OpenVINO {m.get('openvino') or 'not installed'}; 2 threads. "
+         f"OpenVINO {m.get('openvino') or 'not installed'}; 2 threads; glibc heap reuse for large float32 passes "
+         f"(spikeview._malloc): {m.get('malloc', 'not recorded')}. "
          f"1-min load {m['load_before']:.1f} before, {res['load_after']:.1f} after. Command: `{res['command']}`; "
          f"{res['minutes']:.1f} min.", "",
          "Medians of interleaved repeats after a warm-up; × = eager float32 (today) / this, in the same run. "
@@ -520,7 +578,8 @@ def write_report(res: dict, out: Path) -> None:
             L += [f"Not measured: {av['error']}.", ""]
         else:
             L += [f"torch CPU capability {av['capability']}, oneDNN bf16 {av['onednn_bf16']}: `auto` resolves to **{av['auto']}** "
-                  f"({av['auto_reason']}). 1-min load {av['load_before']:.1f} before, {av['load_after']:.1f} after; × in the same child run.", ""]
+                  f"({av['auto_reason']}). 1-min load {av['load_before']:.1f} before, {av['load_after']:.1f} after; × in the same child run; "
+                  f"glibc heap reuse: {av.get('malloc', 'not recorded')}.", ""]
             for f in av["frames"]:
                 base = f["rows"]["eager float32 (today)"]["wall"]
                 L += [f"| {f['size']}×{f['size']} guided frame | median wall s | min s | CPU s | × today |", "|---|---|---|---|---|"]
@@ -641,13 +700,16 @@ def main(argv: list[str] | None = None) -> int:
             sizes = (256,) if a.quick else ((1000, 2000) if a.big else (1000,))
             for size in sizes:
                 path = simulate(size, work)
-                for precision in ("float32", "auto"):
-                    r = peak_rss(path, precision)
+                for precision, env in (("float32", None), ("auto", None), ("float32", MALLOC_OFF)):
+                    r = peak_rss(path, precision, env)
                     r["capture"] = f"{size}×{size}"
                     res["memory"].append(r)
                     print(f"memory {size} {precision}: {r['peak_mb']:.0f} MB, {r['wall_s']:.1f} s, {r['plan']}", flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+    from spikeview import _malloc
+
+    res["machine"]["malloc"] = _malloc.state()
     out = a.out if a.out is not None else (None if a.quick else ROOT / "benchmarks" / "results")
     return save_results(res, out, "prior", write_report, t_start)
 

@@ -3,22 +3,20 @@
 Why: torch allocates every FFDNet layer's output anew (a 96-feature float32 strip of a 1000×1000
 frame is ~54 MB). glibc's ``malloc`` serves a request above its mmap threshold (dynamic, at most
 32 MiB on 64-bit) with a fresh ``mmap`` and returns it with ``munmap`` on ``free``, so every layer
-touches new zeroed pages: ~273,000 minor page faults per 1000² RGB float32 pass, about a fifth of
-its time. With the threshold above the largest layer output (and the trim threshold above what a pass
-frees at the top of the heap) the same buffers come from the heap and are reused from layer to layer:
-no faults after the first pass, the same arithmetic (the pixels are identical; only where the memory
-lies changes). OpenVINO (``float32-openvino``) reuses its own buffers and bfloat16 strips (~27 MB at
-1000²) stay under glibc's dynamic threshold, so the default path on a bf16 CPU does not need this;
-``--precision float32``, ``float32-fast`` (NNPACK) and ``auto`` without OpenVINO or without bf16 do.
+touches new zeroed pages: ~270,000 minor page faults per 1000² RGB float32 pass, a fifth of its time.
+The fused float32 path (``--precision float32``, ``auto``'s float32 steps in torch) avoids that itself:
+it writes those outputs into two buffers of the pass (:func:`spikeview.guided.priors.ffdnet._conv_fused_into`),
+whatever the thread or the C library. NNPACK (``float32-fast``, ``auto`` on AVX2-only CPUs) cannot be
+given a buffer; for it, :func:`reuse_large_buffers` raises glibc's thresholds so that the same memory
+comes from the heap layer after layer (no faults after the first pass in the main thread, e.g. the CLI;
+fewer in other threads, whose glibc heaps are at most 64 MiB each). The arithmetic is unchanged either way.
 
-Who sets it, and when: :func:`reuse_large_buffers` is called by the FFDNet prior right before it runs
-a torch float32 pass whose layer outputs outgrow glibc's dynamic threshold (never at import: a
-process that never runs such a pass is untouched), once per process (``mallopt`` is process-wide and
-cannot be given back to glibc's dynamic threshold). It covers every caller of the prior alike — the
-CLI, the app's worker thread, cluster workers, a notebook — without each having to remember an entry
--point call. What it costs: freed buffers stay resident in the heap for the next pass (+~300 MB after a
-1000² float32 pass); :func:`release_free_memory` (``malloc_trim``) gives them back and is called by the
-app after each guided run (a long-lived process).
+Who sets it, and when: the FFDNet prior, right before an NNPACK (or unfused) float32 pass whose layer
+outputs outgrow glibc's dynamic threshold, once per process (``mallopt`` is process-wide and cannot be
+given back to glibc's dynamic threshold) — never at import: a process that never runs such a pass is
+untouched, and every caller of the prior (CLI, app, cluster workers, a notebook) is served alike without
+an entry-point call. What it costs: freed buffers stay resident in the heap for the next pass (~+300 MB
+after a 1000² pass); :func:`release_free_memory` (``malloc_trim``) gives them back.
 
 Nothing happens (and nothing fails) where the C library is not glibc (musl, macOS, Windows), where the
 environment already sets the thresholds (``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``,
@@ -28,11 +26,14 @@ environment already sets the thresholds (``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TR
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
+import functools
 import os
 import threading
 
-__all__ = ["GLIBC_DYNAMIC_MAX", "MMAP_THRESHOLD", "TRIM_THRESHOLD", "release_free_memory", "reuse_large_buffers", "state"]
+__all__ = ["GLIBC_DYNAMIC_MAX", "MMAP_THRESHOLD", "TRIM_THRESHOLD", "glibc_default", "release_free_memory", "reuse_large_buffers",
+           "state"]
 
 #: glibc's dynamic mmap threshold never grows past this on 64-bit (DEFAULT_MMAP_THRESHOLD_MAX): larger
 #: requests are always fresh mmaps, i.e. page faults on every use
@@ -55,6 +56,7 @@ _lock = threading.Lock()
 _state: str | None = None  # None: not asked yet; otherwise "on …" / "off (…)"
 
 
+@functools.lru_cache(maxsize=1)
 def _glibc() -> ctypes.CDLL | None:
     """The running process's glibc, or None (another C library, or none that ctypes can open)."""
     try:
@@ -126,7 +128,7 @@ def reuse_large_buffers(environ=None) -> bool:
     """Let glibc serve requests up to :data:`MMAP_THRESHOLD` from its heap and keep up to
     :data:`TRIM_THRESHOLD` of freed heap (``mallopt``), once per process; True when that is in effect.
 
-    Called by the FFDNet prior before a torch float32 pass with layer outputs over
+    Called by the FFDNet prior before an NNPACK (or unfused) float32 pass with layer outputs over
     :data:`GLIBC_DYNAMIC_MAX`. Does nothing (False) on another C library, where the environment already
     sets glibc's thresholds, with ``SPIKEVIEW_MALLOC_TUNE=0``, or where glibc refuses the values; never raises.
     ``environ`` (default ``os.environ``) is for tests.
@@ -159,7 +161,8 @@ def _apply(environ) -> str:
 
 
 def state() -> str:
-    """``"on (…)"``, ``"off (reason)"``, or ``"not needed yet"`` (no large float32 pass has run in this process)."""
+    """``"on (…)"``, ``"off (reason)"``, or ``"not needed yet"`` (no large NNPACK/unfused float32 pass has run in
+    this process; the fused float32 path never needs it)."""
     return _state if _state is not None else "not needed yet"
 
 
@@ -174,3 +177,38 @@ def release_free_memory() -> bool:
         return bool(libc is not None and libc.malloc_trim(0))
     except (OSError, ValueError, TypeError, ctypes.ArgumentError):
         return False
+
+
+@contextlib.contextmanager
+def glibc_default():
+    """Within the block, requests above glibc's dynamic maximum (32 MiB) are fresh mmaps again, as in a process
+    where :func:`reuse_large_buffers` never ran. For benchmarks: "before" rows and today's eager baseline measured
+    in the same process as the rows with the heap reuse.
+
+    Lowering the threshold alone is not enough: glibc serves a request from a free heap chunk that fits before it
+    asks the system, so the heap kept by earlier passes would keep serving. The block therefore also takes every
+    free stretch of heap of more than 32 MiB out of reach for its duration (allocated, never written: no memory)
+    and gives it back on exit."""
+    libc = _glibc() if state().startswith("on") else None
+    plugs: list[int] = []
+    if libc is not None:
+        libc.mallopt(_M_MMAP_THRESHOLD, GLIBC_DYNAMIC_MAX)
+        libc.mallopt(_M_TRIM_THRESHOLD, 2 * GLIBC_DYNAMIC_MAX)  # glibc's dynamic trim threshold at its maximum
+        size = GLIBC_DYNAMIC_MAX + (1 << 20)
+        while len(plugs) < 4096:
+            before = _mmapped_bytes(libc)
+            p = libc.malloc(size)
+            if not p:
+                break
+            if before is None or _mmapped_bytes(libc) - before >= size:  # an mmap: no free heap of this size is left
+                libc.free(p)
+                break
+            plugs.append(p)
+    try:
+        yield
+    finally:
+        if libc is not None:
+            for p in plugs:
+                libc.free(p)
+            libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)
+            libc.mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD)

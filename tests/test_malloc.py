@@ -1,7 +1,7 @@
-"""glibc's heap reuses the FFDNet prior's large float32 buffers (spikeview._malloc, issue 15): a torch float32
-pass whose layer outputs are above glibc's mmap threshold no longer page-faults fresh memory every layer,
-with the same pixels; only such passes switch it on; it stays off where the user tunes glibc himself
-or opts out, and does nothing elsewhere than glibc."""
+"""The FFDNet prior's large float32 layer outputs stop being fresh memory every layer (issue 15): above glibc's
+mmap threshold each was ~9–13k page faults. The fused float32 path writes them into two buffers per pass; the
+NNPACK path (float32-fast) has glibc's heap reuse them (spikeview._malloc). Same pixels; only such passes
+do it; glibc is left alone where the user tunes it himself or opts out, and elsewhere than glibc."""
 
 from __future__ import annotations
 
@@ -19,53 +19,85 @@ from spikeview.guided.priors.ffdnet import FFDNetDenoiser
 
 GLIBC = bool(os.confstr("CS_GNU_LIBC_VERSION")) if hasattr(os, "confstr") and "CS_GNU_LIBC_VERSION" in os.confstr_names else False
 
-# One process: the same pass with the reuse held off (as before the fix), then switched on (what forward
-# does by itself). RGB 560×680: half resolution 280×340, one strip, each 96-feature float32 layer output
-# 280·340·96·4 = 36.6 MB, above glibc's largest dynamic mmap threshold (32 MiB).
+# One child process per path: the same pass with the fix held off (as before it), then on. RGB 560×680: half
+# resolution 280×340, one strip, each 96-feature float32 layer output 280·340·96·4 = 36.6 MB, above glibc's
+# largest dynamic mmap threshold (32 MiB).
 _CHILD = r"""
 import json, resource, sys
 import torch
 from spikeview import _malloc
-from spikeview.guided.priors.ffdnet import FFDNetDenoiser
+from spikeview.guided.priors import ffdnet
 
 torch.set_num_threads(2)
-net = FFDNetDenoiser(color=True, pretrained=False, generator=torch.Generator().manual_seed(0))
+net = ffdnet.FFDNetDenoiser(color=True, pretrained=False, generator=torch.Generator().manual_seed(0))
 x = torch.rand(1, 3, 560, 680, generator=torch.Generator().manual_seed(1))
+precision = sys.argv[1]
 
 def passes(n):
     faults, y = [], None
     with torch.no_grad():
         for _ in range(n):
             f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-            y = net(x, 0.1, sys.argv[1])
+            y = net(x, 0.1, precision)
             faults.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0)
     return faults, y
 
+res = {}
 _malloc._state = "off (held off by the test)"
-without, y0 = passes(2)
-_malloc._state = None  # forward switches it on
-with_, y1 = passes(3)
-print(json.dumps({"without": without, "with": with_, "state": _malloc.state(), "diff": float((y0 - y1).abs().max())}))
+ffdnet.REUSE_BUFFERS = False
+res["without"], y0 = passes(1)
+ffdnet.REUSE_BUFFERS = True
+if precision == "float32":  # the fused path: its own two buffers a pass, glibc left alone
+    res["with"], y1 = passes(2)
+else:  # NNPACK: glibc's heap, switched on by the pass itself
+    _malloc._state = None
+    res["with"], y1 = passes(2)
+    with _malloc.glibc_default():  # what the benchmark's "before" rows run under
+        res["held"], _ = passes(1)
+res["state"] = _malloc.state()
+res["diff"] = float((y0 - y1).abs().max())
+print(json.dumps(res))
 """
 
 
-@pytest.mark.skipif(not GLIBC, reason="the page-fault fix is glibc's mallopt; this C library is not glibc")
-def test_large_float32_pass_stops_page_faulting_with_the_same_pixels():
+def _child(precision: str) -> dict:
     env = {k: v for k, v in os.environ.items() if not k.startswith(("MALLOC_", "GLIBC_TUNABLES", "SPIKEVIEW_MALLOC"))}
-    r = subprocess.run([sys.executable, "-c", _CHILD, "float32"], capture_output=True, text=True, timeout=120, env=env)
+    r = subprocess.run([sys.executable, "-c", _CHILD, precision], capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 0, r.stderr[-2000:]
-    res = json.loads(r.stdout.strip().splitlines()[-1])
-    assert res["state"].startswith("on"), res
-    # without: every layer's output is fresh mmapped pages, 12 × ~8,900 faults a pass (~107,000 measured);
-    # with: the heap grows during the first pass, then the same buffers serve every layer (0–600 measured)
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.skipif(not GLIBC, reason="counts glibc's fresh mmaps; this C library is not glibc (other allocators differ)")
+def test_fused_float32_pass_writes_into_two_buffers_with_the_same_pixels():
+    if not ffdnet.into_ok():
+        pytest.skip("oneDNN's in-place fused convolution is not available in this torch")
+    res = _child("float32")
+    # without: every hidden layer's output is fresh mmapped pages, 11 × ~8,900 faults a pass (103–109k measured);
+    # with: the two buffers of the pass only (~18,000), glibc's settings untouched
     assert min(res["without"]) > 50_000, res
-    assert min(res["with"][1:]) < min(res["without"]) / 10, res
-    assert res["diff"] == 0.0, res  # only where the memory lies changes, not the arithmetic
+    assert max(res["with"]) < min(res["without"]) / 3, res
+    assert res["state"].startswith("off"), res
+    assert res["diff"] == 0.0, res  # only where the outputs lie changes, not the arithmetic
 
 
-def test_only_large_float32_torch_passes_switch_it_on(monkeypatch):
-    calls = []
+@pytest.mark.skipif(not GLIBC, reason="the NNPACK path's fix is glibc's mallopt; this C library is not glibc")
+def test_nnpack_pass_reuses_glibc_heap_with_the_same_pixels():
+    if not ffdnet.nnpack_ok():
+        pytest.skip("this torch has no NNPACK (float32-fast runs the fused float32 path)")
+    res = _child("float32-fast")
+    assert res["state"].startswith("on"), res
+    assert min(res["without"]) > 50_000, res
+    # the heap grows during the first pass, then the same memory serves every layer (0–8,900 measured)
+    assert res["with"][-1] < min(res["without"]) / 5, res
+    assert min(res["held"]) > 50_000, res  # glibc_default() brings the faults back (the benchmark's "before" rows)
+    assert res["diff"] == 0.0, res
+
+
+def test_only_large_float32_torch_passes_use_them(monkeypatch):
+    calls, into = [], []
     monkeypatch.setattr(_malloc, "reuse_large_buffers", lambda: calls.append(1) or True)
+    real = ffdnet._conv_fused_into
+    monkeypatch.setattr(ffdnet, "_conv_fused_into", lambda *a: into.append(1) or real(*a))
     monkeypatch.setattr(ffdnet._malloc, "GLIBC_DYNAMIC_MAX", 6 * 40 * 96 * 4 - 1)  # a 12×80 RGB frame's layer, less one byte
     net = FFDNetDenoiser(color=True, pretrained=False, generator=torch.Generator().manual_seed(0))
     big, small = torch.rand(1, 3, 12, 80), torch.rand(1, 3, 12, 78)
@@ -74,13 +106,19 @@ def test_only_large_float32_torch_passes_switch_it_on(monkeypatch):
             net(big, 0.1, precision)
         net(small, 0.1, "float32")
         net(big.double(), 0.1, "float32")
-        assert calls == []
-        net(big, 0.1, "float32")
-        assert len(calls) == 1
+        assert calls == [] and into == []
+        fused = ffdnet.fused_ok() and ffdnet.into_ok()
+        y = net(big, 0.1, "float32")
+        assert (len(into), len(calls)) == ((net.n_layers - 1, 0) if fused else (0, 1))  # every hidden layer into a buffer
+        monkeypatch.setattr(ffdnet, "REUSE_BUFFERS", False)
+        assert torch.equal(y, net(big, 0.1, "float32"))
+        monkeypatch.setattr(ffdnet, "REUSE_BUFFERS", True)
+        n = len(calls)
         net(big, 0.1, "float32-fast")
-        assert len(calls) == 2
+        assert len(calls) == n + (1 if ffdnet.nnpack_ok() else 0)  # NNPACK cannot write into a buffer: glibc's heap
+    n = (len(calls), len(into))
     net(big.requires_grad_(), 0.1, "float32")  # autograd keeps every layer anyway: left as it was
-    assert len(calls) == 2
+    assert (len(calls), len(into)) == n
 
 
 @pytest.mark.parametrize("environ, reason", [

@@ -38,7 +38,10 @@ fused convolution + ReLU on weights packed once into its blocked layout (``torch
 inductor calls; the same sums as ``F.conv2d`` + ReLU; on a quiet machine float32 within ±4 % of the
 unfused path, bfloat16 2–8 % faster, so the packing is a small gain, not the speed-up), where that op exists.
 A bfloat16 layer's bias, kept in float32, absorbs the mean error of its rounded weights (data-free
-bias correction, see :meth:`FFDNetDenoiser._layers`).
+bias correction, see :meth:`FFDNetDenoiser._layers`). Float32 layer outputs larger than glibc's mmap
+threshold (32 MiB: frames from ~600×600) would be fresh pages every layer (~270k page faults a 1000² pass,
+a fifth of its time): the fused path writes them into two buffers per pass (:func:`_conv_fused_into`, the
+same numbers), NNPACK has glibc's heap reuse them (:mod:`spikeview._malloc`).
 """
 
 from __future__ import annotations
@@ -69,6 +72,10 @@ STRIP_ROWS = 256
 #: torch reuses freed memory and OpenVINO was no faster (256² frame 0.31 s with it, 0.29 s without;
 #: benchmarks/results/prior.md). About a 600×600 frame and up; the numbers are the same either way.
 OV_MIN_LAYER_BYTES = 32 << 20
+#: the fused float32 path writes hidden layer outputs larger than glibc's mmap threshold (32 MiB, ~600×600 frames
+#: and up) into two buffers per pass instead of fresh memory per layer (the same numbers; benchmarks turn it off
+#: for their "before" rows)
+REUSE_BUFFERS = True
 #: OpenVINO's strips are as tall as keeps one layer's float32 output under this (and at least
 #: :data:`STRIP_ROWS`): it reuses its buffers, so a 1000² frame runs as one volume (0.86 s a pass
 #: against 0.93 s in 256-row strips, whose halos are recomputed), and a 2000² one in ~256-row strips
@@ -85,6 +92,32 @@ def _conv_fused(feats: torch.Tensor, packed: torch.Tensor, bias: torch.Tensor, r
     """oneDNN's convolution with the ReLU fused in (the call inductor makes), on pre-packed weights."""
     return torch.ops.mkldnn._convolution_pointwise(feats, packed, bias, [1, 1], [1, 1], [1, 1], 1,
                                                    "relu" if relu else "none", [], "")
+
+
+def _conv_fused_into(out: torch.Tensor, feats: torch.Tensor, packed: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
+    """:func:`_conv_fused` with ReLU written into ``out`` (zeroed here): oneDNN's in-place ``relu(conv + out)``,
+    the one form of the fused call that takes its output buffer (``out`` channels-last, float32)."""
+    out.zero_()
+    return torch.ops.mkldnn._convolution_pointwise_.binary(out, feats, packed, bias, [1, 1], [1, 1], [1, 1], 1, "add", None,
+                                                           "relu", [], None)
+
+
+@functools.lru_cache(maxsize=1)
+def into_ok() -> bool:
+    """:func:`_conv_fused_into` runs here and gives exactly :func:`_conv_fused`'s numbers (checked once, float32)."""
+    try:
+        if not fused_ok():
+            return False
+        g = torch.Generator().manual_seed(0)
+        x = torch.rand(1, 16, 7, 9, generator=g).contiguous(memory_format=torch.channels_last)
+        w = _pack(torch.randn(32, 16, 3, 3, generator=g) * 0.1)
+        b = torch.randn(32, generator=g)
+        out = torch.full((1, 9 * 7 * 32), float("nan")).view(1, 7, 9, 32).permute(0, 3, 1, 2)
+        with torch.no_grad():
+            y = _conv_fused_into(out, x, w, b)
+            return bool(y.data_ptr() == out.data_ptr() and torch.equal(y, _conv_fused(x, w, b, True)))
+    except (AttributeError, RuntimeError, TypeError):
+        return False
 
 
 @functools.lru_cache(maxsize=1)
@@ -342,21 +375,27 @@ class FFDNetDenoiser(nn.Module):
                 raise
             except Exception as e:  # noqa: BLE001 - OpenVINO failed: this pass (and every later one) in torch
                 ov_backend.give_up(e)
-        if not grad and x.dtype == torch.float32 and precision == "float32" and layer_bytes > _malloc.GLIBC_DYNAMIC_MAX:
-            # layer outputs above glibc's mmap threshold: page-faulted afresh every layer unless the heap reuses them
-            _malloc.reuse_large_buffers()
         fmt = torch.contiguous_format if (grad or fast) else torch.channels_last
         # no autograd, channels-last float32/bfloat16: oneDNN's fused conv + ReLU on weights packed once
         packed = not grad and not fast and x.dtype == torch.float32 and fused_ok()
+        scratch = None
+        if not grad and x.dtype == torch.float32 and precision == "float32" and layer_bytes > _malloc.GLIBC_DYNAMIC_MAX:
+            # layer outputs above glibc's mmap threshold are fresh pages every layer (~270k page faults a 1000²
+            # pass): the fused path writes them into two buffers of this pass instead; NNPACK cannot, so
+            # glibc's heap is asked to reuse them (spikeview._malloc; process-wide, once)
+            if packed and REUSE_BUFFERS and into_ok():
+                scratch = (torch.empty(layer_bytes // 4), torch.empty(layer_bytes // 4))
+            else:
+                _malloc.reuse_large_buffers()
         if grad and any(w.requires_grad for w in self.weight):  # trained weights: gradients reach them
             layers = [(w.to(x.dtype), b.to(x.dtype)) for w, b in zip(self.weight, self.bias, strict=True)]
         else:
             layers = self._layers(x.dtype, precision, fmt, packed)
         feats = feats.contiguous(memory_format=fmt)
         if grad or feats.shape[2] <= STRIP_ROWS + 2 * self.n_layers:
-            residual = self._body(feats, layers, inplace=not grad, fast=fast)
+            residual = self._body(feats, layers, inplace=not grad, fast=fast, scratch=scratch)
         else:
-            residual = self._strips(feats, layers, fast)
+            residual = self._strips(feats, layers, fast, scratch=scratch)
         out = xp - F.pixel_shuffle(residual.to(x.dtype).contiguous(), 2)
         return out[..., :h, :w]
 
@@ -424,10 +463,11 @@ class FFDNetDenoiser(nn.Module):
 
     @staticmethod
     def _body(feats: torch.Tensor, layers: list[tuple[torch.Tensor, torch.Tensor]], inplace: bool,
-              fast: bool = False) -> torch.Tensor:
+              fast: bool = False, scratch: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
         """The conv stack on a ``(N, 5C, h, w)`` volume; returns the ``(N, 4C, h, w)`` residual
         (``fast``: NNPACK's float32 convolution, NCHW; weights packed by ``_layers(..., packed=True)``
-        run oneDNN's fused conv + ReLU, the same sums)."""
+        run oneDNN's fused conv + ReLU, the same sums; ``scratch``: two flat float32 buffers, each at least one
+        hidden layer's output, that the packed float32 layers write into in turn, :func:`_conv_fused_into`)."""
         last = len(layers) - 1
         packed = bool(layers) and layers[0][0].is_mkldnn
         if fast:
@@ -435,6 +475,11 @@ class FFDNetDenoiser(nn.Module):
         for i, (weight, bias) in enumerate(layers):
             # a job's Cancel takes effect within one layer (of one strip): a 1000x1000 pass is seconds
             check_cancelled("inside a prior pass")
+            if packed and scratch is not None and i < last:
+                n, _, h, w = feats.shape
+                co = int(weight.shape[0])
+                feats = _conv_fused_into(scratch[i % 2][:n * h * w * co].view(n, h, w, co).permute(0, 3, 1, 2), feats, weight, bias)
+                continue
             if packed:
                 feats = _conv_fused(feats.to(weight.dtype), weight, bias, i < last)
                 continue
@@ -447,7 +492,7 @@ class FFDNetDenoiser(nn.Module):
         return feats
 
     def _strips(self, feats: torch.Tensor, layers: list[tuple[torch.Tensor, torch.Tensor]], fast: bool = False,
-                stack=None, rows: int | None = None) -> torch.Tensor:
+                stack=None, rows: int | None = None, scratch: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
         """:meth:`_body` strip by strip (no autograd): ``rows`` (default :data:`STRIP_ROWS`) rows plus a halo
         of one row per layer on each side, so every kept row sees exactly the inputs it sees in the whole
         volume (``stack``: an :class:`~spikeview.guided.priors.ov_backend.OVStack` runs each strip instead)."""
@@ -463,7 +508,8 @@ class FFDNetDenoiser(nn.Module):
             check_cancelled("between the strips of a prior pass")
             b = min(a + step, hh)
             a0, b0 = max(a - halo, 0), min(b + halo, hh)
-            piece = stack.run(feats[:, :, a0:b0]) if stack is not None else self._body(feats[:, :, a0:b0], layers, inplace=True, fast=fast)
+            piece = (stack.run(feats[:, :, a0:b0]) if stack is not None
+                     else self._body(feats[:, :, a0:b0], layers, inplace=True, fast=fast, scratch=scratch))
             out[:, :, a:b] = piece[:, :, a - a0:a - a0 + (b - a)]
         return out
 
