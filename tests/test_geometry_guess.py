@@ -210,3 +210,16 @@ def test_a_known_sensor_file_cut_short_is_still_guessed_at_its_size(tmp_path, ca
     assert "most likely --width 400 --height 250 (39 ticks)" in capsys.readouterr().err
     with open_source(cut, width=400, height=250, cfa="RGGB" if cfa else "none") as src:
         assert src.n_frames == 39
+
+
+def test_a_monochrome_capture_read_with_a_colour_filter_is_reported(tmp_path, capsys):
+    path = write_capture(tmp_path / "m.dat", 128, 96, 400, cfa=False)  # a monochrome sensor
+    with open_source(path, width=128, height=96, cfa="RGGB") as src:
+        assert any("four 2x2 sites fire alike" in w and "--cfa none" in w for w in src.info.warnings), src.info.warnings
+    with open_source(path, width=128, height=96, cfa=None) as src:
+        assert src.info.warnings == [], src.info.warnings
+    bayer = write_capture(tmp_path / "c.dat", 128, 96, 400)  # a colour filter's sites: no such warning
+    with open_source(bayer, width=128, height=96, cfa="RGGB") as src:
+        assert not any("alike" in w for w in src.info.warnings), src.info.warnings
+    assert main(["info", str(path), "--width", "128", "--height", "96", "--cfa", "BGGR"]) == 0
+    assert "read with a colour filter (--cfa BGGR), but its four 2x2 sites fire alike" in capsys.readouterr().out
