@@ -24,13 +24,14 @@ What it measures (one process, ``torch.set_num_threads(2)``; the machine is shar
    with ``--big``), per precision.
 
 **Fresh layer outputs**: float32 layer outputs over glibc's mmap threshold (32 MiB) were fresh mmapped pages
-every layer (~270,000 page faults per 1000² pass). The fused float32 path now writes them into two buffers
-per pass (``ffdnet.REUSE_BUFFERS``); NNPACK's first such pass switches glibc's heap reuse on for the process
-(:mod:`spikeview._malloc`). Today's eager baseline and the rows marked "fresh layer buffers (before)" run
-with both held off (``REUSE_BUFFERS`` False and :func:`spikeview._malloc.glibc_default`: requests over 32 MiB
-are fresh mmaps again, as in a process that never switched it on), so ``× today`` keeps its meaning and
-the gain is measured in the same run; the memory section adds ``--precision float32`` with the buffers'
-glibc side off (``SPIKEVIEW_MALLOC_TUNE=0``); the machine line records glibc's setting.
+every layer (~270,000 page faults per 1000² pass). The first such pass in the main thread (as here and in
+the CLI) now switches glibc's heap reuse on for the process (:mod:`spikeview._malloc`); other threads (the
+app's worker) write the fused path's outputs into two buffers per pass (``ffdnet.REUSE_BUFFERS``). Today's
+eager baseline and the rows marked "fresh layer buffers (before)" run with both held off (``REUSE_BUFFERS``
+False and :func:`spikeview._malloc.glibc_default`: requests over 32 MiB are fresh mmaps again, as in a
+process that never switched it on), so ``× today`` keeps its meaning and the gain is measured in the same
+run; the memory section adds ``--precision float32`` with ``SPIKEVIEW_MALLOC_TUNE=0`` (no heap reuse: the
+two buffers instead); the machine line records glibc's setting.
 
 Also recorded: ``lscpu`` model name and the flags that matter (avx2, avx512f, avx512_bf16,
 amx_bf16…), torch's CPU capability, the 1-minute load before and after, CPU seconds beside wall

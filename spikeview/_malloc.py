@@ -4,17 +4,17 @@ Why: torch allocates every FFDNet layer's output anew (a 96-feature float32 stri
 frame is ~54 MB). glibc's ``malloc`` serves a request above its mmap threshold (dynamic, at most
 32 MiB on 64-bit) with a fresh ``mmap`` and returns it with ``munmap`` on ``free``, so every layer
 touches new zeroed pages: ~270,000 minor page faults per 1000² RGB float32 pass, a fifth of its time.
-The fused float32 path (``--precision float32``, ``auto``'s float32 steps in torch) avoids that itself:
-it writes those outputs into two buffers of the pass (:func:`spikeview.guided.priors.ffdnet._conv_fused_into`),
-whatever the thread or the C library. NNPACK (``float32-fast``, ``auto`` on AVX2-only CPUs) cannot be
-given a buffer; for it, :func:`reuse_large_buffers` raises glibc's thresholds so that the same memory
-comes from the heap layer after layer (no faults after the first pass in the main thread, e.g. the CLI;
-fewer in other threads, whose glibc heaps are at most 64 MiB each). The arithmetic is unchanged either way.
+:func:`reuse_large_buffers` raises glibc's thresholds so that the same memory comes from the heap layer
+after layer: no faults after the first pass in the main thread (the CLI; 1000² ``--precision float32``
+frame 7.59 → 5.81 s). The arithmetic is unchanged. Other threads' glibc heaps hold at most 64 MiB each, so
+there the reuse is partial and the heap grows from run to run; there the fused float32 path writes its
+outputs into two buffers of the pass instead (:func:`spikeview.guided.priors.ffdnet._conv_fused_into`,
+whatever the C library). NNPACK (``float32-fast``) can only have the heap.
 
-Who sets it, and when: the FFDNet prior, right before an NNPACK (or unfused) float32 pass whose layer
-outputs outgrow glibc's dynamic threshold, once per process (``mallopt`` is process-wide and cannot be
-given back to glibc's dynamic threshold) — never at import: a process that never runs such a pass is
-untouched, and every caller of the prior (CLI, app, cluster workers, a notebook) is served alike without
+Who sets it, and when: the FFDNet prior, right before a float32 pass whose layer outputs outgrow glibc's
+dynamic threshold (in the main thread, or NNPACK anywhere), once per process (``mallopt`` is process-wide
+and cannot be given back to glibc's dynamic threshold) — never at import: a process that never runs such a
+pass is untouched, and every caller of the prior (CLI, cluster workers, a notebook) is served alike without
 an entry-point call. What it costs: freed buffers stay resident in the heap for the next pass (~+300 MB
 after a 1000² pass); :func:`release_free_memory` (``malloc_trim``) gives them back.
 
@@ -128,8 +128,8 @@ def reuse_large_buffers(environ=None) -> bool:
     """Let glibc serve requests up to :data:`MMAP_THRESHOLD` from its heap and keep up to
     :data:`TRIM_THRESHOLD` of freed heap (``mallopt``), once per process; True when that is in effect.
 
-    Called by the FFDNet prior before an NNPACK (or unfused) float32 pass with layer outputs over
-    :data:`GLIBC_DYNAMIC_MAX`. Does nothing (False) on another C library, where the environment already
+    Called by the FFDNet prior before a float32 pass in the main thread (or an NNPACK one anywhere) with layer
+    outputs over :data:`GLIBC_DYNAMIC_MAX`. Does nothing (False) on another C library, where the environment already
     sets glibc's thresholds, with ``SPIKEVIEW_MALLOC_TUNE=0``, or where glibc refuses the values; never raises.
     ``environ`` (default ``os.environ``) is for tests.
     """
@@ -161,8 +161,7 @@ def _apply(environ) -> str:
 
 
 def state() -> str:
-    """``"on (…)"``, ``"off (reason)"``, or ``"not needed yet"`` (no large NNPACK/unfused float32 pass has run in
-    this process; the fused float32 path never needs it)."""
+    """``"on (…)"``, ``"off (reason)"``, or ``"not needed yet"`` (no large float32 pass has asked for it in this process)."""
     return _state if _state is not None else "not needed yet"
 
 

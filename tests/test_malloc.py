@@ -1,7 +1,8 @@
 """The FFDNet prior's large float32 layer outputs stop being fresh memory every layer (issue 15): above glibc's
-mmap threshold each was ~9–13k page faults. The fused float32 path writes them into two buffers per pass; the
-NNPACK path (float32-fast) has glibc's heap reuse them (spikeview._malloc). Same pixels; only such passes
-do it; glibc is left alone where the user tunes it himself or opts out, and elsewhere than glibc."""
+mmap threshold each was ~9–13k page faults. In the main thread glibc's heap reuses them (spikeview._malloc),
+in other threads the fused path writes them into two buffers per pass, NNPACK (float32-fast) has the heap.
+Same pixels; only such passes do it; glibc is left alone where the user tunes it himself or opts out, and
+elsewhere than glibc."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import json
 import os
 import subprocess
 import sys
+import threading
 
 import pytest
 import torch
@@ -19,11 +21,11 @@ from spikeview.guided.priors.ffdnet import FFDNetDenoiser
 
 GLIBC = bool(os.confstr("CS_GNU_LIBC_VERSION")) if hasattr(os, "confstr") and "CS_GNU_LIBC_VERSION" in os.confstr_names else False
 
-# One child process per path: the same pass with the fix held off (as before it), then on. RGB 560×680: half
-# resolution 280×340, one strip, each 96-feature float32 layer output 280·340·96·4 = 36.6 MB, above glibc's
-# largest dynamic mmap threshold (32 MiB).
+# One child process per case: the same pass with the fix held off (as before it), then on, in the main thread
+# (glibc's heap) or another one (the fused path's two buffers). RGB 560×680: half resolution 280×340, one strip,
+# each 96-feature float32 layer output 280·340·96·4 = 36.6 MB, above glibc's largest dynamic mmap threshold (32 MiB).
 _CHILD = r"""
-import json, resource, sys
+import json, resource, sys, threading
 import torch
 from spikeview import _malloc
 from spikeview.guided.priors import ffdnet
@@ -31,7 +33,8 @@ from spikeview.guided.priors import ffdnet
 torch.set_num_threads(2)
 net = ffdnet.FFDNetDenoiser(color=True, pretrained=False, generator=torch.Generator().manual_seed(0))
 x = torch.rand(1, 3, 560, 680, generator=torch.Generator().manual_seed(1))
-precision = sys.argv[1]
+precision, where = sys.argv[1], sys.argv[2]
+res = {}
 
 def passes(n):
     faults, y = [], None
@@ -42,55 +45,67 @@ def passes(n):
             faults.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0)
     return faults, y
 
-res = {}
-_malloc._state = "off (held off by the test)"
-ffdnet.REUSE_BUFFERS = False
-res["without"], y0 = passes(1)
-ffdnet.REUSE_BUFFERS = True
-if precision == "float32":  # the fused path: its own two buffers a pass, glibc left alone
+def run():
+    _malloc._state = "off (held off by the test)"
+    ffdnet.REUSE_BUFFERS = False
+    res["without"], y0 = passes(1)
+    _malloc._state, ffdnet.REUSE_BUFFERS = None, True  # the pass itself picks glibc's heap or its two buffers
     res["with"], y1 = passes(2)
-else:  # NNPACK: glibc's heap, switched on by the pass itself
-    _malloc._state = None
-    res["with"], y1 = passes(2)
-    with _malloc.glibc_default():  # what the benchmark's "before" rows run under
-        res["held"], _ = passes(1)
+    res["diff"] = float((y0 - y1).abs().max())
+    if _malloc.state().startswith("on"):
+        with _malloc.glibc_default():  # what the benchmark's "before" rows run under
+            res["held"], _ = passes(1)
+
+if where == "main":
+    run()
+else:
+    t = threading.Thread(target=run)
+    t.start()
+    t.join()
 res["state"] = _malloc.state()
-res["diff"] = float((y0 - y1).abs().max())
 print(json.dumps(res))
 """
 
 
-def _child(precision: str) -> dict:
+def _child(precision: str, where: str) -> dict:
     env = {k: v for k, v in os.environ.items() if not k.startswith(("MALLOC_", "GLIBC_TUNABLES", "SPIKEVIEW_MALLOC"))}
-    r = subprocess.run([sys.executable, "-c", _CHILD, precision], capture_output=True, text=True, timeout=120, env=env)
+    r = subprocess.run([sys.executable, "-c", _CHILD, precision, where], capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 0, r.stderr[-2000:]
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
+def _check_heap(res: dict) -> None:
+    assert res["state"].startswith("on"), res
+    # without: every hidden layer's output is fresh mmapped pages, 11 × ~8,900 faults a pass (103–155k measured);
+    # with: the heap grows during the first pass, then the same memory serves every layer (0–8,900 measured)
+    assert min(res["without"]) > 50_000, res
+    assert res["with"][-1] < min(res["without"]) / 5, res
+    assert min(res["held"]) > 50_000, res  # glibc_default() brings the faults back (the benchmark's "before" rows)
+    assert res["diff"] == 0.0, res  # only where the outputs lie changes, not the arithmetic
+
+
+@pytest.mark.skipif(not GLIBC, reason="the main thread's fix is glibc's mallopt; this C library is not glibc")
+def test_float32_pass_in_the_main_thread_reuses_glibc_heap_with_the_same_pixels():
+    _check_heap(_child("float32", "main"))
+
+
 @pytest.mark.skipif(not GLIBC, reason="counts glibc's fresh mmaps; this C library is not glibc (other allocators differ)")
-def test_fused_float32_pass_writes_into_two_buffers_with_the_same_pixels():
+def test_float32_pass_in_another_thread_writes_into_two_buffers_with_the_same_pixels():
     if not ffdnet.into_ok():
         pytest.skip("oneDNN's in-place fused convolution is not available in this torch")
-    res = _child("float32")
-    # without: every hidden layer's output is fresh mmapped pages, 11 × ~8,900 faults a pass (103–109k measured);
-    # with: the two buffers of the pass only (~18,000), glibc's settings untouched
+    res = _child("float32", "thread")
+    # without: fresh mmapped pages every layer; with: the two buffers of the pass only (~18,000), glibc untouched
     assert min(res["without"]) > 50_000, res
     assert max(res["with"]) < min(res["without"]) / 3, res
-    assert res["state"].startswith("off"), res
-    assert res["diff"] == 0.0, res  # only where the outputs lie changes, not the arithmetic
+    assert res["state"] == "not needed yet", res
+    assert res["diff"] == 0.0, res
 
 
 @pytest.mark.skipif(not GLIBC, reason="the NNPACK path's fix is glibc's mallopt; this C library is not glibc")
 def test_nnpack_pass_reuses_glibc_heap_with_the_same_pixels():
     if not ffdnet.nnpack_ok():
         pytest.skip("this torch has no NNPACK (float32-fast runs the fused float32 path)")
-    res = _child("float32-fast")
-    assert res["state"].startswith("on"), res
-    assert min(res["without"]) > 50_000, res
-    # the heap grows during the first pass, then the same memory serves every layer (0–8,900 measured)
-    assert res["with"][-1] < min(res["without"]) / 5, res
-    assert min(res["held"]) > 50_000, res  # glibc_default() brings the faults back (the benchmark's "before" rows)
-    assert res["diff"] == 0.0, res
+    _check_heap(_child("float32-fast", "main"))
 
 
 def test_only_large_float32_torch_passes_use_them(monkeypatch):
@@ -101,21 +116,32 @@ def test_only_large_float32_torch_passes_use_them(monkeypatch):
     monkeypatch.setattr(ffdnet._malloc, "GLIBC_DYNAMIC_MAX", 6 * 40 * 96 * 4 - 1)  # a 12×80 RGB frame's layer, less one byte
     net = FFDNetDenoiser(color=True, pretrained=False, generator=torch.Generator().manual_seed(0))
     big, small = torch.rand(1, 3, 12, 80), torch.rand(1, 3, 12, 78)
+    fused = ffdnet.fused_ok() and ffdnet.into_ok()
+    out = {}
+
+    def in_thread(key, precision):
+        t = threading.Thread(target=lambda: out.__setitem__(key, net(big, 0.1, precision)))
+        t.start()
+        t.join()
+
     with torch.no_grad():
         for precision in ("bfloat16", "bfloat16-all"):
             net(big, 0.1, precision)
         net(small, 0.1, "float32")
         net(big.double(), 0.1, "float32")
         assert calls == [] and into == []
-        fused = ffdnet.fused_ok() and ffdnet.into_ok()
         y = net(big, 0.1, "float32")
-        assert (len(into), len(calls)) == ((net.n_layers - 1, 0) if fused else (0, 1))  # every hidden layer into a buffer
-        monkeypatch.setattr(ffdnet, "REUSE_BUFFERS", False)
-        assert torch.equal(y, net(big, 0.1, "float32"))
-        monkeypatch.setattr(ffdnet, "REUSE_BUFFERS", True)
-        n = len(calls)
-        net(big, 0.1, "float32-fast")
-        assert len(calls) == n + (1 if ffdnet.nnpack_ok() else 0)  # NNPACK cannot write into a buffer: glibc's heap
+        assert (len(calls), len(into)) == (1, 0)  # the main thread: glibc's heap
+        in_thread("buffers", "float32")
+        assert (len(calls), len(into)) == ((1, net.n_layers - 1) if fused else (2, 0))  # every hidden layer into a buffer
+        assert torch.equal(out["buffers"], y)
+        monkeypatch.setattr(_malloc, "reuse_large_buffers", lambda: calls.append(1) or False)  # not glibc, or opted out
+        n = len(into)
+        net(big, 0.1, "float32")
+        assert len(into) == n + (net.n_layers - 1 if fused else 0)
+        calls.clear()
+        in_thread("fast", "float32-fast")
+        assert len(calls) == (1 if ffdnet.nnpack_ok() else 0 if fused else 1)  # NNPACK cannot write into a buffer
     n = (len(calls), len(into))
     net(big.requires_grad_(), 0.1, "float32")  # autograd keeps every layer anyway: left as it was
     assert (len(calls), len(into)) == n

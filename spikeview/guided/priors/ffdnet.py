@@ -40,8 +40,9 @@ unfused path, bfloat16 2–8 % faster, so the packing is a small gain, not the s
 A bfloat16 layer's bias, kept in float32, absorbs the mean error of its rounded weights (data-free
 bias correction, see :meth:`FFDNetDenoiser._layers`). Float32 layer outputs larger than glibc's mmap
 threshold (32 MiB: frames from ~600×600) would be fresh pages every layer (~270k page faults a 1000² pass,
-a fifth of its time): the fused path writes them into two buffers per pass (:func:`_conv_fused_into`, the
-same numbers), NNPACK has glibc's heap reuse them (:mod:`spikeview._malloc`).
+a fifth of its time): in the main thread glibc's heap reuses them (:mod:`spikeview._malloc`); in other
+threads (the app's worker) the fused path writes them into two buffers per pass (:func:`_conv_fused_into`).
+The numbers are the same.
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 import os
+import threading
 from pathlib import Path
 
 import torch
@@ -72,9 +74,9 @@ STRIP_ROWS = 256
 #: torch reuses freed memory and OpenVINO was no faster (256² frame 0.31 s with it, 0.29 s without;
 #: benchmarks/results/prior.md). About a 600×600 frame and up; the numbers are the same either way.
 OV_MIN_LAYER_BYTES = 32 << 20
-#: the fused float32 path writes hidden layer outputs larger than glibc's mmap threshold (32 MiB, ~600×600 frames
-#: and up) into two buffers per pass instead of fresh memory per layer (the same numbers; benchmarks turn it off
-#: for their "before" rows)
+#: outside the main thread (or without glibc's heap reuse), the fused float32 path writes hidden layer outputs
+#: larger than glibc's mmap threshold (32 MiB, ~600×600 frames and up) into two buffers per pass instead of
+#: fresh memory per layer (the same numbers; benchmarks turn it off for their "before" rows)
 REUSE_BUFFERS = True
 #: OpenVINO's strips are as tall as keeps one layer's float32 output under this (and at least
 #: :data:`STRIP_ROWS`): it reuses its buffers, so a 1000² frame runs as one volume (0.86 s a pass
@@ -381,12 +383,14 @@ class FFDNetDenoiser(nn.Module):
         scratch = None
         if not grad and x.dtype == torch.float32 and precision == "float32" and layer_bytes > _malloc.GLIBC_DYNAMIC_MAX:
             # layer outputs above glibc's mmap threshold are fresh pages every layer (~270k page faults a 1000²
-            # pass): the fused path writes them into two buffers of this pass instead; NNPACK cannot, so
-            # glibc's heap is asked to reuse them (spikeview._malloc; process-wide, once)
-            if packed and REUSE_BUFFERS and into_ok():
+            # pass). In the main thread glibc's heap can reuse them (spikeview._malloc; process-wide, once): no
+            # faults after the first pass. Other threads' glibc heaps hold at most 64 MiB each, so there the
+            # fused path writes them into two buffers of this pass (zeroed each layer: 1000² frame 6.46 s,
+            # heap 5.81 s, before 7.59 s); NNPACK can only have the heap
+            into = packed and REUSE_BUFFERS and into_ok()
+            main = threading.current_thread() is threading.main_thread()
+            if not ((main or not into) and _malloc.reuse_large_buffers()) and into:
                 scratch = (torch.empty(layer_bytes // 4), torch.empty(layer_bytes // 4))
-            else:
-                _malloc.reuse_large_buffers()
         if grad and any(w.requires_grad for w in self.weight):  # trained weights: gradients reach them
             layers = [(w.to(x.dtype), b.to(x.dtype)) for w, b in zip(self.weight, self.bias, strict=True)]
         else:
