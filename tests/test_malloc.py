@@ -162,3 +162,29 @@ def test_not_glibc_does_nothing(monkeypatch):
     monkeypatch.setattr(_malloc, "_state", "off (not glibc)")
     assert _malloc.reuse_large_buffers() is False
     assert _malloc.release_free_memory() is False
+
+
+def test_app_gives_the_heap_back_after_every_guided_run(monkeypatch):
+    pytest.importorskip("PySide6", reason="the app's controller needs PySide6")
+    from spikeview.errors import Cancelled
+    from spikeview.gui import controller
+
+    released = []
+    monkeypatch.setattr(controller._malloc, "release_free_memory", lambda: released.append(1) or True)
+    monkeypatch.setattr(controller.jobs, "guided_job", lambda req, ctx: "result")
+    assert controller._guided_then_release(None, None) == "result"
+    assert released == [1]
+
+    def cancelled(req, ctx):
+        raise Cancelled("stopped")
+
+    monkeypatch.setattr(controller.jobs, "guided_job", cancelled)
+    with pytest.raises(Cancelled):
+        controller._guided_then_release(None, None)
+    assert released == [1, 1]  # a cancelled run gives its memory back too
+
+
+@pytest.mark.skipif(not GLIBC, reason="malloc_trim is glibc's")
+def test_release_gives_nothing_back_unless_the_reuse_is_on(monkeypatch):
+    monkeypatch.setattr(_malloc, "_state", "not needed yet")
+    assert _malloc.release_free_memory() is False

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 from PySide6 import QtCore
 
+from spikeview import _malloc
 from spikeview.gui import jobs
 from spikeview.gui.model import SPECS, Session
 from spikeview.gui.workers import Worker
@@ -51,6 +52,17 @@ PLAY_INTERVAL_MS = 10
 MAX_DISPLAY_FPS = 60
 #: OS priority (Linux nice value) of the preview, TFI and export worker threads; the GUI thread keeps 0
 WORKER_NICE = 5
+
+
+def _guided_then_release(req: jobs.GuidedRequest, ctx: Any) -> jobs.GuidedResult:
+    """The guided job, then the heap memory its passes freed given back to the OS, in the worker thread (only where
+    glibc's heap reuse is on, i.e. after an NNPACK pass: :mod:`spikeview._malloc`). The app lives long: without it
+    RSS grew 1113 → 1272 MB over three 1000² float32-fast runs (peak 1381 MB; with it 1150 MB, and 1142 MB without
+    the reuse); ``malloc_trim`` took 34–44 ms, and the runs 5.8 s against 7.5 s without the reuse."""
+    try:
+        return jobs.guided_job(req, ctx)
+    finally:
+        _malloc.release_free_memory()
 
 
 class Controller(QtCore.QObject):
@@ -333,7 +345,7 @@ class Controller(QtCore.QObject):
             return self.guided_run
         req = jobs.GuidedRequest(s.source, s.tick, dict(s.params), self.alpha, s.roi, gt, self.guided_run, recipe)
         self._guided_pending_key = self._guided_context()
-        self.guided.submit("guided", lambda ctx, r=req: jobs.guided_job(r, ctx), cancel_running=True)
+        self.guided.submit("guided", lambda ctx, r=req: _guided_then_release(r, ctx), cancel_running=True)
         self.guided_state.emit("running", f"Guided run {self.guided_run} started.")
         return self.guided_run
 
