@@ -133,14 +133,7 @@ def run(args: argparse.Namespace) -> int:
             if b > src.n_frames:
                 print(f"note: --range {recipe.run.range} ends past the stream's last tick ({src.n_frames - 1}); "
                       f"the last window is centred on tick {centres[-1]}.", file=sys.stderr)
-        warm = None
-        if recipe.run.method == "guided":  # torch, the CPU probe and the weights load while the capture is read
-            from spikeview.guided.warmup import WarmUp
-
-            warm = WarmUp.start(recipe.guided, 3 if src.cfa else 1)
         state = prepare_sequence(src, recipe)
-        if warm is not None:
-            warm.wait_precision()
         asked_precision = recipe.guided.precision
         recipe = recipe_for_state(recipe, state)
         how = "set by --white" if "export.white" in given_flags(args) else (
@@ -157,8 +150,6 @@ def run(args: argparse.Namespace) -> int:
             factor = slow_motion_factor(src.tick_rate, step, recipe.export.fps)
             print(f"{len(centres)} frames, one per {step} ticks, at {recipe.export.fps:g} fps: {describe_slow_motion(factor)}",
                   file=sys.stderr)
-        if warm is not None:
-            warm.wait()
         guided = recipe.run.method == "guided"
         total = len(centres) * (max(1, recipe.guided.steps) if guided else 1)
         begun = [0]  # the index of the latest frame begun: the frames before it are written

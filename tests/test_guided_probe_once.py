@@ -1,25 +1,9 @@
-"""The guided start-up thread (:mod:`spikeview.guided.warmup`): it fills the caches the run reads (the
-same prior object, one OpenVINO probe), and a failure in it is left to the run's own clear error."""
+"""OpenVINO's one-time probe runs once when two threads ask at once (the app's preload and its worker),
+and a guided run whose weights are missing says so in one sentence."""
 
 from __future__ import annotations
 
 import numpy as np
-import pytest
-
-from spikeview.guided import GuidedConfig
-from spikeview.guided.warmup import WarmUp
-
-
-@pytest.mark.parametrize("channels", [3, 1])
-def test_warm_up_loads_the_prior_the_sampler_then_uses(channels):
-    from spikeview.guided.sampler import load_prior
-
-    warm = WarmUp.start(GuidedConfig(), channels)
-    warm.wait_precision()
-    warm.wait()
-    prior = load_prior(GuidedConfig(), channels)
-    assert load_prior(GuidedConfig(), channels) is prior  # cached: the run does not load the weights again
-    assert prior.channels == channels
 
 
 def test_probe_runs_once_when_two_threads_ask(monkeypatch):
