@@ -109,6 +109,7 @@ def test_nnpack_pass_reuses_glibc_heap_with_the_same_pixels():
 
 
 def test_only_large_float32_torch_passes_use_them(monkeypatch):
+    fused = ffdnet.fused_ok() and ffdnet.into_ok()  # their one-time checks before the spies (any test order)
     calls, into = [], []
     monkeypatch.setattr(_malloc, "reuse_large_buffers", lambda: calls.append(1) or True)
     real = ffdnet._conv_fused_into
@@ -116,7 +117,6 @@ def test_only_large_float32_torch_passes_use_them(monkeypatch):
     monkeypatch.setattr(ffdnet._malloc, "GLIBC_DYNAMIC_MAX", 6 * 40 * 96 * 4 - 1)  # a 12×80 RGB frame's layer, less one byte
     net = FFDNetDenoiser(color=True, pretrained=False, generator=torch.Generator().manual_seed(0))
     big, small = torch.rand(1, 3, 12, 80), torch.rand(1, 3, 12, 78)
-    fused = ffdnet.fused_ok() and ffdnet.into_ok()
     out = {}
 
     def in_thread(key, precision):
