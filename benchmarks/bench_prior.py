@@ -25,10 +25,10 @@ What it measures (one process, ``torch.set_num_threads(2)``; the machine is shar
 
 **Fresh layer outputs**: float32 layer outputs over glibc's mmap threshold (32 MiB) were fresh mmapped pages
 every layer (~270,000 page faults per 1000² pass). The first such pass in the main thread (as here and in
-the CLI) now switches glibc's heap reuse on for the process (:mod:`spikeview._malloc`); other threads (the
+the CLI) now switches glibc's heap reuse on for the process (:mod:`spikeview.memory`); other threads (the
 app's worker) write the fused path's outputs into two buffers per pass (``ffdnet.REUSE_BUFFERS``). Today's
 eager baseline and the rows marked "fresh layer buffers (before)" run with both held off (``REUSE_BUFFERS``
-False and :func:`spikeview._malloc.glibc_default`: requests over 32 MiB are fresh mmaps again, as in a
+False and :func:`spikeview.memory.glibc_default`: requests over 32 MiB are fresh mmaps again, as in a
 process that never switched it on), so ``× today`` keeps its meaning and the gain is measured in the same
 run; the memory section adds ``--precision float32`` with ``SPIKEVIEW_MALLOC_TUNE=0`` (no heap reuse: the
 two buffers instead); the machine line records glibc's setting.
@@ -284,21 +284,21 @@ def _torch_only(f):
     return g
 
 
-#: the rows measured with fresh layer outputs, as before (ffdnet.REUSE_BUFFERS off, spikeview._malloc.glibc_default)
+#: the rows measured with fresh layer outputs, as before (ffdnet.REUSE_BUFFERS off, spikeview.memory.glibc_default)
 BEFORE = "fresh layer buffers (before)"
 
 
 def _glibc_default(f):
     """``f`` with large float32 layer outputs fresh mmapped pages again (page-faulted every layer), as before:
-    the fused path's two buffers off and glibc's heap reuse held off (:func:`spikeview._malloc.glibc_default`)."""
-    from spikeview import _malloc
+    the fused path's two buffers off and glibc's heap reuse held off (:func:`spikeview.memory.glibc_default`)."""
+    from spikeview import memory
     from spikeview.guided.priors import ffdnet
 
     def g():
         old = ffdnet.REUSE_BUFFERS
         ffdnet.REUSE_BUFFERS = False
         try:
-            with _malloc.glibc_default():
+            with memory.glibc_default():
                 return f()
         finally:
             ffdnet.REUSE_BUFFERS = old
@@ -307,10 +307,10 @@ def _glibc_default(f):
 
 def _faults_matter(h: int, w: int) -> bool:
     """An ``h``×``w`` RGB frame's float32 layer strips outgrow glibc's dynamic mmap threshold (the heap reuse applies)."""
-    from spikeview import _malloc
+    from spikeview import memory
     from spikeview.guided.priors.ffdnet import STRIP_ROWS
 
-    return min(h // 2, STRIP_ROWS + 24) * (w // 2) * 96 * 4 > _malloc.GLIBC_DYNAMIC_MAX
+    return min(h // 2, STRIP_ROWS + 24) * (w // 2) * 96 * 4 > memory.GLIBC_DYNAMIC_MAX
 
 
 def _nog(ctx, f, *a):
@@ -428,9 +428,9 @@ def isa_child(out: Path, repeats: int, quick: bool) -> int:
     finally:
         shutil.rmtree(work, ignore_errors=True)
     res["load_after"] = os.getloadavg()[0]
-    from spikeview import _malloc
+    from spikeview import memory
 
-    res["malloc"] = _malloc.state()
+    res["malloc"] = memory.state()
     out.write_text(json.dumps(res, indent=1), encoding="utf-8")
     return 0
 
@@ -533,7 +533,7 @@ def peak_rss(path: Path, precision: str, env: dict | None = None) -> dict:
     return {"precision": label, "peak_mb": r["peak_mb"], "wall_s": r["wall_s"], "rc": r["rc"], "plan": r["row"]}
 
 
-#: the CLI with glibc's heap reuse held off (spikeview._malloc): the float32 path's memory before it
+#: the CLI with glibc's heap reuse held off (spikeview.memory): the float32 path's memory before it
 MALLOC_OFF = {"SPIKEVIEW_MALLOC_TUNE": "0"}
 
 
@@ -544,7 +544,7 @@ def write_report(res: dict, out: Path) -> None:
          f"Machine: {m['model']}, {m['cpus']} CPUs, flags {' '.join(m['flags']) or '(none of ' + ', '.join(FLAGS) + ')'}; "
          f"torch {m['torch']} (CPU capability {m['capability']}, oneDNN bf16 {m['onednn_bf16']}); "
          f"OpenVINO {m.get('openvino') or 'not installed'}; 2 threads; glibc heap reuse for large float32 passes "
-         f"(spikeview._malloc): {m.get('malloc', 'not recorded')}. "
+         f"(spikeview.memory): {m.get('malloc', 'not recorded')}. "
          f"1-min load {m['load_before']:.1f} before, {res['load_after']:.1f} after. Command: `{res['command']}`; "
          f"{res['minutes']:.1f} min.", "",
          "Medians of interleaved repeats after a warm-up; × = eager float32 (today) / this, in the same run. "
@@ -708,9 +708,9 @@ def main(argv: list[str] | None = None) -> int:
                     print(f"memory {size} {precision}: {r['peak_mb']:.0f} MB, {r['wall_s']:.1f} s, {r['plan']}", flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    from spikeview import _malloc
+    from spikeview import memory
 
-    res["machine"]["malloc"] = _malloc.state()
+    res["machine"]["malloc"] = memory.state()
     out = a.out if a.out is not None else (None if a.quick else ROOT / "benchmarks" / "results")
     return save_results(res, out, "prior", write_report, t_start)
 

@@ -63,9 +63,9 @@ class _Trap:
                         trap.hand_over()
                     yield item
 
-        def counting_body(feats, layers, inplace, fast=False):
+        def counting_body(feats, layers, inplace, fast=False, scratch=None):
             self.strips.append(0)
-            out = body(feats, Layers(layers), inplace, fast)
+            out = body(feats, Layers(layers), inplace, fast, scratch)
             if len(self.strips) - 1 == self.strip and self.layer is None:
                 self.hand_over()
             return out

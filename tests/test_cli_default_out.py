@@ -50,7 +50,7 @@ def test_a_file_that_is_not_a_capture_is_named_before_any_default_output(tmp_pat
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pic.png"]
 
 
-@pytest.mark.parametrize("out", ["", "nofolder/", "."])
+@pytest.mark.parametrize("out", ["", "nofolder/", "./"])
 def test_an_out_that_names_no_file_gets_one_sentence(tmp_path, monkeypatch, capsys, out):
     src = tmp_path / "cap.npy"
     np.save(src, (np.random.default_rng(3).random((40, 8, 8)) < 0.3).astype(np.uint8))

@@ -1,5 +1,5 @@
 """The FFDNet prior's large float32 layer outputs stop being fresh memory every layer (issue 15): above glibc's
-mmap threshold each was ~9–13k page faults. In the main thread glibc's heap reuses them (spikeview._malloc),
+mmap threshold each was ~9–13k page faults. In the main thread glibc's heap reuses them (spikeview.memory),
 in other threads the fused path writes them into two buffers per pass, NNPACK (float32-fast) has the heap.
 Same pixels; only such passes do it; glibc is left alone where the user tunes it himself or opts out, and
 elsewhere than glibc."""
@@ -15,7 +15,7 @@ import threading
 import pytest
 import torch
 
-from spikeview import _malloc
+from spikeview import memory
 from spikeview.guided.priors import ffdnet
 from spikeview.guided.priors.ffdnet import FFDNetDenoiser
 
@@ -27,7 +27,7 @@ GLIBC = bool(os.confstr("CS_GNU_LIBC_VERSION")) if hasattr(os, "confstr") and "C
 _CHILD = r"""
 import json, resource, sys, threading
 import torch
-from spikeview import _malloc
+from spikeview import memory
 from spikeview.guided.priors import ffdnet
 
 torch.set_num_threads(2)
@@ -46,14 +46,14 @@ def passes(n):
     return faults, y
 
 def run():
-    _malloc._state = "off (held off by the test)"
+    memory._state = "off (held off by the test)"
     ffdnet.REUSE_BUFFERS = False
     res["without"], y0 = passes(1)
-    _malloc._state, ffdnet.REUSE_BUFFERS = None, True  # the pass itself picks glibc's heap or its two buffers
+    memory._state, ffdnet.REUSE_BUFFERS = None, True  # the pass itself picks glibc's heap or its two buffers
     res["with"], y1 = passes(2)
     res["diff"] = float((y0 - y1).abs().max())
-    if _malloc.state().startswith("on"):
-        with _malloc.glibc_default():  # what the benchmark's "before" rows run under
+    if memory.state().startswith("on"):
+        with memory.glibc_default():  # what the benchmark's "before" rows run under
             res["held"], _ = passes(1)
 
 if where == "main":
@@ -62,7 +62,7 @@ else:
     t = threading.Thread(target=run)
     t.start()
     t.join()
-res["state"] = _malloc.state()
+res["state"] = memory.state()
 print(json.dumps(res))
 """
 
@@ -111,10 +111,10 @@ def test_nnpack_pass_reuses_glibc_heap_with_the_same_pixels():
 def test_only_large_float32_torch_passes_use_them(monkeypatch):
     fused = ffdnet.fused_ok() and ffdnet.into_ok()  # their one-time checks before the spies (any test order)
     calls, into = [], []
-    monkeypatch.setattr(_malloc, "reuse_large_buffers", lambda: calls.append(1) or True)
+    monkeypatch.setattr(memory, "reuse_large_buffers", lambda: calls.append(1) or True)
     real = ffdnet._conv_fused_into
     monkeypatch.setattr(ffdnet, "_conv_fused_into", lambda *a: into.append(1) or real(*a))
-    monkeypatch.setattr(ffdnet._malloc, "GLIBC_DYNAMIC_MAX", 6 * 40 * 96 * 4 - 1)  # a 12×80 RGB frame's layer, less one byte
+    monkeypatch.setattr(ffdnet.memory, "GLIBC_DYNAMIC_MAX", 6 * 40 * 96 * 4 - 1)  # a 12×80 RGB frame's layer, less one byte
     net = FFDNetDenoiser(color=True, pretrained=False, generator=torch.Generator().manual_seed(0))
     big, small = torch.rand(1, 3, 12, 80), torch.rand(1, 3, 12, 78)
     out = {}
@@ -135,7 +135,7 @@ def test_only_large_float32_torch_passes_use_them(monkeypatch):
         in_thread("buffers", "float32")
         assert (len(calls), len(into)) == ((1, net.n_layers - 1) if fused else (2, 0))  # every hidden layer into a buffer
         assert torch.equal(out["buffers"], y)
-        monkeypatch.setattr(_malloc, "reuse_large_buffers", lambda: calls.append(1) or False)  # not glibc, or opted out
+        monkeypatch.setattr(memory, "reuse_large_buffers", lambda: calls.append(1) or False)  # not glibc, or opted out
         n = len(into)
         net(big, 0.1, "float32")
         assert len(into) == n + (net.n_layers - 1 if fused else 0)
@@ -153,15 +153,15 @@ def test_only_large_float32_torch_passes_use_them(monkeypatch):
     ({"GLIBC_TUNABLES": "glibc.malloc.trim_threshold=0"}, "GLIBC_TUNABLES set in the environment"),
 ])
 def test_left_alone_where_the_user_decides(environ, reason):
-    assert _malloc._apply(environ) == f"off ({reason})"
+    assert memory._apply(environ) == f"off ({reason})"
 
 
 def test_not_glibc_does_nothing(monkeypatch):
-    monkeypatch.setattr(_malloc, "_glibc", lambda: None)
-    assert _malloc._apply({}) == "off (not glibc)"
-    monkeypatch.setattr(_malloc, "_state", "off (not glibc)")
-    assert _malloc.reuse_large_buffers() is False
-    assert _malloc.release_free_memory() is False
+    monkeypatch.setattr(memory, "_glibc", lambda: None)
+    assert memory._apply({}) == "off (not glibc)"
+    monkeypatch.setattr(memory, "_state", "off (not glibc)")
+    assert memory.reuse_large_buffers() is False
+    assert memory.release_free_memory() is False
 
 
 def test_app_gives_the_heap_back_after_every_guided_run(monkeypatch):
@@ -170,7 +170,7 @@ def test_app_gives_the_heap_back_after_every_guided_run(monkeypatch):
     from spikeview.gui import controller
 
     released = []
-    monkeypatch.setattr(controller._malloc, "release_free_memory", lambda: released.append(1) or True)
+    monkeypatch.setattr(controller.memory, "release_free_memory", lambda: released.append(1) or True)
     monkeypatch.setattr(controller.jobs, "guided_job", lambda req, ctx: "result")
     assert controller._guided_then_release(None, None) == "result"
     assert released == [1]
@@ -186,5 +186,5 @@ def test_app_gives_the_heap_back_after_every_guided_run(monkeypatch):
 
 @pytest.mark.skipif(not GLIBC, reason="malloc_trim is glibc's")
 def test_release_gives_nothing_back_unless_the_reuse_is_on(monkeypatch):
-    monkeypatch.setattr(_malloc, "_state", "not needed yet")
-    assert _malloc.release_free_memory() is False
+    monkeypatch.setattr(memory, "_state", "not needed yet")
+    assert memory.release_free_memory() is False

@@ -183,7 +183,7 @@ def _check_output_first(out: Path, args: argparse.Namespace) -> None:
     from spikeview.export import SUFFIXES
 
     raw = str(getattr(args, "out", out) or "")
-    if not raw.strip() or out.is_dir() or raw.endswith(("/", "\\")):
+    if not raw.strip() or raw.endswith(("/", "\\")):  # an existing folder: check_writable names it
         raise ParameterError(f"--out {raw!r} names no file; give a file name such as frame.exr, clip.mp4 or "
                              "frames/f_%04d.png (the folder must exist).")
     if out.suffix.lower() not in SUFFIXES:

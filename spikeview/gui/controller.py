@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from PySide6 import QtCore
 
-from spikeview import _malloc
+from spikeview import memory
 from spikeview.gui import jobs
 from spikeview.gui.model import SPECS, Session
 from spikeview.gui.workers import Worker
@@ -56,13 +56,13 @@ WORKER_NICE = 5
 
 def _guided_then_release(req: jobs.GuidedRequest, ctx: Any) -> jobs.GuidedResult:
     """The guided job, then the heap memory its passes freed given back to the OS, in the worker thread (only where
-    glibc's heap reuse is on, i.e. after an NNPACK pass: :mod:`spikeview._malloc`). The app lives long: without it
+    glibc's heap reuse is on, i.e. after an NNPACK pass: :mod:`spikeview.memory`). The app lives long: without it
     RSS grew 1113 → 1272 MB over three 1000² float32-fast runs (peak 1381 MB; with it 1150 MB, and 1142 MB without
     the reuse); ``malloc_trim`` took 34–44 ms, and the runs 5.8 s against 7.5 s without the reuse."""
     try:
         return jobs.guided_job(req, ctx)
     finally:
-        _malloc.release_free_memory()
+        memory.release_free_memory()
 
 
 class Controller(QtCore.QObject):

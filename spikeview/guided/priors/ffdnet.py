@@ -40,7 +40,7 @@ unfused path, bfloat16 2–8 % faster, so the packing is a small gain, not the s
 A bfloat16 layer's bias, kept in float32, absorbs the mean error of its rounded weights (data-free
 bias correction, see :meth:`FFDNetDenoiser._layers`). Float32 layer outputs larger than glibc's mmap
 threshold (32 MiB: frames from ~600×600) would be fresh pages every layer (~270k page faults a 1000² pass,
-a fifth of its time): in the main thread glibc's heap reuses them (:mod:`spikeview._malloc`); in other
+a fifth of its time): in the main thread glibc's heap reuses them (:mod:`spikeview.memory`); in other
 threads (the app's worker) the fused path writes them into two buffers per pass (:func:`_conv_fused_into`).
 The numbers are the same.
 """
@@ -57,7 +57,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from spikeview import _malloc
+from spikeview import memory
 from spikeview.errors import Cancelled, InputFileError, ParameterError, check_cancelled
 from spikeview.guided.priors.base import PriorUnavailableError
 
@@ -381,15 +381,15 @@ class FFDNetDenoiser(nn.Module):
         # no autograd, channels-last float32/bfloat16: oneDNN's fused conv + ReLU on weights packed once
         packed = not grad and not fast and x.dtype == torch.float32 and fused_ok()
         scratch = None
-        if not grad and x.dtype == torch.float32 and precision == "float32" and layer_bytes > _malloc.GLIBC_DYNAMIC_MAX:
+        if not grad and x.dtype == torch.float32 and precision == "float32" and layer_bytes > memory.GLIBC_DYNAMIC_MAX:
             # layer outputs above glibc's mmap threshold are fresh pages every layer (~270k page faults a 1000²
-            # pass). In the main thread glibc's heap can reuse them (spikeview._malloc; process-wide, once): no
+            # pass). In the main thread glibc's heap can reuse them (spikeview.memory; process-wide, once): no
             # faults after the first pass. Other threads' glibc heaps hold at most 64 MiB each, so there the
             # fused path writes them into two buffers of this pass (zeroed each layer: 1000² frame 6.46 s,
             # heap 5.81 s, before 7.59 s); NNPACK can only have the heap
             into = packed and REUSE_BUFFERS and into_ok()
             main = threading.current_thread() is threading.main_thread()
-            if not ((main or not into) and _malloc.reuse_large_buffers()) and into:
+            if not ((main or not into) and memory.reuse_large_buffers()) and into:
                 scratch = (torch.empty(layer_bytes // 4), torch.empty(layer_bytes // 4))
         if grad and any(w.requires_grad for w in self.weight):  # trained weights: gradients reach them
             layers = [(w.to(x.dtype), b.to(x.dtype)) for w, b in zip(self.weight, self.bias, strict=True)]
