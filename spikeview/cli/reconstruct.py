@@ -106,14 +106,15 @@ def default_out(args: argparse.Namespace, recipe: Recipe) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     chosen = args.out is None
+    recipe = recipe_from_args(args) if chosen else None
     if chosen:
-        args.out = str(default_out(args, recipe_from_args(args)))
+        args.out = str(default_out(args, recipe))
     if batch.wants_zarr(args):  # a .zarr output: the chunked, resumable batch path
         return batch.run_zarr(args)
     from spikeview.export import describe_slow_motion, slow_motion_factor
     from spikeview.pipeline import prepare_sequence, recipe_for_state, white_point_line, window_centres, write_sequence
 
-    recipe = recipe_from_args(args)
+    recipe = recipe if recipe is not None else recipe_from_args(args)
     out = Path(args.out)
     _check_output_first(out, args)
     src = open_source_from_args(args, recipe)
@@ -182,7 +183,7 @@ def _check_output_first(out: Path, args: argparse.Namespace) -> None:
     from spikeview.errors import ParameterError
     from spikeview.export import SUFFIXES
 
-    raw = str(getattr(args, "out", out) or "")
+    raw = str(args.out)
     if not raw.strip() or raw.endswith(("/", "\\")):  # an existing folder: check_writable names it
         raise ParameterError(f"--out {raw!r} names no file; give a file name such as frame.exr, clip.mp4 or "
                              "frames/f_%04d.png (the folder must exist).")

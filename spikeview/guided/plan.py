@@ -227,14 +227,15 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
 
     # --- levels
     top = max_levels(*obs.shape)
+    size = f"{obs.shape[1]}x{obs.shape[0]}"  # width x height, as the tiles row
     if p.levels > top:
         if not p.levels_cap:
             raise ParameterError(
-                f"GuidedConfig.levels = {p.levels} is too many for a {obs.shape[1]}x{obs.shape[0]} frame: use at most {top}."
+                f"GuidedConfig.levels = {p.levels} is too many for a {size} frame: use at most {top}."
             )
-        levels, r["levels"] = top, f"capped from {p.levels}: a {obs.shape[1]}x{obs.shape[0]} frame allows at most {top}"
+        levels, r["levels"] = top, f"capped from {p.levels}: a {size} frame allows at most {top}"
     else:
-        levels, r["levels"] = p.levels, f"as set (a {obs.shape[1]}x{obs.shape[0]} frame allows up to {top})"
+        levels, r["levels"] = p.levels, f"as set (a {size} frame allows up to {top})"
 
     # --- diffusion
     var, gain = start_variance(obs, mosaic, cast)  # per pixel: the tile plan averages it per tile

@@ -389,7 +389,8 @@ class FFDNetDenoiser(nn.Module):
             # heap 5.81 s, before 7.59 s); NNPACK can only have the heap
             into = packed and REUSE_BUFFERS and into_ok()
             main = threading.current_thread() is threading.main_thread()
-            if not ((main or not into) and memory.reuse_large_buffers()) and into:
+            heap = (main or not into) and memory.reuse_large_buffers()
+            if into and not heap:
                 scratch = (torch.empty(layer_bytes // 4), torch.empty(layer_bytes // 4))
         if grad and any(w.requires_grad for w in self.weight):  # trained weights: gradients reach them
             layers = [(w.to(x.dtype), b.to(x.dtype)) for w, b in zip(self.weight, self.bias, strict=True)]
