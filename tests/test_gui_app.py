@@ -346,7 +346,7 @@ def test_the_stall_measurement_sees_a_freeze(opened, qtbot):
     from spikeview.gui import jobs
 
     w, s = opened, opened.session
-    s.set("steps", 40)
+    s.set("steps", 120)  # ~0.5 s on the test capture: well beyond 2 × the stall limit on a fast machine too
     req = jobs.GuidedRequest(s.source, s.tick, dict(s.params), w.controller.alpha, None, recipe=s.recipe())
 
     class Ctx:
@@ -368,7 +368,7 @@ def test_the_stall_measurement_sees_a_freeze(opened, qtbot):
         flag["blocked"] = time.perf_counter() - t0
 
     gap, _n = _largest_tick_gap(qtbot, lambda: QtCore.QTimer.singleShot(30, block), lambda: "blocked" in flag, WAIT_MS)
-    assert flag["blocked"] > 2 * STALL_LIMIT_S  # 40 prior calls: a freeze well beyond the allowed gap
+    assert flag["blocked"] > 2 * STALL_LIMIT_S  # 120 prior calls: a freeze well beyond the allowed gap
     assert gap >= flag["blocked"] - 0.002  # … and the measurement sees all of it
 
 
