@@ -85,15 +85,13 @@ def default_out(args: argparse.Namespace, recipe: Recipe) -> Path:
     ``<stem>_<method>_<A>-<B>.mp4`` for ``--range A:B[:STEP]``, in the current folder (the input's
     folder may be read-only). A name whose output or preset exists is passed over for the next free
     ``_2``, ``_3``, ... unless ``--overwrite`` is given: a run without ``--out`` never replaces a file."""
-    stem = Path(args.input).name.split(".")[0] or "spikeview"
-    method = recipe.run.method
+    from spikeview.export import output_stem
+
     if recipe.run.range is not None:
         a, b = (recipe.run.range.split(":") + [""])[:2]
-        base, suffix = f"{stem}_{method}_{a or 0}-{b or 'end'}", ".mp4"
-    elif recipe.run.at is not None:
-        base, suffix = f"{stem}_{method}_t{recipe.run.at}", ".exr"
+        base, suffix = output_stem(args.input, recipe.run.method, span=(a or 0, b or "end")), ".mp4"
     else:
-        base, suffix = f"{stem}_{method}", ".exr"
+        base, suffix = output_stem(args.input, recipe.run.method, tick=recipe.run.at), ".exr"
     out = Path(base + suffix)
     if getattr(args, "overwrite", False):
         return out

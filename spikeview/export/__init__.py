@@ -62,6 +62,7 @@ __all__ = [
     "Exporter",
     "SUFFIXES",
     "check_output_name",
+    "output_stem",
     "describe_slow_motion",
     "export_frames",
     "open_exporter",
@@ -95,6 +96,16 @@ def _exporter_class(path: Path) -> type[Exporter]:
     raise ParameterError(
         f"{path}: unknown export format {suffix or '(no suffix)'!r}; end the name with .exr, .png, .mp4 or .npy."
     )
+
+
+def output_stem(source: str | os.PathLike[str] | None, method: str, *, tick: int | None = None,
+                span: tuple[object, object] | None = None) -> str:
+    """The default output name without suffix, the app's and the CLI's: ``<capture>_<method>_t<T>`` for the
+    window at tick ``T``, ``<capture>_<method>_<A>-<B>`` for the range ``span = (A, B)``."""
+    base = Path(source).stem if source else "spikeview"
+    if span is not None:
+        return f"{base}_{method}_{span[0]}-{span[1]}"
+    return f"{base}_{method}_t{tick}" if tick is not None else f"{base}_{method}"
 
 
 def check_output_name(out: str | os.PathLike[str], n_frames: int) -> None:

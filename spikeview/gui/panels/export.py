@@ -152,13 +152,13 @@ class ExportPanel(QtWidgets.QWidget):
             return (int(s.tick),)
 
     def stem(self) -> str:
+        from spikeview.export import output_stem
+
         s = self.session
-        base = s.stream.path.stem if (s.stream is not None and s.stream.path is not None) else "spikeview"
-        method = s.get("export_method")
+        path = s.stream.path if s.stream is not None else None
         if s.get("export_range") == "frame":
-            return f"{base}_{method}_t{s.tick}"
-        lo, hi = s.marked_range()
-        return f"{base}_{method}_{lo}-{hi}"
+            return output_stem(path, s.get("export_method"), tick=s.tick)
+        return output_stem(path, s.get("export_method"), span=s.marked_range())
 
     def refresh(self) -> None:
         """Update the derived texts: frame count, slow-motion factor, the suggested file name."""
