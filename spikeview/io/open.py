@@ -213,8 +213,8 @@ def _detect(path: Path, *, width: int | None, height: int | None,
     if only is None and width is not None and height is not None:
         if (width, height) == (raw400.RAW400_WIDTH, raw400.RAW400_HEIGHT) and size % raw400.RAW400_FRAME_BYTES == 0 \
                 and size % (width * height // 8) != 0:
-            return "raw400", width, height, ("read as a raw 400x250 stream (its size is whole "
-                                             "416-bit-row frames); pass --format to be explicit.")
+            return _raw400_unless_plain(path, "read as a raw 400x250 stream (its size is whole "
+                                              "416-bit-row frames); pass --format to be explicit.")
         return "plain", width, height, ""
     cands = [c for c in _size_candidates(size) if only is None or c[0] == only]
     if width is not None or height is not None:
@@ -224,8 +224,9 @@ def _detect(path: Path, *, width: int | None, height: int | None,
         if fmt == "plain" and width is None and height is None:
             _check_known_size_against_rates(path, w, h, size)
         what = "a raw 400x250 stream" if fmt == "raw400" else f"a plain {w}x{h} file"
-        return fmt, w, h, (f"no sidecar, read as {what} because its size ({size} bytes) is a whole number "
-                           f"of such frames; pass --format, --width and --height to be explicit.")
+        note = (f"no sidecar, read as {what} because its size ({size} bytes) is a whole number "
+                f"of such frames; pass --format, --width and --height to be explicit.")
+        return _raw400_unless_plain(path, note) if fmt == "raw400" else (fmt, w, h, note)
     if len(cands) > 1:
         listed = "; ".join(f"--format {f} --width {w} --height {h}" for f, w, h in cands)
         geoms = list(dict.fromkeys((w, h) for _, w, h in cands))
@@ -251,6 +252,20 @@ def _detect(path: Path, *, width: int | None, height: int | None,
         raise GeometryError(f"{path}: its size ({size} bytes) fits several known formats or sizes, so pass one of: "
                             f"{listed}{hint}.", geoms)
     raise _unknown_plain_geometry(path, width, height, size)
+
+
+def _raw400_unless_plain(path: Path, note: str) -> tuple[str, int, int, str]:
+    """A detected raw 400x250 stream, or a plain 400x250 file when its spikes repeat at the plain frame size
+    (a plain capture cut to a whole number of raw frames; see :func:`~spikeview.io.raw400.plain_400x250_evidence`)."""
+    from spikeview.io import raw400
+
+    _, buf = open_bytes(path, "spike")
+    why = raw400.plain_400x250_evidence(buf)
+    w, h = raw400.RAW400_WIDTH, raw400.RAW400_HEIGHT
+    if why is None:
+        return "raw400", w, h, note
+    return "plain", w, h, (f"read as a plain {w}x{h} file although its size is whole raw 400x250 frames, as {why}; "
+                           "pass --format plain --width 400 --height 250 to be explicit.")
 
 
 def _size_candidates(size: int) -> list[tuple[str, int, int]]:
