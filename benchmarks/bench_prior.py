@@ -68,7 +68,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-FLAGS = ("avx2", "avx512f", "avx512_bf16", "avx512_vnni", "amx_tile", "amx_bf16", "amx_int8")
+FLAGS = ("avx2", "avx512f", "avx512_bf16", "avx512_vnni", "avx512_fp16", "amx_tile", "amx_bf16", "amx_int8")
 #: candidates measured for quality: name -> (guided.precision, layers in bf16, bf16 on steps with σ >= threshold);
 #: the default 6 steps run at σ = 50, 31.5, 19.9, 12.6, 7.9, 5 /255; bf16 layers carry the bias correction
 #: of their rounded weights (float32 bias, FFDNetDenoiser._layers)
@@ -102,7 +102,7 @@ def machine() -> dict:
     flags = cpu_flags()
     return {"model": model, "cpus": os.cpu_count(), "flags": [f for f in FLAGS if f in flags], "torch": torch.__version__,
             "capability": cpu_summary()["capability"], "onednn_bf16": cpu_summary()["onednn_bf16"],
-            "openvino": cpu_summary().get("openvino", ""),
+            "openvino": cpu_summary().get("openvino", ""), "bf16_speedup": cpu_summary().get("bf16_speedup"),
             "compiler": shutil.which(os.environ.get("CXX", "g++")) or shutil.which("cc") or "", "load_before": os.getloadavg()[0]}
 
 
@@ -542,7 +542,9 @@ def write_report(res: dict, out: Path) -> None:
     m = res["machine"]
     L = ["# FFDNet prior: precision and backend (benchmarks/bench_prior.py)", "",
          f"Machine: {m['model']}, {m['cpus']} CPUs, flags {' '.join(m['flags']) or '(none of ' + ', '.join(FLAGS) + ')'}; "
-         f"torch {m['torch']} (CPU capability {m['capability']}, oneDNN bf16 {m['onednn_bf16']}); "
+         f"torch {m['torch']} (CPU capability {m['capability']}, oneDNN bf16 {m['onednn_bf16']}; auto's probe: a bfloat16 "
+         f"layer {'not measured' if m.get('bf16_speedup') is None else format(m['bf16_speedup'], '.2f') + 'x'} as fast as "
+         f"float32); "
          f"OpenVINO {m.get('openvino') or 'not installed'}; 2 threads; glibc heap reuse for large float32 passes "
          f"(spikeview.memory): {m.get('malloc', 'not recorded')}. "
          f"1-min load {m['load_before']:.1f} before, {res['load_after']:.1f} after. Command: `{res['command']}`; "

@@ -159,6 +159,32 @@ def test_auto_follows_the_cpu():
         assert choice == p and f"set by precision={p}" in why
 
 
+def test_auto_spends_bfloat16_only_where_it_was_measured_faster():
+    # native bfloat16 that pays (AMD EPYC Zen 4: 1.9x; AMX: several times): the mixed policy
+    choice, why = prec.resolve_precision("auto", dict(BF16_CPU, bf16_speedup=1.9))
+    assert choice == ("bfloat16-mixed" if prec.AUTO_BF16 else "float32")
+    if prec.AUTO_BF16:
+        assert "1.9x as fast as float32 here" in why
+    # native bfloat16 that does not (Intel Xeon, AVX512_BF16 without AMX: a bfloat16 layer 0.55x float32's
+    # speed; auto had run 1.3x slower than float32 there): the reference float32 path, and the plan says why
+    choice, why = prec.resolve_precision("auto", dict(BF16_CPU, bf16_speedup=0.55))
+    assert choice == "float32" and "0.55x as fast as float32 here (below 1.2x)" in why
+    # just below the bar is not enough either; asking for the mixed policy still gets it
+    assert prec.resolve_precision("auto", dict(BF16_CPU, bf16_speedup=prec.BF16_MIN_SPEEDUP - 0.01))[0] == "float32"
+    assert prec.resolve_precision("bfloat16-mixed", dict(BF16_CPU, bf16_speedup=0.55))[0] == "bfloat16-mixed"
+
+
+def test_the_bfloat16_probe_measures_this_cpu():
+    s = prec.cpu_summary()
+    if not prec.native_bf16(dict(s, bf16_speedup=None)):
+        assert s["bf16_speedup"] is None  # not measured where bfloat16 is not native
+        return
+    r = s["bf16_speedup"]
+    assert isinstance(r, float) and 0.05 < r < 50, r  # a ratio of two timings of the same layer
+    # auto on this CPU follows the measurement
+    assert (prec.resolve_precision("auto")[0] == "bfloat16-mixed") == (prec.AUTO_BF16 and r >= prec.BF16_MIN_SPEEDUP)
+
+
 def test_bfloat16_only_on_high_noise_steps():
     sig = np.geomspace(50, 5, 6) / 255
     # the float32 steps run in OpenVINO where it is installed and works (tests/test_guided_openvino.py)

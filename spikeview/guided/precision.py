@@ -34,8 +34,8 @@ from pathlib import Path
 
 from spikeview.guided.config import PRECISIONS  # the values of ``guided.precision`` (one list: the config's)
 
-__all__ = ["MIXED_BF16_SIGMA", "MIXED_LAYERS", "PRECISIONS", "at_precision", "cpu_summary", "float_backend", "resolve_precision",
-           "step_precisions"]
+__all__ = ["BF16_MIN_SPEEDUP", "MIXED_BF16_SIGMA", "MIXED_LAYERS", "PRECISIONS", "at_precision", "bf16_speedup",
+           "cpu_summary", "float_backend", "resolve_precision", "step_precisions"]
 #: ``bfloat16-mixed``: the FFDNet layers in bfloat16 on the high-noise steps (``"bfloat16-all"`` = every
 #: layer, ``"bfloat16"`` = the hidden layers, first and last float32). With the bias correction of the
 #: rounded weights (:meth:`FFDNetDenoiser._layers`) the two cost the same on the bench (worst scene
@@ -49,8 +49,15 @@ MIXED_LAYERS = "bfloat16-all"
 #: (50 → 5/255): worst held-out scene −0.002 dB / −0.0023 SSIM; 4 steps (σ ≥ 12/255, hidden layers) cost
 #: −0.0080 SSIM on colorwheel, over the 0.005 budget (``benchmarks/bench_prior.py --quality``)
 MIXED_BF16_SIGMA = 18.0 / 255.0
-#: ``auto`` picks ``bfloat16-mixed`` on a CPU with native bfloat16 (set from the bench's numbers)
+#: ``auto`` picks ``bfloat16-mixed`` on a CPU with native bfloat16 (set from the bench's numbers) where
+#: bfloat16 is measured faster (:func:`bf16_speedup`)
 AUTO_BF16 = True
+#: ``auto`` spends bfloat16 only where a bfloat16 convolution takes at least this many times less time than
+#: float32 on this CPU (:func:`bf16_speedup`). The flags alone do not tell: an AMD EPYC (Zen 4) with
+#: AVX512_BF16 ran a 1000² pass 1.9x faster in bfloat16, an Intel Xeon with AVX512_BF16 and AVX10.1 but no
+#: AMX (hidden by its hypervisor) 1.7x *slower* (2.58 vs 1.53 s; its VDPBF16PS has the float32 FMA's
+#: throughput, and the conversions cost on top), so ``auto`` there ran 1.3x slower than ``float32``
+BF16_MIN_SPEEDUP = 1.2
 
 
 @functools.lru_cache(maxsize=1)
@@ -107,7 +114,49 @@ def cpu_summary() -> dict[str, object]:
         "onednn_max_isa": isa,
         "nnpack": nnpack_ok(),
         "openvino": ov_backend.version(),  # installed (float_backend says whether it is used)
+        # measured only where bfloat16 is native (otherwise None): whether it pays here (auto's rule)
+        "bf16_speedup": bf16_speedup() if (onednn_bf16 and (("avx512_bf16" in flags) or ("amx_bf16" in flags))) else None,
     }
+
+
+@functools.lru_cache(maxsize=1)
+def bf16_speedup() -> float:
+    """float32 time over bfloat16 time of one FFDNet hidden layer (96 → 96 features, 3×3, fused ReLU,
+    channels-last) on a 96×128×256 volume, measured once per process on this CPU as torch runs it now
+    (its threads, ``ONEDNN_MAX_CPU_ISA``): the best of 3 alternating runs each after a warm-up, ~0.2 s.
+    ``0.0`` where bfloat16 convolutions do not run."""
+    import time
+
+    import torch
+    import torch.nn.functional as F
+
+    from spikeview.guided.priors.ffdnet import _conv_fused, _pack, fused_ok
+
+    g = torch.Generator().manual_seed(0)
+    x32 = torch.rand(1, 96, 128, 256, generator=g).contiguous(memory_format=torch.channels_last)
+    w32 = torch.randn(96, 96, 3, 3, generator=g) * 0.03
+    b32 = torch.randn(96, generator=g) * 0.01
+    fused = fused_ok()
+    runs = {}
+    try:
+        for dt in (torch.float32, torch.bfloat16):
+            x, w = x32.to(dt), w32.to(dt).contiguous(memory_format=torch.channels_last)
+            if fused:  # the prior's own call: packed weights, float32 bias beside bfloat16 weights
+                runs[dt] = functools.partial(_conv_fused, x, _pack(w), b32, True)
+            else:
+                runs[dt] = functools.partial(lambda x, w, b: F.relu(F.conv2d(x, w, b, padding=1)), x, w, b32.to(dt))
+        best = {dt: float("inf") for dt in runs}
+        with torch.no_grad():
+            for f in runs.values():
+                f()
+            for _ in range(3):
+                for dt, f in runs.items():
+                    t0 = time.perf_counter()
+                    f()
+                    best[dt] = min(best[dt], time.perf_counter() - t0)
+    except (RuntimeError, TypeError):  # no bfloat16 convolution in this torch/CPU
+        return 0.0
+    return best[torch.float32] / max(best[torch.bfloat16], 1e-9)
 
 
 def native_bf16(summary: dict[str, object] | None = None) -> bool:
@@ -153,8 +202,16 @@ def avx512_usable(s: dict[str, object]) -> bool:
 
 def _auto(s: dict[str, object]) -> tuple[str, str]:
     feats = ", ".join(k for k in ("amx_bf16", "avx512_bf16", "avx512f", "avx2") if s.get(k)) or "no AVX2"
+    speedup = s.get("bf16_speedup")  # None: not measured (a summary given by hand): the flags decide
+    if AUTO_BF16 and native_bf16(s) and (speedup is None or speedup >= BF16_MIN_SPEEDUP):
+        measured = "" if speedup is None else f", a bfloat16 layer {speedup:.1f}x as fast as float32 here"
+        return "bfloat16-mixed", (f"native bfloat16 ({feats}{measured}); within 0.1 dB / 0.005 SSIM of float32 "
+                                  "on the bench")
     if AUTO_BF16 and native_bf16(s):
-        return "bfloat16-mixed", f"native bfloat16 ({feats}); within 0.1 dB / 0.005 SSIM of float32 on the bench"
+        # native bfloat16 that does not pay (Intel without AMX: VDPBF16PS has the float32 FMA's throughput)
+        return "float32", (f"{feats}; native bfloat16 but a bfloat16 layer measured {speedup:.2f}x as fast as "
+                           f"float32 here (below {BF16_MIN_SPEEDUP}x): float32 with oneDNN's fused "
+                           "channels-last convolutions")
     if s.get("nnpack") and not avx512_usable(s):
         # an AVX2-only CPU: NNPACK's fast (Winograd/FFT) float32 convolutions took 1.6-2.0x less time per
         # 1000² pass than oneDNN's AVX2 kernels (this EPYC capped with ONEDNN_MAX_CPU_ISA=AVX2; NNPACK has
