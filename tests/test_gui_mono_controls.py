@@ -22,8 +22,10 @@ def _controls(window):
 
 @pytest.mark.parametrize("order", [("none", "RGGB"), ("RGGB", "none")])
 def test_colour_only_controls_follow_the_capture(window, qtbot, tmp_path, order):
+    panel = window.degradation_panel
     for cfa in order:
         path = _simulate(tmp_path, cfa)
+        before = panel.updates
         _open(window, qtbot, path)
         qtbot.waitUntil(lambda: window.session.stream.path == path, timeout=WAIT_MS)  # the second one, too
         colour = cfa != "none"
@@ -33,3 +35,6 @@ def test_colour_only_controls_follow_the_capture(window, qtbot, tmp_path, order)
         panes = window.degradation_panel.panes
         assert ("monochrome" in panes["mx"].title.text()) != colour, panes["mx"].title.text()
         assert ("monochrome" in panes["cmx"].title.text()) != colour, panes["cmx"].title.text()
+        # the preview's info line names η only where it acts (a colour filter)
+        qtbot.waitUntil(lambda: panel.updates > before and panel.info.text().startswith("tick "), timeout=WAIT_MS)
+        assert ("η =" in panel.info.text()) == colour, (cfa, panel.info.text())
