@@ -251,6 +251,13 @@ def test_guided_run_to_the_end_plots_quality(opened, qtbot):
     assert "finished" in g.status.text()
     # the degradation preview now starts from the guided result
     qtbot.waitUntil(lambda: "guided run" in w.degradation_panel.panes["x"].title.text(), timeout=WAIT_MS)
+    # the Export panel says that its classical method does not write the guided result shown, until Guided is chosen
+    count = w.export_panel.count
+    s.set("export_method", "tfp")
+    assert "TFP, not the guided result: Method Guided exports it" in count.text(), count.text()
+    s.set("export_method", "guided")
+    assert "not the guided result" not in count.text(), count.text()
+    s.set("export_method", "tfp")
     # a second run keeps the first run's curve
     w.controller.run_guided()
     qtbot.waitUntil(lambda: w.controller.guided_result.run == r.run + 1, timeout=WAIT_MS * 3)

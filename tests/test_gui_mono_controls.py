@@ -36,5 +36,7 @@ def test_colour_only_controls_follow_the_capture(window, qtbot, tmp_path, order)
         assert ("monochrome" in panes["mx"].title.text()) != colour, panes["mx"].title.text()
         assert ("monochrome" in panes["cmx"].title.text()) != colour, panes["cmx"].title.text()
         # the preview's info line names η only where it acts (a colour filter)
-        qtbot.waitUntil(lambda: panel.updates > before and panel.info.text().startswith("tick "), timeout=WAIT_MS)
+        # (a view of the capture before may still arrive: wait for one of this capture)
+        qtbot.waitUntil(lambda: panel.updates > before and panel.last.colour == colour
+                        and panel.info.text().startswith("tick "), timeout=WAIT_MS)
         assert ("η =" in panel.info.text()) == colour, (cfa, panel.info.text())

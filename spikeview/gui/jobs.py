@@ -103,6 +103,8 @@ class DegradationView:
     pooling: Any = None
     #: the pooling map's uint8 image, made here in the worker (:func:`pooling_display`), or None
     pooling_image: np.ndarray | None = None
+    #: the capture has a colour filter (mosaic and cast in the model; on a monochrome one η acts on nothing)
+    colour: bool = True
 
 
 def window_observation(source: Any, tick: int, cfg: Any, alpha: np.ndarray | None,
@@ -155,7 +157,7 @@ def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
         st = data.stages(to_tensor(np.clip(x / scale, 0.0, 1.0)))
     res = core.stage_images(x, st, req.params, bool(req.params.get("show_pyramid")), scene_scale=float(scale))
     return DegradationView(res, label, req.tick, obs.shape, str(plan), knob_status(cfg, plan), plan.quantise, plan.pooling,
-                           pooling_display(plan.pooling))
+                           pooling_display(plan.pooling), colour=bool(plan.mosaic))
 
 
 def pooling_display(pool: Any) -> np.ndarray | None:

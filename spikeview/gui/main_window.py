@@ -344,6 +344,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.guided_panel.pooling_toggled.connect(lambda v: c.set_enabled("pooling", v) if not self._closing else None)
         c.guided_update.connect(self.guided_panel.show_update)
         c.guided_done.connect(self.guided_panel.show_result)
+        c.guided_done.connect(self.export_panel.note_guided_result)
         c.guided_state.connect(self.guided_panel.set_state)
         c.guided_state.connect(self._on_guided_state)
         c.export_progress.connect(self.export_panel.set_progress)

@@ -132,7 +132,6 @@ class DegradationPanel(QtWidgets.QWidget):
         for p in list(self.panes.values()) + self.bands:
             p.set_image(None)
         colour = set_colour_only(self.colour_only, self.session.source)
-        self._colour = colour  # η scales the colour cast only: the info line leaves it out on a monochrome capture
         self.panes["mx"].set_title(TITLES["mx"] if colour else "M X (no mosaic: monochrome)")
         self.panes["cmx"].set_title(TITLES["cmx"] if colour else "C M X (no cast: monochrome)")
 
@@ -169,6 +168,6 @@ class DegradationPanel(QtWidgets.QWidget):
             control.setToolTip(SPECS[path.split(".")[1]].help if why is None else f"No effect on this window: {why}.")
         p = self.session.params
         h, w = view.shape
-        eta = f"η = {p['eta']:g} · " if getattr(self, "_colour", True) else ""
+        eta = f"η = {p['eta']:g} · " if getattr(view, "colour", True) else ""  # η scales the colour cast only
         self.info.setText(f"tick {view.tick} · {w}×{h} · Δτ = {p['window']} · k = {p['k']:g} · {eta}"
                           f"residual RMS {r.rmse:.4f} (1 level = {1 / max(p['window'], 1):.3f})")

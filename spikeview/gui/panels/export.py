@@ -104,6 +104,7 @@ class ExportPanel(QtWidgets.QWidget):
         subscribe(self, ev.playback_changed, lambda playing: None if playing else self.refresh())
         self._auto_name = True
         self.path.textEdited.connect(self._edited)
+        self.guided_seen = False  # a guided result of this capture is on screen (the count line then says what Export writes)
         self._on_source()
 
     def _edited(self, _text: str) -> None:
@@ -118,8 +119,16 @@ class ExportPanel(QtWidgets.QWidget):
         self._suggested = text
         self.path.setText(text)
 
+    def note_guided_result(self, _result: object = None) -> None:
+        """A guided run finished: while the method is a classical one, the count line says that Export does not
+        write the guided result shown (the method is this panel's own parameter; it does not change by itself)."""
+        self.guided_seen = True
+        self.refresh()
+
     def _on_source(self) -> None:
         import os
+
+        self.guided_seen = False
 
         stream = self.session.stream
         if self._chosen_folder is not None:  # the last export folder wins: it was writable
@@ -172,6 +181,9 @@ class ExportPanel(QtWidgets.QWidget):
             self.slowmo.setText("")
             return
         self.count.setText(f"{n} frame(s), centre ticks {ticks[0]}…{ticks[-1]}" if n > 1 else f"1 frame at tick {ticks[0]}")
+        if self.guided_seen and s.get("export_method") != "guided":
+            self.count.setText(self.count.text() + f" by {s.get('export_method').upper()}, not the guided result: "
+                               "Method Guided exports it")
         if not self.cancel_btn.isEnabled():  # idle: the bar reads 0 / the frames this export would write
             self.progress.setRange(0, max(n, 1))
             self.progress.setValue(0)
