@@ -308,9 +308,10 @@ def _glibc_default(f):
 def _faults_matter(h: int, w: int) -> bool:
     """An ``h``×``w`` RGB frame's float32 layer strips outgrow glibc's dynamic mmap threshold (the heap reuse applies)."""
     from spikeview import memory
-    from spikeview.guided.priors.ffdnet import STRIP_ROWS
+    from spikeview.guided.priors.ffdnet import strip_rows
 
-    return min(h // 2, STRIP_ROWS + 24) * (w // 2) * 96 * 4 > memory.GLIBC_DYNAMIC_MAX
+    row = (w // 2) * 96 * 4
+    return min(h // 2, strip_rows(row, 12) + 24) * row > memory.GLIBC_DYNAMIC_MAX
 
 
 def _nog(ctx, f, *a):

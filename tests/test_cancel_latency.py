@@ -72,6 +72,7 @@ class _Trap:
 
         monkeypatch.setattr(FFDNetDenoiser, "_body", staticmethod(counting_body))
         monkeypatch.setattr(ffdnet, "STRIP_ROWS", STRIP)
+        monkeypatch.setattr(ffdnet, "STRIP_BYTES", 0)  # strips of STRIP_ROWS rows, whatever their bytes
 
     def hand_over(self) -> None:
         self.reached.set()
@@ -126,6 +127,7 @@ def test_prior_pass_stops_within_one_layer_of_the_strip_it_is_in(monkeypatch, co
 @COLOR
 def test_an_unset_flag_changes_no_number(monkeypatch, color):
     monkeypatch.setattr(ffdnet, "STRIP_ROWS", STRIP)
+    monkeypatch.setattr(ffdnet, "STRIP_BYTES", 0)  # strips of STRIP_ROWS rows, whatever their bytes
     net = _net(color)
     x = torch.rand(1, net.channels, 8 * STRIP + 2, 42, generator=torch.Generator().manual_seed(2))
     with torch.no_grad():

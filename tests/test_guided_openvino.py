@@ -56,7 +56,7 @@ class _Spy:
 def _every_size(monkeypatch):
     """These tests use small frames: let OpenVINO serve every size (the size rule has its own test)."""
     monkeypatch.setattr(ffdnet, "OV_MIN_LAYER_BYTES", 0)
-    monkeypatch.setattr(ffdnet, "OV_STRIP_BYTES", 0)  # OpenVINO's strips follow STRIP_ROWS here
+    monkeypatch.setattr(ffdnet, "STRIP_BYTES", 0)  # the strips follow STRIP_ROWS here
 
 
 def test_small_volumes_stay_in_torch(monkeypatch):
@@ -239,7 +239,7 @@ def test_a_failure_during_a_run_falls_back_to_torch(cfa, monkeypatch):
 
 
 def test_openvino_strips_are_sized_by_bytes(monkeypatch):
-    """OpenVINO reuses its buffers, so its strips are as tall as OV_STRIP_BYTES allows (fewer halos to
+    """OpenVINO reuses its buffers, so its strips are as tall as STRIP_BYTES allows (fewer halos to
     recompute): a whole 1000² frame in one call, a wide one in strips; the numbers do not change."""
     needs_openvino()
     net = _net(False)
@@ -249,15 +249,15 @@ def test_openvino_strips_are_sized_by_bytes(monkeypatch):
     row = 12 * int(net.weight[0].shape[0]) * 4
     with torch.no_grad():
         ref = net(x, 0.1, "float32")
-        monkeypatch.setattr(ffdnet, "OV_STRIP_BYTES", (5 + 2 * net.n_layers) * row)  # strips of 5 rows: 8 calls
+        monkeypatch.setattr(ffdnet, "STRIP_BYTES", (5 + 2 * net.n_layers) * row)  # strips of 5 rows: 8 calls
         a = net(x, 0.1, "float32-openvino")
         assert spy.calls == 8
-        monkeypatch.setattr(ffdnet, "OV_STRIP_BYTES", 1 << 30)  # the whole volume: 1 call
+        monkeypatch.setattr(ffdnet, "STRIP_BYTES", 1 << 30)  # the whole volume: 1 call
         b = net(x, 0.1, "float32-openvino")
         assert spy.calls == 9
     assert (a - ref).abs().max() <= TOL and (b - ref).abs().max() <= TOL
     # the real rule: a 1000² RGB frame (500 feature columns) in one volume, a 2000² one in ~256-row strips
     monkeypatch.undo()
     rgb = 96 * 4
-    assert ffdnet.OV_STRIP_BYTES // (500 * rgb) - 2 * 12 >= 500 - 2 * 12
-    assert ffdnet.OV_STRIP_BYTES // (1000 * rgb) - 2 * 12 <= 300
+    assert ffdnet.STRIP_BYTES // (500 * rgb) - 2 * 12 >= 500 - 2 * 12
+    assert ffdnet.STRIP_BYTES // (1000 * rgb) - 2 * 12 <= 300

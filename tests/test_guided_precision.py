@@ -56,11 +56,22 @@ def test_float32_paths_match_the_reference(net, size):
             assert (net(x, 0.1, "float32-fast") - ref).abs().max() < 1e-4
 
 
+def test_a_full_frame_runs_as_one_volume_and_larger_ones_in_strips():
+    """The no-grad strips are sized by bytes (ffdnet.STRIP_BYTES): a 1000² RGB frame (500 feature rows of 500
+    columns, 96 features) runs whole, without the 12-row halos that 256-row strips recompute; a 2000² one in
+    ~256-row strips, so memory stays flat."""
+    row = 96 * 4
+    assert 500 <= ffdnet.strip_rows(500 * row, 12) + 2 * 12
+    assert ffdnet.strip_rows(1000 * row, 12) <= 300
+    assert ffdnet.strip_rows(10 ** 9, 12) == ffdnet.STRIP_ROWS  # never below STRIP_ROWS
+
+
 def test_strips_give_the_whole_volume(net, monkeypatch):
     x = _image(net, 150, 40, seed=1)
     with torch.no_grad():
         whole = net(x, 0.08)
         monkeypatch.setattr(ffdnet, "STRIP_ROWS", 16)  # 75 half-resolution rows: 5 strips with 12-row halos
+        monkeypatch.setattr(ffdnet, "STRIP_BYTES", 0)  # strips of STRIP_ROWS rows, whatever their bytes
         strips = net(x, 0.08)
         assert (strips - whole).abs().max() < 1e-6
         assert (strips - reference(net, x, 0.08)).abs().max() < 1e-5
@@ -94,6 +105,7 @@ def test_fused_packed_layers_give_the_unfused_numbers(net, monkeypatch):
     x = _image(net, 90, 38, seed=4)
     with torch.no_grad():
         monkeypatch.setattr(ffdnet, "STRIP_ROWS", 12)  # 45 half-resolution rows: 4 strips
+        monkeypatch.setattr(ffdnet, "STRIP_BYTES", 0)  # strips of STRIP_ROWS rows, whatever their bytes
         fused = net(x, 0.07)
         fused_bf = net(x, 0.07, "bfloat16-all")
         monkeypatch.setattr(ffdnet, "fused_ok", lambda: False)

@@ -147,6 +147,29 @@ def test_only_large_float32_torch_passes_use_them(monkeypatch):
     assert (len(calls), len(into)) == n
 
 
+def test_a_frame_in_strips_takes_the_two_buffers_in_the_main_thread_too(monkeypatch):
+    """glibc's heap kept up to 512 MiB of freed memory besides a 2000² frame's own (2176 MB peak against the 2 GB
+    target; 1804 MB with the two buffers): frames in strips write their layers into the two buffers in the main
+    thread as well, with the same pixels."""
+    if not (ffdnet.fused_ok() and ffdnet.into_ok()):
+        pytest.skip("oneDNN's in-place fused convolution is not available in this torch")
+    calls, into = [], []
+    monkeypatch.setattr(memory, "reuse_large_buffers", lambda: calls.append(1) or True)
+    real = ffdnet._conv_fused_into
+    monkeypatch.setattr(ffdnet, "_conv_fused_into", lambda *a: into.append(1) or real(*a))
+    monkeypatch.setattr(ffdnet.memory, "GLIBC_DYNAMIC_MAX", 0)
+    net = FFDNetDenoiser(color=True, pretrained=False, generator=torch.Generator().manual_seed(0))
+    x = torch.rand(1, 3, 60, 80, generator=torch.Generator().manual_seed(3))  # 30 half-resolution rows
+    with torch.no_grad():
+        whole = net(x, 0.1, "float32")  # one volume: the heap in the main thread
+        assert (len(calls), len(into)) == (1, 0)
+        monkeypatch.setattr(ffdnet, "STRIP_ROWS", 2)
+        monkeypatch.setattr(ffdnet, "STRIP_BYTES", 0)  # 15 strips of 2 rows (30 > 2 + 2 × 12 halo rows)
+        strips = net(x, 0.1, "float32")
+    assert len(calls) == 1 and len(into) == 15 * (net.n_layers - 1), (len(calls), len(into))
+    assert torch.equal(strips, whole)
+
+
 @pytest.mark.parametrize("environ, reason", [
     ({"SPIKEVIEW_MALLOC_TUNE": "0"}, "SPIKEVIEW_MALLOC_TUNE=0"),
     ({"MALLOC_MMAP_THRESHOLD_": "1048576"}, "MALLOC_MMAP_THRESHOLD_ set in the environment"),

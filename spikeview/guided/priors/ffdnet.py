@@ -66,7 +66,8 @@ _PREFIX = "module.intermediate_dncnn.itermediate_dncnn."
 _BN_EPS = 1e-5  # torch.nn.BatchNorm2d default, used when the weights were trained
 #: arithmetic of the hidden layers (see the module docstring)
 LAYER_PRECISIONS = ("float32", "float32-fast", "float32-openvino", "bfloat16", "bfloat16-all")
-#: half-resolution rows per strip of the no-grad path (a 96-feature float32 strip of 500 columns is 50 MB)
+#: the fewest half-resolution rows per strip of the no-grad path (a 96-feature float32 strip of 500 columns is 50 MB;
+#: strips are as tall as :data:`STRIP_BYTES` allows)
 STRIP_ROWS = 256
 #: ``float32-openvino`` runs OpenVINO only where one layer's float32 output (of a strip) is larger than
 #: this. Its gain is buffer reuse: torch allocates every layer's output afresh, and above glibc's mmap
@@ -78,11 +79,18 @@ OV_MIN_LAYER_BYTES = 32 << 20
 #: larger than glibc's mmap threshold (32 MiB, ~600×600 frames and up) into two buffers per pass instead of
 #: fresh memory per layer (the same numbers; benchmarks turn it off for their "before" rows)
 REUSE_BUFFERS = True
-#: OpenVINO's strips are as tall as keeps one layer's float32 output under this (and at least
-#: :data:`STRIP_ROWS`): it reuses its buffers, so a 1000² frame runs as one volume (0.86 s a pass
-#: against 0.93 s in 256-row strips, whose halos are recomputed), and a 2000² one in ~256-row strips
-#: (memory stays within the 2 GB of a 2000² frame)
-OV_STRIP_BYTES = 100 << 20
+#: the no-grad strips (torch and OpenVINO alike) are as tall as keeps one layer's float32 output under this
+#: (and at least :data:`STRIP_ROWS`): a 1000² frame runs as one volume (torch 1.36 s a pass against 1.46 s
+#: in 256-row strips, whose 12-row halos are recomputed; the same numbers; +110 MB peak), a 2000² one in
+#: ~256-row strips (memory stays within the 2 GB of a 2000² frame)
+STRIP_BYTES = 100 << 20
+
+
+def strip_rows(row_bytes: int, n_layers: int) -> int:
+    """Half-resolution rows per no-grad strip for layer outputs of ``row_bytes`` a row (float32) through
+    ``n_layers`` layers (a halo of one row per layer on each side comes on top): :data:`STRIP_BYTES`, at
+    least :data:`STRIP_ROWS`."""
+    return max(STRIP_ROWS, STRIP_BYTES // max(int(row_bytes), 1) - 2 * n_layers)
 
 
 def _pack(weight: torch.Tensor) -> torch.Tensor:
@@ -355,7 +363,9 @@ class FFDNetDenoiser(nn.Module):
         stack = None
         hidden = int(self.weight[0].shape[0])
         row_bytes = feats.shape[0] * feats.shape[3] * hidden * 4  # one row of one layer's float32 output
-        layer_bytes = row_bytes * min(feats.shape[2], STRIP_ROWS + 2 * self.n_layers)
+        rows = strip_rows(row_bytes, self.n_layers)
+        whole = feats.shape[2] <= rows + 2 * self.n_layers  # one volume, no strips
+        layer_bytes = row_bytes * min(feats.shape[2], rows + 2 * self.n_layers)
         if precision == "float32-openvino" and not grad and x.dtype == torch.float32 and layer_bytes > OV_MIN_LAYER_BYTES:
             from spikeview.guided.priors import ov_backend
 
@@ -365,8 +375,7 @@ class FFDNetDenoiser(nn.Module):
         if stack is not None:
             try:
                 ov_feats = feats.contiguous()
-                rows = max(STRIP_ROWS, OV_STRIP_BYTES // row_bytes - 2 * self.n_layers)
-                if ov_feats.shape[2] <= rows + 2 * self.n_layers:
+                if whole:
                     check_cancelled("inside a prior pass")
                     residual = stack.run(ov_feats)
                 else:
@@ -386,10 +395,12 @@ class FFDNetDenoiser(nn.Module):
             # pass). In the main thread glibc's heap can reuse them (spikeview.memory; process-wide, once): no
             # faults after the first pass. Other threads' glibc heaps hold at most 64 MiB each, so there the
             # fused path writes them into two buffers of this pass (zeroed each layer: 1000² frame 6.46 s,
-            # heap 5.81 s, before 7.59 s); NNPACK can only have the heap
+            # heap 5.81 s, before 7.59 s); NNPACK can only have the heap. A frame in strips (2000² and up) takes the
+            # two buffers in the main thread too: the heap kept up to 512 MiB of freed memory besides the frame's own
+            # (2000² default frame 2176 MB peak with the heap, 1775 MB with neither: over the 2 GB target)
             into = packed and REUSE_BUFFERS and into_ok()
             main = threading.current_thread() is threading.main_thread()
-            heap = (main or not into) and memory.reuse_large_buffers()
+            heap = ((main and whole) or not into) and memory.reuse_large_buffers()
             if into and not heap:
                 scratch = (torch.empty(layer_bytes // 4), torch.empty(layer_bytes // 4))
         if grad and any(w.requires_grad for w in self.weight):  # trained weights: gradients reach them
@@ -397,10 +408,10 @@ class FFDNetDenoiser(nn.Module):
         else:
             layers = self._layers(x.dtype, precision, fmt, packed)
         feats = feats.contiguous(memory_format=fmt)
-        if grad or feats.shape[2] <= STRIP_ROWS + 2 * self.n_layers:
+        if grad or whole:
             residual = self._body(feats, layers, inplace=not grad, fast=fast, scratch=scratch)
         else:
-            residual = self._strips(feats, layers, fast, scratch=scratch)
+            residual = self._strips(feats, layers, fast, rows=rows, scratch=scratch)
         out = xp - F.pixel_shuffle(residual.to(x.dtype).contiguous(), 2)
         return out[..., :h, :w]
 
