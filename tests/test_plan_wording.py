@@ -34,6 +34,19 @@ def test_sigma_just_above_the_target_prints_above_it(cfa):
 
 
 @pytest.mark.parametrize("cfa", ["RGGB", None])
+@pytest.mark.parametrize("delta", [0.002, -0.002, 0.0004])
+def test_sigma_a_hair_from_the_target_prints_unequal_numbers(cfa, delta):
+    # a Spike-Zoo clip read "TFP noise σ = 4.00/255 is above the target 4.00/255" (its σ 4.003/255)
+    obs = _obs(cfa)
+    smax = 255 * float(make_plan(obs, GuidedConfig()).sigma.max())
+    plan = make_plan(obs, GuidedConfig(noise_target=(smax - delta) / 255))
+    assert plan.diffusion == (delta > 0)
+    sigma, target = map(float, re.match(r"TFP noise σ = ([\d.]+)/255 (?:is above|already meets) the target ([\d.]+)/255",
+                                        plan.reasons["diffusion"]).groups())
+    assert (sigma > target) if delta > 0 else (sigma < target), plan.reasons["diffusion"]
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", None])
 def test_levels_reason_names_the_frame_width_x_height(cfa):
     plan = make_plan(_obs(cfa, h=16, w=24), GuidedConfig())
     assert "a 24x16 frame" in plan.reasons["levels"], plan.reasons["levels"]

@@ -177,6 +177,16 @@ def _cast_neutral(obs: Observation, tol: float) -> tuple[bool, str]:
     return False, f"{words} deviate {100 * dev:.0f}% from neutral"
 
 
+def _distinct(a: float, b: float) -> tuple[str, str]:
+    """``a`` and ``b`` to 2 decimals, or to as many more (up to 4) as it takes for unequal numbers to print
+    unequal (a σ just above its target read "σ = 4.00/255 is above the target 4.00/255")."""
+    for digits in (2, 3, 4):
+        fa, fb = f"{a:.{digits}f}", f"{b:.{digits}f}"
+        if fa != fb or a == b:
+            break
+    return fa, fb
+
+
 def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     """Analyse one window and decide the stages (see the module docstring for the rules).
 
@@ -249,11 +259,12 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
         diffusion, r["diffusion"] = False, "set by diffusion='never'"
     elif smax <= p.noise_target:
         diffusion = False
-        r["diffusion"] = (f"TFP noise σ = {255 * smax:.2f}/255 already meets the target {255 * p.noise_target:.2f}/255 "
-                          f"(bright or long window)")
+        a, b = _distinct(255 * smax, 255 * p.noise_target)
+        r["diffusion"] = f"TFP noise σ = {a}/255 already meets the target {b}/255 (bright or long window)"
     else:
         diffusion = True
-        r["diffusion"] = f"TFP noise σ = {255 * smax:.2f}/255 is above the target {255 * p.noise_target:.2f}/255"
+        a, b = _distinct(255 * smax, 255 * p.noise_target)
+        r["diffusion"] = f"TFP noise σ = {a}/255 is above the target {b}/255"
     if not diffusion:
         r["diffusion"] += f"; fallback {fallback}" + (" (set by fallback)" if p.fallback else "")
 
