@@ -66,6 +66,29 @@ def test_a_full_frame_runs_as_one_volume_and_larger_ones_in_strips():
     assert ffdnet.strip_rows(10 ** 9, 12) == ffdnet.STRIP_ROWS  # never below STRIP_ROWS
 
 
+def test_the_main_thread_runs_whole_and_other_threads_keep_short_strips(monkeypatch):
+    """In the main thread (the CLI) a frame within STRIP_BYTES runs as one volume; in another thread (the app's
+    worker, Dask) torch keeps STRIP_ROWS strips, so a job's Cancel, checked between layers, lands within a
+    strip-layer; the numbers are the same."""
+    import threading
+
+    net = FFDNetDenoiser(color=True, pretrained=False, generator=torch.Generator().manual_seed(3))
+    x = _image(net, 120, 40, seed=2)  # 60 half-resolution rows
+    monkeypatch.setattr(ffdnet, "STRIP_ROWS", 8)  # 60 > 8 + 2 x 12: strips where STRIP_ROWS rules
+    bodies = []
+    real = FFDNetDenoiser._body
+    monkeypatch.setattr(FFDNetDenoiser, "_body", staticmethod(lambda *a, **k: bodies.append(1) or real(*a, **k)))
+    out = {}
+    with torch.no_grad():
+        out["main"] = net(x, 0.1)
+        main_calls = len(bodies)
+        t = threading.Thread(target=lambda: out.__setitem__("thread", net(x, 0.1)))
+        t.start()
+        t.join()
+    assert main_calls == 1 and len(bodies) - main_calls == 8, (main_calls, len(bodies))  # 60 rows in 8-row strips
+    assert torch.equal(out["main"], out["thread"])
+
+
 def test_strips_give_the_whole_volume(net, monkeypatch):
     x = _image(net, 150, 40, seed=1)
     with torch.no_grad():

@@ -363,7 +363,11 @@ class FFDNetDenoiser(nn.Module):
         stack = None
         hidden = int(self.weight[0].shape[0])
         row_bytes = feats.shape[0] * feats.shape[3] * hidden * 4  # one row of one layer's float32 output
-        rows = strip_rows(row_bytes, self.n_layers)
+        ov_rows = strip_rows(row_bytes, self.n_layers)  # OpenVINO polls Cancel inside its pass: strips by bytes anywhere
+        # torch checks Cancel between layers: in other threads (the app's worker, Dask's) it keeps STRIP_ROWS strips,
+        # a layer of one ~60 ms at 1000², so a job's Cancel lands within 0.2 s; the main thread (the CLI) runs whole
+        main = threading.current_thread() is threading.main_thread()
+        rows = ov_rows if main else STRIP_ROWS
         whole = feats.shape[2] <= rows + 2 * self.n_layers  # one volume, no strips
         layer_bytes = row_bytes * min(feats.shape[2], rows + 2 * self.n_layers)
         if precision == "float32-openvino" and not grad and x.dtype == torch.float32 and layer_bytes > OV_MIN_LAYER_BYTES:
@@ -375,11 +379,11 @@ class FFDNetDenoiser(nn.Module):
         if stack is not None:
             try:
                 ov_feats = feats.contiguous()
-                if whole:
+                if feats.shape[2] <= ov_rows + 2 * self.n_layers:
                     check_cancelled("inside a prior pass")
                     residual = stack.run(ov_feats)
                 else:
-                    residual = self._strips(ov_feats, [], stack=stack, rows=rows)
+                    residual = self._strips(ov_feats, [], stack=stack, rows=ov_rows)
                 out = xp - F.pixel_shuffle(residual.to(x.dtype), 2)
                 return out[..., :h, :w]
             except Cancelled:
@@ -399,7 +403,6 @@ class FFDNetDenoiser(nn.Module):
             # two buffers in the main thread too: the heap kept up to 512 MiB of freed memory besides the frame's own
             # (2000² default frame 2176 MB peak with the heap, 1775 MB with neither: over the 2 GB target)
             into = packed and REUSE_BUFFERS and into_ok()
-            main = threading.current_thread() is threading.main_thread()
             heap = ((main and whole) or not into) and memory.reuse_large_buffers()
             if into and not heap:
                 scratch = (torch.empty(layer_bytes // 4), torch.empty(layer_bytes // 4))
