@@ -106,3 +106,33 @@ def test_a_stopped_png_sequence_keeps_its_frames_and_their_preset(tmp_path, monk
     monkeypatch.setattr(pipeline, "reconstruct_windows", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt))
     assert main(["reconstruct", str(src), "--cfa", cfa, "--range", "10:70:10", "--out", str(tmp_path / "h_%04d.png")]) == 130
     assert not any(p.name.startswith("h") for p in tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("cfa", ["none", "RGGB"])
+def test_an_8bit_output_of_a_capture_without_sidecar_names_the_display_curve(tmp_path, capsys, cfa):
+    """The walk-through found Spike-Zoo clips' PNGs too bright against their ground truth (spikes simulated from
+    display values; the default sRGB curve is for linear light): such a run says which curve matches them."""
+    from spikeview.cli.reconstruct import DISPLAY_CURVE_NOTE
+    from spikeview.sim import SimConfig, simulate_to_file
+    from spikeview.sim.scenes import StaticScene
+
+    scene = StaticScene(np.full((24, 32, 3), 0.4, dtype=np.float32))
+    files = simulate_to_file(scene, SimConfig(n_ticks=60, width=32, height=24, cfa=cfa, seed=1), tmp_path / "sim.dat")
+    flags = ["--method", "tfp", "--cfa", cfa]
+    note = f"note: {DISPLAY_CURVE_NOTE}"
+
+    def err_of(*extra):
+        capsys.readouterr()
+        at = [] if "--range" in extra else ["--at", "30"]
+        assert main(["reconstruct", str(files.dat), *flags, *at, *extra]) == 0
+        return capsys.readouterr().err
+
+    assert note not in err_of("--out", str(tmp_path / "a.png"))  # spikeview's own sidecar: linear light, sRGB is right
+    files.sidecar.unlink()
+    plain = ["--width", "32", "--height", "24"]
+    assert err_of(*plain, "--out", str(tmp_path / "b.png")).count(note) == 1
+    assert note in err_of(*plain, "--range", "10:50:10", "--out", str(tmp_path / "b.mp4"))
+    assert note not in err_of(*plain, "--out", str(tmp_path / "b.exr"))  # linear values: no display curve
+    assert note not in err_of(*plain, "--transfer", "srgb", "--out", str(tmp_path / "c.png"))  # the user's choice
+    lin = err_of(*plain, "--transfer", "linear", "--out", str(tmp_path / "d.png"))
+    assert note not in lin

@@ -50,6 +50,20 @@ def add_args(p: argparse.ArgumentParser) -> None:
     batch.add_args(p)
 
 
+#: said when a PNG/MP4 of a capture without a sidecar takes the default sRGB curve (the walk-through found Spike-Zoo
+#: clips "too bright" against their ground truth: mean grey 186 against 123; --transfer linear matched it, 25 dB)
+DISPLAY_CURVE_NOTE = ("PNG/MP4 use the sRGB display curve, right for linear light (real cameras, spikeview's simulator); a capture "
+                      "simulated from video frames (Spike-Zoo, SpikeCV) fires in proportion to display values: --transfer linear "
+                      "matches its ground truth.")
+
+
+def display_curve_note_applies(out: Path, recipe: Recipe, args: argparse.Namespace, source: Any) -> bool:
+    """An 8-bit output of a capture file without a sidecar, with the sRGB curve by default (no --transfer, no preset)."""
+    return (out.suffix.lower() in (".png", ".mp4") and recipe.export.transfer == "srgb"
+            and "export.transfer" not in given_flags(args) and not getattr(args, "preset", None)
+            and source.info.path is not None and "sidecar" not in source.info.extra)
+
+
 def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre: int, state: Any,
                    asked_precision: str | None = None) -> tuple[list[str], Any]:
     """One sentence for every flag the user gave that cannot act on this run (and why), and the first
@@ -139,6 +153,8 @@ def run(args: argparse.Namespace) -> int:
             "from the preset" if getattr(args, "preset", None) and state.white is not None and
             recipe.export.white != state.white else "the 99.9th percentile of the sequence's rates")
         print(white_point_line(recipe, state, how), file=sys.stderr)
+        if display_curve_note_applies(out, recipe, args, src):
+            print(f"note: {DISPLAY_CURVE_NOTE}", file=sys.stderr)
         notes, first = inactive_notes(recipe, args, src, centres[0], state, asked_precision)
         for note in notes:
             print(f"note: {note}", file=sys.stderr)
