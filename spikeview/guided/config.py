@@ -133,8 +133,8 @@ class GuidedConfig(Config):
             borrow, aligned and weighted per photosite by how well they match
             (:mod:`spikeview.guided.temporal`); 0 = the window alone (the paper).
         precision: arithmetic of the FFDNet prior (:mod:`spikeview.guided.precision`): ``"auto"``
-            (the fastest path within 0.1 dB / 0.005 SSIM of float32 on the bench, from the CPU's
-            features), ``"float32"`` (the reference pixels), ``"float32-fast"`` (NNPACK's fast
+            (the fastest path within 0.1 dB / 0.005 SSIM of float32 on the bench, for this CPU: bfloat16 only
+            where a probe measures it faster), ``"float32"`` (the reference pixels), ``"float32-fast"`` (NNPACK's fast
             float32 convolution) or ``"bfloat16-mixed"`` (bfloat16 layers, bias-corrected, on high-noise steps).
         tile: per-tile plan and step-synchronous sampling (:mod:`spikeview.guided.tiles`): a frame
             larger than this is cut into tiles of about this many pixels (>= 64), each skipped,
@@ -202,7 +202,7 @@ class GuidedConfig(Config):
     reuse_alpha: float = 1e-3
     precision: str = param("auto", label="Prior precision", choices=PRECISIONS,
                            help="Arithmetic of the FFDNet prior: auto (the fastest path within 0.1 dB / 0.005 SSIM of "
-                                "float32 on the bench, from the CPU's features), float32 (the reference pixels), "
+                                "float32 on the bench, for this CPU: bfloat16 only where measured faster), float32 (the reference pixels), "
                                 "float32-fast (NNPACK's fast float32 convolution) or bfloat16-mixed (bfloat16 on high-noise "
                                 "steps).")
     tile: int = param(128, label="Tile size", unit="px", lo=0, hi=8192, step=64,
