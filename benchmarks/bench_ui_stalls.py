@@ -393,7 +393,7 @@ def report(runs: list[dict], args) -> list[str]:
         f"Produced by `python benchmarks/bench_ui_stalls.py {' '.join(args.argv)}`".rstrip() + " "
         f"({args.size}×{args.size} simulated captures, {args.ticks} ticks, mono and RGGB; playback {args.play_seconds:g} s; "
         f"MP4 export of {args.export_ticks} ticks; guided runs of {args.guided_steps} steps, full frame, a preview every step).", "",
-        f"Machine: {machine()}. The machine is shared with three other sessions: 1-minute load average "
+        f"Machine: {machine()}. 1-minute load average "
         f"{min(loads):.1f}–{max(loads):.1f} during these runs (per run below).", "",
         f"Method: a {TIMER_MS} ms precise QTimer in the app's real Qt event loop (the main window, 1600×1000, offscreen); "
         "each interval between two of its ticks is recorded while the work runs: a frozen GUI thread shows as one long "
