@@ -56,6 +56,11 @@ def preload() -> None:
             importlib.import_module(name)
         except ImportError:  # an optional writer missing: its export says so when asked for
             pass
+    # numba's cached counting kernel loads under the interpreter lock (tens of ms): in the workers, a first file
+    # open of the process stalled the window 70-83 ms on it (the demo is an in-memory stream and never loads it)
+    from spikeview.io._packed import warm_up
+
+    warm_up()
 
 
 # ------------------------------------------------------------------------------------ sources

@@ -359,3 +359,13 @@ def count_frames(buf: np.ndarray, offsets: np.ndarray, *, row_bytes: int, n_rows
             for fut in futures:
                 fut.result()
     return out
+
+
+def warm_up() -> None:
+    """Load the counting kernel (numba's on-disk cache, or a compile) in the calling thread, for the argument
+    types a file source passes (a read-only byte buffer). Loading takes the interpreter lock for tens of ms:
+    done by the app's window before its workers start, a first file open no longer stalls the window on it."""
+    buf = np.zeros(64, dtype=np.uint8)
+    buf.flags.writeable = False
+    count_frames(buf, np.zeros((1, 2), dtype=np.int64), row_bytes=2, n_rows=2, segments=np.array([[0, 0, 16]]), width=16,
+                 flip_vertical=True, flip_horizontal=False)
