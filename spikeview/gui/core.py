@@ -58,9 +58,9 @@ def preload() -> None:
             pass
     # numba's cached counting kernel loads under the interpreter lock (tens of ms): in the workers, a first file
     # open of the process stalled the window 70-83 ms on it (the demo is an in-memory stream and never loads it)
-    from spikeview.io._packed import warm_up
+    from spikeview.io import warm_up_counting
 
-    warm_up()
+    warm_up_counting()
 
 
 # ------------------------------------------------------------------------------------ sources

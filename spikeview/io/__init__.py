@@ -54,4 +54,14 @@ __all__ = [
     "write_raw1m",
     "write_raw400",
     "write_sidecar",
+    "warm_up_counting",
 ]
+
+
+def warm_up_counting() -> None:
+    """Load numba's packed-frame counting kernel in the calling thread, for the argument types file sources
+    pass (:func:`spikeview.io._packed.warm_up`): the app's window does it before its workers start, so a first
+    file open does not stall the window while a worker loads it under the interpreter lock."""
+    from spikeview.io._packed import warm_up  # numba: imported here, on first use only
+
+    warm_up()
