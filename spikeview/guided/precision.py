@@ -104,7 +104,7 @@ def cpu_summary() -> dict[str, object]:
     onednn_bf16 = onednn_bf16 and isa_has_bf16(isa)
     from spikeview.guided.priors import ov_backend
 
-    return {
+    s: dict[str, object] = {
         "capability": str(torch.backends.cpu.get_cpu_capability()),
         "avx2": "avx2" in flags,
         "avx512f": "avx512f" in flags,
@@ -114,9 +114,10 @@ def cpu_summary() -> dict[str, object]:
         "onednn_max_isa": isa,
         "nnpack": nnpack_ok(),
         "openvino": ov_backend.version(),  # installed (float_backend says whether it is used)
-        # measured only where bfloat16 is native (otherwise None): whether it pays here (auto's rule)
-        "bf16_speedup": bf16_speedup() if (onednn_bf16 and (("avx512_bf16" in flags) or ("amx_bf16" in flags))) else None,
     }
+    # measured only where bfloat16 is native (otherwise None): whether it pays here (auto's rule)
+    s["bf16_speedup"] = bf16_speedup() if native_bf16(s) else None
+    return s
 
 
 @functools.lru_cache(maxsize=1)

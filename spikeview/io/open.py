@@ -110,7 +110,8 @@ def open_source(path: str | os.PathLike[str], *, format: str | None = None, widt
     notes: list[str] = []
 
     # --------------------------------------------------------------------------- detection
-    if fmt is None:
+    detected = fmt is None  # a raw 400x250 format found by _detect has passed the plain-layout check already
+    if detected:
         fmt, w, h, note = _detect(path, width=w, height=h)
         notes.append(note)
     if layout is not None and fmt != "npz":
@@ -137,7 +138,8 @@ def open_source(path: str | os.PathLike[str], *, format: str | None = None, widt
             raise ParameterError(f"{fmt} streams are always {fixed[0]}x{fixed[1]}, but width/height "
                                  f"{width}x{height} were given; drop --width/--height or change --format.")
         if fmt == "raw400":
-            src = raw400.Raw400Source(path, flip_vertical=fv, flip_horizontal=fh, cfa=cfa_v, tick_rate=tr)
+            src = raw400.Raw400Source(path, flip_vertical=fv, flip_horizontal=fh, cfa=cfa_v, tick_rate=tr,
+                                      check_layout=not detected)
         else:
             src = raw1m.Raw1MSource(path, flip_vertical=fv, flip_horizontal=fh, cfa=cfa_v, tick_rate=tr,
                                     tag_check=tag_check or "sequence")

@@ -168,6 +168,6 @@ class DegradationPanel(QtWidgets.QWidget):
             control.setToolTip(SPECS[path.split(".")[1]].help if why is None else f"No effect on this window: {why}.")
         p = self.session.params
         h, w = view.shape
-        eta = f"η = {p['eta']:g} · " if getattr(view, "colour", True) else ""  # η scales the colour cast only
+        eta = f"η = {p['eta']:g} · " if view.colour else ""  # η scales the colour cast only
         self.info.setText(f"tick {view.tick} · {w}×{h} · Δτ = {p['window']} · k = {p['k']:g} · {eta}"
                           f"residual RMS {r.rmse:.4f} (1 level = {1 / max(p['window'], 1):.3f})")
