@@ -121,7 +121,9 @@ def recipe_for_state(recipe: Recipe, state: SequenceState) -> Recipe:
     if out.run.method == "guided" and out.guided.precision == "auto":  # the prior's arithmetic, as this CPU resolves it
         from spikeview.guided.precision import resolve_precision
 
-        out = out.with_values({"guided.precision": resolve_precision("auto")[0]})
+        from spikeview.guided.device import resolve_device
+
+        out = out.with_values({"guided.precision": resolve_precision("auto", device=resolve_device(out.guided.device))[0]})
     return out
 
 
@@ -290,6 +292,7 @@ def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str
     plan = getattr(infos[0], "plan", None) if infos else None
     if plan is not None:  # the first frame's plan: its tile map and the prior's arithmetic, as printed
         meta.plan = {k: plan.reasons[k] for k in ("tiles", "precision") if plan.reasons.get(k)}
+        meta.plan["device"] = f"{getattr(plan, 'device', 'cpu')} ({plan.reasons.get('device', '')})"
     kwargs: dict[str, Any] = {}
     if progress is not None:
         kwargs["progress"] = progress

@@ -57,8 +57,11 @@ def to_image(x: torch.Tensor) -> np.ndarray:
 
 def one_pass(prior: DenoiserPrior, y0: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     """One prior pass over ``y0`` with per-channel σ (fractions of 1)."""
-    x = to_tensor(y0)
-    s = torch.as_tensor(np.asarray(sigma, dtype=np.float32).reshape(1, -1))
+    from spikeview.guided.device import module_device
+
+    dev = module_device(prior)  # the prior's device (guided.device)
+    x = to_tensor(y0).to(dev, non_blocking=True)
+    s = torch.as_tensor(np.asarray(sigma, dtype=np.float32).reshape(1, -1), device=dev)
     if s.shape[1] != x.shape[1]:
         s = s.mean(dim=1, keepdim=True).expand(1, x.shape[1])
     with torch.no_grad():

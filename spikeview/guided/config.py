@@ -141,8 +141,9 @@ class GuidedConfig(Config):
             shortened or fully sampled by its own noise (128, the default: a 1000×1000 frame in 64
             tiles; a frame whose tiles all need the full ladder gives the untiled pixels); 0 = the
             whole frame at once.
-        device, dtype: where and in what precision the sd prior runs (``"auto"`` = CUDA when
-            available; ``float16``/``bfloat16`` need CUDA).
+        device: where the whole guided path runs (:mod:`spikeview.guided.device`): ``"auto"`` (the
+            first CUDA GPU torch sees, else the CPU), ``"cpu"``, ``"cuda"``, ``"cuda:N"``.
+        dtype: the precision of the sd prior (``float16``/``bfloat16`` need CUDA).
     """
 
     TABLE = "guided"
@@ -212,7 +213,9 @@ class GuidedConfig(Config):
     temporal_radius: int = param(3, label="Temporal radius", unit="windows", lo=0, hi=8, step=1,
                                  help="Neighbouring windows on each side whose spikes a guided frame may borrow, aligned and "
                                       "used only where they match (0 = the window alone).")
-    device: str = "auto"
+    device: str = param("auto", label="Device",
+                        help="Where the guided reconstruction runs (prior, data term, tiles, temporal alignment): auto (the "
+                             "first CUDA GPU torch sees, else the CPU), cpu, cuda or cuda:N.")
     dtype: str = "float32"
 
     def __post_init__(self) -> None:
@@ -245,5 +248,6 @@ class GuidedConfig(Config):
         _check_range("cast_tolerance", self.cast_tolerance, 0.0, math.inf)
         _check_range("reuse_alpha", self.reuse_alpha, 0.0, 1.0, lo_open=True)
         _check_choice("dtype", self.dtype, ("float32", "float16", "bfloat16"))
-        if self.device != "auto" and self.device.split(":")[0] not in ("cpu", "cuda"):
-            raise ParameterError(f"guided.device = {self.device!r} is not valid: use auto, cpu or cuda.")
+        from spikeview.guided.device import check_device_name
+
+        self.device = check_device_name(self.device)

@@ -100,7 +100,7 @@ class DataTerm:
 
     def _curvature_of(self, x: torch.Tensor) -> torch.Tensor:
         fm = self.forward
-        gain = torch.ones(1, 3, 1, 1, dtype=x.dtype) if fm.cast is None else (fm.cast.eta / fm.cast.alpha.to(x.dtype)).view(1, 3, 1, 1)
+        gain = torch.ones(1, 3, 1, 1, dtype=x.dtype, device=x.device) if fm.cast is None else (fm.cast.eta / fm.cast.alpha.to(x.dtype)).view(1, 3, 1, 1)
         from spikeview.ops.mosaic import mosaic
 
         slope = mosaic(gain.expand_as(x), fm.cfa)

@@ -73,7 +73,7 @@ class Plan:
         sigma: per-channel data-derived noise level of the corrected TFP estimate (fraction of 1).
         reasons: one sentence per choice, keyed by the attribute name.
         demosaic: the demosaic of the start estimate / TFP fallback; ``"none"`` without M.
-        precision: the prior's arithmetic (``guided.precision`` resolved for this CPU; ``""`` for
+        precision: the prior's arithmetic (``guided.precision`` resolved for this CPU or GPU; ``""`` for
             the sd prior, which runs in ``guided.dtype``).
         tile_map: the per-tile plan (:class:`spikeview.guided.tiles.TileMap`) when ``guided.tile``
             splits the frame, else ``None``.
@@ -93,6 +93,8 @@ class Plan:
     temporal: str = "off"
     precision: str = ""
     pooling: object = field(default=None, repr=False)
+    #: where the window runs (``"cpu"``, ``"cuda:0"``: ``guided.device`` resolved)
+    device: str = "cpu"
     tile_map: object = field(default=None, repr=False)
 
     def __str__(self) -> str:
@@ -108,6 +110,7 @@ class Plan:
             "reuse": "yes" if self.reuse else "no",
             "temporal": self.temporal,
             "precision": self.precision or "-",
+            "device": self.device,
             "tiles": "off" if self.tile_map is None else f"{len(self.tile_map.tiles)}",
         }
         for key, val in values.items():
@@ -306,12 +309,17 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
                else "the sd prior runs on the whole frame" if p.prior == "sd"
                else "DPS guidance takes one gradient of the whole frame's residual norm")
         r["tiles"] = f"off: {why}"
-    # --- arithmetic of the prior (spikeview.guided.precision: resolved from the CPU's features)
+    # --- where the window runs (spikeview.guided.device) and the prior's arithmetic there (spikeview.guided.precision:
+    # resolved from the CPU's features, or the GPU)
+    from spikeview.guided.device import describe_device, device_label, resolve_device
+
+    dev = resolve_device(p.device)
+    r["device"] = describe_device(p.device)
     if p.prior == "sd":
         precision, r["precision"] = "", f"the sd prior runs in guided.dtype = {p.dtype}"
     else:
         from spikeview.guided.precision import resolve_precision
 
-        precision, r["precision"] = resolve_precision(p.precision)
+        precision, r["precision"] = resolve_precision(p.precision, device=dev)
     return Plan(mosaic, cast, levels, diffusion, fallback, reuse, changed, sigma, r, quantise, demosaic, temporal,
-                pooling=pool, precision=precision, tile_map=tile_map)
+                pooling=pool, precision=precision, tile_map=tile_map, device=device_label(dev))

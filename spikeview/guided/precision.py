@@ -227,11 +227,29 @@ def _auto(s: dict[str, object]) -> tuple[str, str]:
     return "float32", f"{feats}; no native bfloat16: float32 with oneDNN's fused channels-last convolutions"
 
 
-def resolve_precision(requested: str, summary: dict[str, object] | None = None) -> tuple[str, str]:
-    """The precision a run uses for ``requested`` (one of :data:`PRECISIONS`), and why.
+#: on a CUDA GPU the float32 convolutions run cuDNN's TF32 tensor-core paths (10-bit mantissa products,
+#: float32 sums): measured on the bench's held-out scenes against the CPU's float32 (benchmarks/gpu_check.py)
+CUDA_TF32 = True
 
-    ``summary`` is :func:`cpu_summary` (given in tests to play another CPU).
+
+def resolve_precision(requested: str, summary: dict[str, object] | None = None, device=None) -> tuple[str, str]:
+    """The precision a run uses for ``requested`` (one of :data:`PRECISIONS`) on ``device`` (default: the
+    CPU), and why.
+
+    ``summary`` is :func:`cpu_summary` (given in tests to play another CPU). On a CUDA device ``auto`` is
+    ``float32`` with TF32 convolutions: a 1000² FFDNet pass is milliseconds there, the prior is no longer
+    what a window waits for, so bfloat16 would buy nothing worth its error (``bfloat16-mixed`` stays
+    available: bfloat16 layers on the high-noise steps, cuDNN); ``float32-fast`` (NNPACK) is a CPU path.
     """
+    if getattr(device, "type", str(device or "cpu").split(":")[0]) == "cuda":
+        gpu = "float32, cuDNN with TF32 convolutions" if CUDA_TF32 else "float32, cuDNN"
+        if requested in ("auto", "float32", "float32-fast"):
+            why = {"auto": "auto on a CUDA GPU (the prior takes milliseconds there: no bfloat16)",
+                   "float32": "set by precision=float32",
+                   "float32-fast": "float32-fast (NNPACK) is a CPU path"}[requested]
+            return "float32", f"{gpu}: {why}"
+        return requested, (f"bfloat16 layers on steps with noise >= {255 * MIXED_BF16_SIGMA:.0f}/255, {gpu} below: "
+                           f"set by precision={requested}")
     s = cpu_summary() if summary is None else summary
     auto, why = _auto(s)
     if requested == "auto":

@@ -41,6 +41,7 @@ import torch
 from spikeview.errors import Cancelled, ParameterError, cancel_scope, is_cancelled
 from spikeview.guided.baseline import baseline, start_estimate, to_image, to_tensor
 from spikeview.guided.config import GuidedConfig
+from spikeview.guided.device import module_device
 from spikeview.guided.guidance import DPSGuidance, GuidanceRule, HQSGuidance
 from spikeview.guided.likelihood import DataTerm
 from spikeview.guided.observation import Observation
@@ -58,10 +59,11 @@ Callback = Callable[[int, int, np.ndarray], Any]
 
 
 @functools.lru_cache(maxsize=4)
-def _load_ffdnet(color: bool, path: str | None) -> DenoiserPrior:
+def _load_ffdnet(color: bool, path: str | None, device: str = "cpu") -> DenoiserPrior:
     from spikeview.guided.priors.ffdnet import FFDNetDenoiser
 
-    return FFDNetDenoiser(color=color, weights=path)
+    net = FFDNetDenoiser(color=color, weights=path)
+    return net if device == "cpu" else net.to(device)
 
 
 @functools.lru_cache(maxsize=2)
@@ -75,13 +77,15 @@ def load_prior(params: GuidedConfig, channels: int) -> Any:
     """The prior of ``params`` (the one place that picks it), loaded once and cached.
 
     ``"ffdnet"``: the pixel-space denoiser for ``channels`` (3 RGB, 1 gray), the packaged weights or
-    ``params.model_path``. ``"sd"``: the latent model in the diffusers folder ``params.model_path``
+    ``params.model_path``, on ``params.device`` (:func:`spikeview.guided.device.resolve_device`). ``"sd"``: the latent model in the diffusers folder ``params.model_path``
     on ``params.device`` in ``params.dtype``.
 
     Raises:
         PriorUnavailableError: the weights are missing.
-        ParameterError: ``prior = "sd"`` without a model folder.
+        ParameterError: ``prior = "sd"`` without a model folder, or a device that is not there.
     """
+    from spikeview.guided.device import resolve_device
+
     if params.prior == "sd":
         if not params.model_path:
             raise ParameterError(
@@ -89,7 +93,7 @@ def load_prior(params: GuidedConfig, channels: int) -> Any:
                 "diffusers-format Stable Diffusion 2.x folder (unet/, vae/, scheduler/)."
             )
         return _load_sd(str(params.model_path), params.device, params.dtype)
-    return _load_ffdnet(channels == 3, params.model_path)
+    return _load_ffdnet(channels == 3, params.model_path, str(resolve_device(params.device)))
 
 
 def is_latent(prior: Any) -> bool:
@@ -107,7 +111,8 @@ class RunInfo:
         steps: prior calls made by the sampler.
         sigma_start: per-channel σ' of the first prior call (fractions of 1).
         seconds: wall-clock time of the run.
-        precision: the prior's arithmetic (``guided.precision`` resolved for this CPU).
+        precision: the prior's arithmetic (``guided.precision`` resolved for this CPU or GPU).
+        device: where the window ran (``"cpu"``, ``"cuda:0"``).
     """
 
     plan: Plan | None = None
@@ -116,6 +121,7 @@ class RunInfo:
     sigma_start: list[float] = field(default_factory=list)
     seconds: float = 0.0
     precision: str = ""
+    device: str = ""
 
 
 class GuidedSampler:
@@ -171,13 +177,18 @@ class GuidedSampler:
         return fm
 
     @classmethod
-    def data_term(cls, obs: Observation, plan: Plan, params: GuidedConfig) -> DataTerm:
-        """The weighted multiscale data term of one window (forward model, noise weights, pyramid)."""
+    def data_term(cls, obs: Observation, plan: Plan, params: GuidedConfig, device: Any = None) -> DataTerm:
+        """The weighted multiscale data term of one window (forward model, noise weights, pyramid), on
+        ``device`` (default: the CPU)."""
         fm = cls.forward_model(obs, plan, params)
         y = torch.from_numpy(obs.y)[None, None]
         var = obs.variance()
         if not params.noise_weights:
             var = np.full(obs.shape, float(var.mean()), dtype=np.float32)
+        if device is not None and torch.device(device).type != "cpu":
+            fm = fm.to(device)
+            y = y.to(device, non_blocking=True)
+            return DataTerm(fm, y, torch.from_numpy(var)[None, None].to(device, non_blocking=True), plan.levels)
         return DataTerm(fm, y, torch.from_numpy(var)[None, None], plan.levels)
 
     # ---------------------------------------------------------------------------------- run
@@ -261,10 +272,13 @@ class GuidedSampler:
         """The one sampling loop, for a pixel-space denoiser (VE schedule) and a latent model (DDIM) alike."""
         prior = self.prior_for(channels, p)
         latent = is_latent(prior)
-        self.info.precision = "float32" if latent else (plan.precision or prec.resolve_precision(p.precision)[0])
+        # the window runs where its prior runs (guided.device); a latent model moves its own tensors
+        dev = torch.device("cpu") if latent else module_device(prior)
+        self.info.device = str(getattr(prior, "device", dev)) if latent else str(dev)
+        self.info.precision = "float32" if latent else (plan.precision or prec.resolve_precision(p.precision, device=dev)[0])
         rule = self._guidance if self._guidance is not None else self.guidance_for(p, prior, obs.shape)
-        gen = torch.Generator().manual_seed(int(p.seed))
-        data = self.data_term(obs, plan, p)
+        gen = torch.Generator().manual_seed(int(p.seed))  # on the CPU: the same numbers on every device
+        data = self.data_term(obs, plan, p, dev)
 
         sigma_obs = np.asarray(plan.sigma, dtype=np.float64) * p.sigma_scale
         if sigma_obs.size != channels:
@@ -282,7 +296,7 @@ class GuidedSampler:
             sigma_add = np.sqrt(np.maximum(t_s ** 2 - sigma_obs ** 2, 0.0))
         else:
             sigma_add = np.full(channels, t_s)
-        start = to_tensor(x_start)
+        start = to_tensor(x_start).to(dev, non_blocking=True)
 
         if latent:
             from spikeview.guided.latent import LatentSpace, make_ladder
@@ -297,7 +311,7 @@ class GuidedSampler:
             self.info.sigma_start = sigma_first.tolist()
             schedule = VESchedule(tuple(sigma_first), p.sigma_end)
             schedule.set_timesteps(p.steps)
-            add = torch.as_tensor(sigma_add, dtype=start.dtype).view(1, -1, 1, 1)
+            add = torch.as_tensor(sigma_add, dtype=start.dtype, device=dev).view(1, -1, 1, 1)
         # the prior's arithmetic per step (bfloat16 only at high noise levels: spikeview.guided.precision)
         layer_prec = prec.step_precisions(self.info.precision, p.steps if latent else schedule.sigmas[:p.steps].min(axis=1))
         total = p.steps * p.chains
@@ -307,7 +321,7 @@ class GuidedSampler:
             if latent:
                 x = space.start(start, schedule, gen)
             elif noise is not None and chain == 0:
-                x = start + add * noise.to(start.dtype)
+                x = start + add * noise.to(dev, start.dtype)
             else:
                 x = schedule.add_noise(start, add, gen)
             for i in range(p.steps):
@@ -320,7 +334,7 @@ class GuidedSampler:
                                   generator=gen, transform=transform)
                 if not (bool(torch.isfinite(x).all()) and bool(torch.isfinite(x0).all())):
                     raise ParameterError(_diverged(p, done + 1, total))
-                x0 = x0.float().cpu()
+                x0 = x0.float().cpu() if latent else x0.float()  # a latent run accumulates on the CPU
                 self.info.steps = done + 1
                 if callback is not None:
                     callback(done + 1, total, to_image((acc + x0) / (chain + 1)))

@@ -82,7 +82,9 @@ class VESchedule:
         """``x0 + sigma·n`` with ``n ~ N(0, 1)`` drawn from ``generator`` (``sigma`` a number or ``(1, C, 1, 1)``)."""
         if not bool(torch.any(torch.as_tensor(sigma) > 0)):
             return x0.clone()
-        noise = torch.randn(x0.shape, generator=generator, dtype=x0.dtype, device=x0.device)
+        from spikeview.guided.device import randn
+
+        noise = randn(x0.shape, generator, x0.dtype, x0.device)  # the CPU generator's numbers on any device
         return x0 + sigma * noise
 
     def step(self, x0_hat: torch.Tensor, index: int, sample: torch.Tensor, *, zeta: float = 0.0,
@@ -111,6 +113,8 @@ class VESchedule:
             eps_hat = torch.where(s_t > 0, (sample - x0_hat) / s_t.clamp_min(1e-12), torch.zeros_like(sample))
         noise = eps_hat
         if zeta > 0:
-            fresh = torch.randn(sample.shape, generator=generator, dtype=sample.dtype, device=sample.device)
+            from spikeview.guided.device import randn
+
+            fresh = randn(sample.shape, generator, sample.dtype, sample.device)
             noise = (1 - zeta) ** 0.5 * eps_hat + zeta ** 0.5 * fresh
         return StepOutput(x0_hat + s_prev * noise, x0_hat)

@@ -343,6 +343,14 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
     h, w = obs.shape
     channels = 3 if plan.mosaic else 1
     prior = sampler.prior_for(channels, p)
+    from spikeview.guided.device import module_device, randn
+
+    dev = module_device(prior)  # the whole step-synchronous run lives where the prior runs (guided.device)
+    sampler.info.device = str(dev)
+
+    def on(t: Any) -> Any:  # a host tensor (masks, maps) on the run's device
+        return t.to(dev, non_blocking=True)
+
     rule = sampler._guidance if sampler._guidance is not None else sampler.guidance_for(p, prior, obs.shape)
     if not isinstance(rule, HQSGuidance):
         raise TypeError("step-synchronous tiles need HQS guidance (the plan turns tiles off for DPS)")
@@ -362,35 +370,35 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
         return max(0, y0 - mg), min(h, y1 + mg), max(0, x0 - mg), min(w, x1 + mg)
 
     # the start estimate of the whole frame (as untiled), and every skipped tile's fallback
-    start = to_tensor(start_estimate(obs, plan.mosaic, plan.cast, p.demosaic))
+    start = on(to_tensor(start_estimate(obs, plan.mosaic, plan.cast, p.demosaic)))
     fallback = start.clone() if any(t.kind == "skipped" and t.fallback == "baseline" for t in tm.tiles) else start
     for t in tm.tiles:
         if t.kind == "skipped" and t.fallback == "baseline":
             check_cancelled("before a skipped tile's one-pass estimate")
             cy0, cy1, cx0, cx1 = crop(t.y0, t.y1, t.x0, t.x1)
             sub = _FrameNoise.of(obs.crop(cy0, cy1, cx0, cx1), kappa)
-            one = to_tensor(baseline(sub, prior, sigma_scale=p.sigma_scale, use_mosaic=plan.mosaic, use_cast=plan.cast,
-                                     demosaic=p.demosaic))
+            one = on(to_tensor(baseline(sub, prior, sigma_scale=p.sigma_scale, use_mosaic=plan.mosaic, use_cast=plan.cast,
+                                     demosaic=p.demosaic)))
             fallback[..., t.y0:t.y1, t.x0:t.x1] = one[..., t.y0 - cy0:t.y1 - cy0, t.x0 - cx0:t.x1 - cx0]
 
     # per-pixel start noise: full tiles exactly as untiled; a short tile (and a skipped tile's cross-fade
     # band) tops its own noise up to the level of the step it joins at (tile by tile: no frame-sized temporaries)
-    lad = torch.as_tensor(sigmas[:n], dtype=torch.float32)  # (n, C)
-    add = torch.as_tensor(sigma_add, dtype=torch.float32).view(1, -1, 1, 1).expand(1, channels, h, w).clone()
+    lad = torch.as_tensor(sigmas[:n], dtype=torch.float32, device=dev)  # (n, C)
+    add = torch.as_tensor(sigma_add, dtype=torch.float32, device=dev).view(1, -1, 1, 1).expand(1, channels, h, w).clone()
     for t in tm.tiles:
         jr = join[t.y0:t.y1, t.x0:t.x1]
         if t.kind == "full" and not (jr > 0).any():
             continue
         own = np.asarray(t.sigma_c, dtype=np.float64) * p.sigma_scale
         own = own if own.size == channels else np.full(channels, float(np.sqrt(np.mean(own ** 2))))
-        own = torch.as_tensor(np.minimum(sigma_obs, own) if t.kind != "full" else sigma_obs, dtype=torch.float32)
-        level = lad[torch.from_numpy(np.minimum(jr, n - 1).astype(np.int64))].permute(2, 0, 1)[None]
+        own = torch.as_tensor(np.minimum(sigma_obs, own) if t.kind != "full" else sigma_obs, dtype=torch.float32, device=dev)
+        level = lad[on(torch.from_numpy(np.minimum(jr, n - 1).astype(np.int64)))].permute(2, 0, 1)[None]
         top = torch.sqrt(torch.clamp(level ** 2 - own.view(1, -1, 1, 1) ** 2, min=0.0))
         region = add[..., t.y0:t.y1, t.x0:t.x1]
-        region.copy_(torch.where(torch.from_numpy(jr == 0)[None, None], region, top))
-    skipped_only = torch.from_numpy(join >= n)[None, None]
-    wd = torch.from_numpy(wdiff)[None, None]
-    precision = plan.precision or prec.resolve_precision(p.precision)[0]
+        region.copy_(torch.where(on(torch.from_numpy(jr == 0))[None, None], region, top))
+    skipped_only = on(torch.from_numpy(join >= n))[None, None]
+    wd = on(torch.from_numpy(wdiff))[None, None]
+    precision = plan.precision or prec.resolve_precision(p.precision, device=dev)[0]
     sampler.info.precision = precision
     layer_prec = prec.step_precisions(precision, sigmas[:n].min(axis=1))
     gen = torch.Generator().manual_seed(int(p.seed))
@@ -403,7 +411,7 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
             if cache[box] is None:
                 sub = _FrameNoise.of(obs.crop(*box), kappa)
                 sub_plan = dataclasses.replace(plan, levels=min(plan.levels, max_levels(*sub.shape)), tile_map=None)
-                cache[box] = sampler.data_term(sub, sub_plan, p)
+                cache[box] = sampler.data_term(sub, sub_plan, p, dev)
         return cache[box]
 
     def blend(x0: Any) -> Any:
@@ -411,7 +419,8 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
 
     acc = torch.zeros_like(start)
     for chain in range(p.chains):
-        x = torch.randn(start.shape, generator=gen, dtype=start.dtype) if bool((add > 0).any()) else torch.zeros_like(start)
+        # drawn from the CPU generator on any device: the noise a CPU run draws
+        x = randn(start.shape, gen, start.dtype, dev) if bool((add > 0).any()) else torch.zeros_like(start)
         x.mul_(add).add_(start)  # start + add·z, as the untiled run draws it
         x = torch.where(skipped_only, fallback, x, out=x)
         x0_full = torch.where(skipped_only, fallback, start)
@@ -421,7 +430,7 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
                 raise Cancelled(f"guided reconstruction cancelled at step {done + 1} of {total}")
             act = join <= i
             if act.any():
-                sigma = torch.as_tensor(sigmas[i], dtype=start.dtype).view(1, -1, 1, 1)
+                sigma = torch.as_tensor(sigmas[i], dtype=start.dtype, device=dev).view(1, -1, 1, 1)
                 transform = ((i + 3 * chain) % 8) if p.self_ensemble else None
                 prior_i = prec.at_precision(prior, layer_prec[i])
                 new = x0_full  # written in place: the rectangles read x, never x̂₀
@@ -433,12 +442,12 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
                     jc = join[cy0:cy1, cx0:cx1]
                     pr = prior_i
                     if (jc > i).any():  # waiting or skipped pixels in the context: a per-pixel noise map
-                        smap = lad[torch.from_numpy(np.clip(np.maximum(jc, i), 0, n - 1).astype(np.int64))]
+                        smap = lad[on(torch.from_numpy(np.clip(np.maximum(jc, i), 0, n - 1).astype(np.int64)))]
                         smap = smap.permute(2, 0, 1)[None].to(start.dtype)
                         pr = _MapPrior(prior_i, _dihedral(smap, transform) if transform else smap)
                     _, x0c = step_rule.step(pr, None, data_for(box, used), x[..., cy0:cy1, cx0:cx1], i, sigma, zeta=p.zeta,
                                             generator=None, transform=transform)
-                    keep = torch.from_numpy(act[ry0:ry1, rx0:rx1])[None, None]
+                    keep = on(torch.from_numpy(act[ry0:ry1, rx0:rx1]))[None, None]
                     inner = x0c[..., ry0 - cy0:ry1 - cy0, rx0 - cx0:rx1 - cx0]
                     new[..., ry0:ry1, rx0:rx1] = torch.where(keep, inner, new[..., ry0:ry1, rx0:rx1])
                 data_cache = used
@@ -446,7 +455,7 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
                     raise ParameterError(f"the guided sample diverged (non-finite values at step {done + 1} of {total}, "
                                          f"tiled, guidance = hqs); raise lam (now {p.lam:g}) or use fewer data_steps, "
                                          "or use method tfp for this stream.")
-                mask = torch.from_numpy(act)[None, None]
+                mask = on(torch.from_numpy(act))[None, None]
                 if rule.renoise:
                     prev = sched.step(new, i, x, zeta=p.zeta, generator=gen).prev_sample
                 else:

@@ -357,7 +357,7 @@ class FFDNetDenoiser(nn.Module):
         grad = torch.is_grad_enabled() and (feats.requires_grad or any(p.requires_grad for p in self.parameters()))
         # autograd (DPS) keeps the NCHW layout: its float32 gradients are those of the reference path;
         # float32-fast runs NNPACK (NCHW, float32 only) where torch has it
-        fast = precision == "float32-fast" and not grad and x.dtype == torch.float32 and nnpack_ok()
+        fast = precision == "float32-fast" and not grad and x.dtype == torch.float32 and x.device.type == "cpu" and nnpack_ok()
         # float32-openvino: the conv stack in OpenVINO's float32 CPU runtime where it is installed and works
         # (spikeview.guided.priors.ov_backend), otherwise (and with autograd) the float32 path below
         stack = None
@@ -368,9 +368,13 @@ class FFDNetDenoiser(nn.Module):
         # a layer of one ~60 ms at 1000², so a job's Cancel lands within 0.2 s; the main thread (the CLI) runs whole
         main = threading.current_thread() is threading.main_thread()
         rows = ov_rows if main else STRIP_ROWS
-        whole = feats.shape[2] <= rows + 2 * self.n_layers  # one volume, no strips
+        cpu = x.device.type == "cpu"
+        # a GPU runs the whole volume (a 1000² pass is milliseconds, Cancel lands between passes and layers);
+        # the CPU's fused oneDNN paths, strips, buffers, NNPACK and OpenVINO below are CPU paths
+        whole = not cpu or feats.shape[2] <= rows + 2 * self.n_layers  # one volume, no strips
         layer_bytes = row_bytes * min(feats.shape[2], rows + 2 * self.n_layers)
-        if precision == "float32-openvino" and not grad and x.dtype == torch.float32 and layer_bytes > OV_MIN_LAYER_BYTES:
+        if (precision == "float32-openvino" and not grad and x.dtype == torch.float32 and layer_bytes > OV_MIN_LAYER_BYTES
+                and x.device.type == "cpu"):
             from spikeview.guided.priors import ov_backend
 
             stack = ov_backend.stack_for(self)
@@ -392,9 +396,9 @@ class FFDNetDenoiser(nn.Module):
                 ov_backend.give_up(e)
         fmt = torch.contiguous_format if (grad or fast) else torch.channels_last
         # no autograd, channels-last float32/bfloat16: oneDNN's fused conv + ReLU on weights packed once
-        packed = not grad and not fast and x.dtype == torch.float32 and fused_ok()
+        packed = not grad and not fast and x.dtype == torch.float32 and cpu and fused_ok()
         scratch = None
-        if not grad and x.dtype == torch.float32 and precision == "float32" and layer_bytes > memory.GLIBC_DYNAMIC_MAX:
+        if not grad and cpu and x.dtype == torch.float32 and precision == "float32" and layer_bytes > memory.GLIBC_DYNAMIC_MAX:
             # layer outputs above glibc's mmap threshold are fresh pages every layer (~270k page faults a 1000²
             # pass). In the main thread glibc's heap can reuse them (spikeview.memory; process-wide, once): no
             # faults after the first pass. Other threads' glibc heaps hold at most 64 MiB each, so there the
@@ -432,7 +436,7 @@ class FFDNetDenoiser(nn.Module):
         RMS, is left).
         """
         # keyed on the parameters' storage and version too: replaced or edited weights are re-converted
-        key = (dtype, precision, fmt, packed, tuple((w.data_ptr(), w._version) for w in self.weight))
+        key = (dtype, precision, fmt, packed, str(self.weight[0].device), tuple((w.data_ptr(), w._version) for w in self.weight))
         cache = self.__dict__.setdefault("_layer_cache", {})
         if key not in cache:
             if len(cache) > 8:
@@ -447,7 +451,7 @@ class FFDNetDenoiser(nn.Module):
                 if precision == "bfloat16-all" or (precision == "bfloat16" and 0 < i < last):
                     dt = low
                     w32 = w.float()
-                    b = b.float() + (w32 - w32.to(low).float()).sum(dim=(2, 3)) @ means[i]
+                    b = b.float() + (w32 - w32.to(low).float()).sum(dim=(2, 3)) @ means[i].to(w32.device)
                 wt = w.to(dt).contiguous(memory_format=fmt)
                 # the fused call takes a float32 bias beside bfloat16 weights (no rounding of the correction)
                 out.append((_pack(wt) if packed else wt, b.to(torch.float32 if packed and dt == low else dt)))
@@ -473,7 +477,7 @@ class FFDNetDenoiser(nn.Module):
                 last = len(self.weight) - 1
                 for i, (w, b) in enumerate(zip(self.weight, self.bias, strict=True)):
                     means.append(feats.mean(dim=(0, 2, 3)))
-                    feats = F.conv2d(feats, w.detach().float(), b.detach().float(), padding=1)
+                    feats = F.conv2d(feats, w.detach().float().cpu(), b.detach().float().cpu(), padding=1)
                     if i < last:
                         feats = F.relu(feats)
             cached = (key, means)

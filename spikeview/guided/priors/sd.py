@@ -97,16 +97,10 @@ def resolve_dtype(dtype: str | torch.dtype | None) -> torch.dtype:
 
 
 def resolve_device(device: str | torch.device | None) -> torch.device:
-    """``None``/``"auto"`` → CUDA when available, else CPU; anything else as torch understands it."""
-    if device is None or device == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    try:
-        dev = torch.device(device)
-    except (RuntimeError, TypeError):
-        raise ParameterError(f"device = {device!r} is not a device name: use 'auto', 'cpu' or 'cuda'.") from None
-    if dev.type == "cuda" and not torch.cuda.is_available():
-        raise ParameterError(f"device = {device!r} was asked for but torch sees no CUDA GPU: use 'auto' or 'cpu'.")
-    return dev
+    """``None``/``"auto"`` → CUDA when available, else CPU (:func:`spikeview.guided.device.resolve_device`)."""
+    from spikeview.guided.device import resolve_device as _resolve
+
+    return _resolve(device)
 
 
 def _check_subfolder(root: Path, sub: str, config_name: str, weights: bool) -> tuple[str | None, bool | None]:
