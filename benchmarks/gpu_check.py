@@ -180,7 +180,8 @@ def guided_frame(sizes: list[int], folder: Path, repeats: int) -> list[dict]:
 
         def once(record: bool):
             t0 = time.perf_counter()
-            obs = Observation.from_source(src, 100, p.window, alpha=state.alpha, eta=p.eta, radius=p.temporal_radius)
+            obs = Observation.from_source(src, 100, p.window, alpha=state.alpha, eta=p.eta, radius=p.temporal_radius,
+                                          device=p.device)
             t1 = time.perf_counter()
             plan = make_plan(obs, p)
             t2 = time.perf_counter()

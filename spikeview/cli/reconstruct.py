@@ -85,7 +85,8 @@ def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre
     cfg = sampler_params(recipe, state)
     if asked_precision == "auto":
         cfg = cfg.replace(precision="auto")
-    obs = Observation.from_source(source, centre, cfg.window, alpha=state.alpha, eta=cfg.eta, radius=cfg.temporal_radius)
+    obs = Observation.from_source(source, centre, cfg.window, alpha=state.alpha, eta=cfg.eta, radius=cfg.temporal_radius,
+                                  device=cfg.device)
     plan = make_plan(obs, cfg)
     print(plan, file=sys.stderr)
     for path, why in knob_status(cfg, plan).items():

@@ -141,7 +141,8 @@ def run_chunk(job: BatchJob, index: int, state: dict[str, Any], topic: str | Non
 
         torch.set_num_threads(1)
         _TORCH_THREADS_SET = True
-    source, sampler = worker_resources(job.input, job.open_kwargs, job.recipe)
+    recipe = _worker_recipe(job.recipe, in_worker)
+    source, sampler = worker_resources(job.input, job.open_kwargs, recipe)
     lo, hi = job.bounds(index)
     start = job.chain_start(lo)
     t0 = time.perf_counter()
@@ -160,7 +161,7 @@ def run_chunk(job: BatchJob, index: int, state: dict[str, Any], topic: str | Non
             get_worker().log_event(topic, {"chunk": index, "done": k})
 
     centres = job.centres[start - job.offset:hi - job.offset]
-    frames = compute_chunk(source, centres, job.recipe, state_from_attrs(state), sampler=sampler, on_window=window_done)
+    frames = compute_chunk(source, centres, recipe, state_from_attrs(state), sampler=sampler, on_window=window_done)
     frames = frames[lo - start:]
     seconds = time.perf_counter() - t0
     write_chunk(job.store, index, lo, frames, seconds)
@@ -196,6 +197,24 @@ def parse_cluster(text: str) -> tuple[str, Any]:
     if "://" in t and t.split("://", 1)[1]:
         return "address", t
     raise ParameterError(f"--cluster {text!r} is neither local:N nor a scheduler address such as tcp://HOST:8786.")
+
+
+def _worker_recipe(recipe: dict[str, Any], in_worker: bool) -> dict[str, Any]:
+    """The chunk's recipe on this worker: with several GPUs and ``guided.device`` auto or cuda, Dask worker N
+    of ``local:N`` takes GPU ``N mod GPUs`` (one worker per GPU; the pixels do not depend on which GPU)."""
+    guided = recipe.get("guided", {})
+    if not in_worker or recipe.get("run", {}).get("method") != "guided" or guided.get("device", "auto") not in ("auto", "cuda"):
+        return recipe
+    from spikeview.guided.device import cuda_count
+
+    count = cuda_count()
+    if count < 2:
+        return recipe
+    from distributed import get_worker
+
+    name = get_worker().name
+    index = (name if isinstance(name, int) else abs(hash(str(name)))) % count
+    return {**recipe, "guided": {**guided, "device": f"cuda:{index}"}}
 
 
 def connect(cluster: str, timeout: float = 10.0):

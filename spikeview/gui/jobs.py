@@ -114,7 +114,8 @@ def window_observation(source: Any, tick: int, cfg: Any, alpha: np.ndarray | Non
     from spikeview.guided.observation import Observation
     from spikeview.guided.video import _crop_to_roi
 
-    obs = Observation.from_source(source, int(tick), cfg.window, alpha=alpha, eta=cfg.eta, radius=cfg.temporal_radius)
+    obs = Observation.from_source(source, int(tick), cfg.window, alpha=alpha, eta=cfg.eta, radius=cfg.temporal_radius,
+                                  device=cfg.device)
     return obs if roi is None else _crop_to_roi(obs, roi)
 
 

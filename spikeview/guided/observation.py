@@ -144,7 +144,8 @@ class Observation:
     # -------------------------------------------------------------------------- construction
     @classmethod
     def from_source(cls, source: SpikeSource, center: int, window: int = 10, *, alpha: np.ndarray | list[float] | None = None,
-                    eta: float = 2.0, previous: bool = False, radius: int = 0, cache: Any = None) -> "Observation":
+                    eta: float = 2.0, previous: bool = False, radius: int = 0, cache: Any = None,
+                    device: Any = None) -> "Observation":
         """The ``window``-tick TFP window around ``center`` (see :func:`~spikeview.classical.windows.window_range`).
 
         Args:
@@ -158,6 +159,7 @@ class Observation:
             radius: pool the aligned neighbouring windows, up to ``radius`` on each side
                 (:func:`spikeview.guided.temporal.pool_counts`); 0 = this window alone.
             cache: a :class:`spikeview.guided.temporal.WindowCache` shared by a sequence's frames.
+            device: where the pooling's alignment runs (``guided.device``; ``None`` = the CPU).
         """
         a, b = window_range(center, window, source.n_frames)
         prev = None
@@ -167,7 +169,12 @@ class Observation:
         if radius:
             from spikeview.guided.temporal import pool_counts
 
-            counts, pool = pool_counts(source, a, b, radius, parse_cfa(source.cfa), cache)
+            dev = None
+            if device is not None and str(device) != "cpu":
+                from spikeview.guided.device import resolve_device
+
+                dev = resolve_device(device)
+            counts, pool = pool_counts(source, a, b, radius, parse_cfa(source.cfa), cache, device=dev)
             if pool.dtau is not None:
                 own = cls(counts_to_sfr(window_counts(source, a, b), b - a), source.cfa, b - a, alpha, eta, (a, b), int(center))
                 return cls(counts / pool.dtau, source.cfa, b - a, alpha, eta, (a, b), int(center), prev, pool.dtau, pool, own)

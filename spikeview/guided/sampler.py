@@ -185,11 +185,10 @@ class GuidedSampler:
         var = obs.variance()
         if not params.noise_weights:
             var = np.full(obs.shape, float(var.mean()), dtype=np.float32)
+        data = DataTerm(fm, y, torch.from_numpy(var)[None, None], plan.levels)  # σ_n² measured here, on the CPU
         if device is not None and torch.device(device).type != "cpu":
-            fm = fm.to(device)
-            y = y.to(device, non_blocking=True)
-            return DataTerm(fm, y, torch.from_numpy(var)[None, None].to(device, non_blocking=True), plan.levels)
-        return DataTerm(fm, y, torch.from_numpy(var)[None, None], plan.levels)
+            _to_device(data, device)
+        return data
 
     # ---------------------------------------------------------------------------------- run
     def run(self, observation: Observation, params: GuidedConfig | None = None, callback: Callback | None = None,
@@ -343,9 +342,10 @@ class GuidedSampler:
 
 
 def _to_device(data: DataTerm, device: Any) -> None:
-    """Move a data term to the prior's device (a latent model on CUDA)."""
+    """Move a data term to the prior's device (guided.device; a latent model's)."""
     data.forward = data.forward.to(device)
-    data.y, data.w, data.sqrt_w = data.y.to(device), data.w.to(device), data.sqrt_w.to(device)
+    data.y, data.w = data.y.to(device, non_blocking=True), data.w.to(device, non_blocking=True)
+    data.sqrt_w = data.sqrt_w.to(device, non_blocking=True)
 
 
 def _diverged(p: GuidedConfig, step: int, total: int) -> str:

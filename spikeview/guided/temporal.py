@@ -125,6 +125,10 @@ class Pooling:
         return Pooling(self.radius, self.window, self.offsets, d, self.shifts, self.accepted, self.kind, self.reason)
 
 
+#: run the torch alignment (:func:`_align_torch`) on the CPU too (tests hold the GPU path to the numpy one with it)
+TORCH_ON_CPU = False
+
+
 # --------------------------------------------------------------------------------- window reads
 class WindowCache:
     """Counts of recently read windows (a sequence's consecutive frames share most neighbours)."""
@@ -323,8 +327,12 @@ def _box_same_colour(c: np.ndarray, cfa: str | None) -> np.ndarray:
 
 # ---------------------------------------------------------------------------------------- pooling
 def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
-                cache: WindowCache | None = None) -> tuple[np.ndarray, Pooling]:
+                cache: WindowCache | None = None, device: Any = None) -> tuple[np.ndarray, Pooling]:
     """Pooled counts of the window ``[a, b)`` with its aligned neighbours (see the module docstring).
+
+    ``device``: where the alignment runs (``guided.device``; ``None``/CPU: numpy, as always). On a CUDA
+    device the motion search, the match test and the per-photosite decisions run in torch there
+    (:func:`_align_torch`: the same rules, sums in float64; counting and the smoothed guides stay on the CPU).
 
     Returns:
         ``(counts, pooling)``: ``(H, W)`` float32 pooled spike counts (``counts / pooling.dtau`` is
@@ -364,6 +372,13 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     ty_of, tx_of = np.arange(h) // TILE, np.arange(w) // TILE
     counts = {k: cache.counts(source, a + k * window, b + k * window) for k in offsets}
     guides = {k: gaussian_filter(_guide_raw(counts[k], cfa), SMOOTH, mode="reflect") for k in offsets}
+    if (device is not None and getattr(device, "type", str(device).split(":")[0]) not in ("cpu", "auto")) or TORCH_ON_CPU:
+        total, pooled, shifts, accepted = _align_torch(n0, raw0, g0, counts, guides, cfa, window, radius, kappa,
+                                                       kernel_energy, device if device is not None else "cpu")
+        dtau = (window * (1.0 + pooled)).astype(np.float32)
+        pool = Pooling(radius, window, offsets, dtau, shifts, accepted)
+        pool.kind, pool.reason = describe(pool)
+        return total, pool
     motion, _ = estimate_motion(g0, guides, tile_g, kappa, kernel_energy, radius, MAX_SPEED / f, cap)
     chis = {k: match_quality(raw0, _guide_raw(counts[k], cfa), motion[k], tile_g,
                              (ADJACENT_DISPERSION if abs(k) == 1 else 1.0) * kappa, cap) for k in offsets}
@@ -413,6 +428,158 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     pool = Pooling(radius, window, offsets, dtau, shifts, accepted)
     pool.kind, pool.reason = describe(pool)
     return total, pool
+
+
+def _align_torch(n0: np.ndarray, raw0: np.ndarray, g0: np.ndarray, counts: dict[int, np.ndarray],
+                 guides: dict[int, np.ndarray], cfa: str | None, window: int, radius: int, kappa: float,
+                 kernel_energy: float, device: Any) -> tuple[np.ndarray, np.ndarray, dict[int, np.ndarray], dict[int, np.ndarray]]:
+    """:func:`pool_counts`'s alignment and merge in torch on ``device`` (a GPU; tests run it on the CPU).
+
+    The rules of the numpy path, computed for every candidate shift at once: the per-tile normalised SSD of
+    every shift of every neighbour (:func:`_tile_chi`, float64 tile sums), the velocity search with its
+    speed penalty (the first minimum in the same grid order), the match test on the unsmoothed counts, then
+    the per-photosite chain and 3×3 same-colour test. Returns ``(total, pooled, shifts, accepted)`` as numpy.
+    """
+    import torch
+    import torch.nn.functional as F
+
+    from spikeview.errors import check_cancelled
+
+    dev = torch.device(device)
+    f = 2
+    tile = max(1, TILE // f)
+    cap = 4.0 * window
+    ks = sorted(guides)
+    step = 1.0 / max(1, radius)
+    n = int(np.floor((MAX_SPEED / f) / step + 1e-9))
+    grid = [(i * step, j * step) for i in range(-n, n + 1) for j in range(-n, n + 1)]  # vy outer, vx inner
+
+    def up(x: np.ndarray) -> Any:
+        return torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32)).to(dev, non_blocking=True)
+
+    def binvar(g: Any, c: float) -> Any:
+        return torch.clamp(g * (1.0 - g / c), min=0.0)
+
+    def tile_sums(x: Any) -> Any:  # (S, h, w) float32 -> (S, th, tw) float64 sums over tile × tile blocks
+        s_, h_, w_ = x.shape
+        th_, tw_ = -(-h_ // tile), -(-w_ // tile)
+        x = F.pad(x, (0, tw_ * tile - w_, 0, th_ * tile - h_)).double()
+        return x.view(s_, th_, tile, tw_, tile).sum(dim=(2, 4))
+
+    def chi_all(ref: Any, other: Any, shifts: list[tuple[int, int]], noise: float) -> Any:
+        """(S, th, tw) normalised SSD of ``ref`` against the edge-padded ``other`` at each shift."""
+        pad = max(max(abs(dy), abs(dx)) for dy, dx in shifts) + 1
+        padded = F.pad(other[None, None], (pad, pad, pad, pad), mode="replicate")[0, 0]
+        h_, w_ = ref.shape
+        v0 = binvar(ref, cap)
+        out = []
+        for i in range(0, len(shifts), 32):  # bounded memory: 32 shifted copies at a time
+            check_cancelled("while aligning the neighbouring windows")
+            sl = torch.stack([padded[pad + dy:pad + dy + h_, pad + dx:pad + dx + w_] for dy, dx in shifts[i:i + 32]])
+            d = ref[None] - sl
+            out.append(tile_sums(d * d) / (noise * tile_sums(v0[None] + binvar(sl, cap)) + 1e-6))
+        return torch.cat(out)
+
+    g0_t = up(g0)
+    raw0_t = up(raw0)
+    # --- the velocity search (estimate_motion): cost of every grid velocity, mean over neighbours
+    cost = None
+    cand: dict[int, list[tuple[int, int]]] = {}
+    index: dict[int, Any] = {}
+    chis_sm: dict[int, Any] = {}
+    for k in ks:
+        sh = [(int(round(k * vy)), int(round(k * vx))) for vy, vx in grid]
+        uniq = sorted(set(sh))
+        cand[k] = uniq
+        pos = {s_: i for i, s_ in enumerate(uniq)}
+        index[k] = torch.tensor([pos[s_] for s_ in sh], device=dev)
+        factor = ADJACENT_DISPERSION if abs(k) == 1 else 1.0
+        chis_sm[k] = chi_all(g0_t, up(guides[k]), uniq, factor * kappa * kernel_energy)
+        term = chis_sm[k][index[k]]  # (V, th, tw)
+        cost = term if cost is None else cost + term
+    assert cost is not None
+    pen = torch.tensor([SHIFT_PENALTY * float(np.hypot(vy, vx)) for vy, vx in grid], dtype=torch.float64, device=dev)
+    cost = cost / len(ks) + pen[:, None, None]
+    best = torch.argmin(cost, dim=0)  # the first minimum, as the numpy search's strict "<" keeps
+    vel = torch.tensor(grid, dtype=torch.float64, device=dev)[best]  # (th, tw, 2)
+    h, w = n0.shape
+    th, tw = -(-h // TILE), -(-w // TILE)
+    ty_of, tx_of = torch.arange(h, device=dev) // TILE, torch.arange(w, device=dev) // TILE
+
+    def fit(a_: Any) -> Any:  # _fit_tiles: cut or edge-extend the first two axes to th × tw
+        a_ = a_[:th, :tw]
+        if a_.shape[0] < th:
+            a_ = torch.cat([a_, a_[-1:].expand(th - a_.shape[0], *a_.shape[1:])], 0)
+        if a_.shape[1] < tw:
+            a_ = torch.cat([a_, a_[:, -1:].expand(a_.shape[0], tw - a_.shape[1], *a_.shape[2:])], 1)
+        return a_
+
+    def box3(c: Any) -> Any:  # _box_same_colour: 3×3 sums within each Bayer plane (edges repeated)
+        def one(p_: Any) -> Any:
+            q = F.pad(p_[None, None], (1, 1, 1, 1), mode="replicate")
+            return F.avg_pool2d(q, 3, stride=1)[0, 0] * 9.0
+        if cfa is None:
+            return one(c)
+        out_ = torch.empty_like(c)
+        for i in (0, 1):
+            for j in (0, 1):
+                out_[i::2, j::2] = one(c[i::2, j::2])
+        return out_
+
+    total = up(n0).clone()
+    pooled = torch.zeros((h, w), dtype=torch.float32, device=dev)
+    cnt = {k: up(v) for k, v in counts.items()}
+    motion: dict[int, Any] = {}
+    chis: dict[int, Any] = {}
+    for k in ks:
+        sh = torch.round(k * vel).long()  # (th_g, tw_g, 2): np.rint, half to even, as torch.round
+        motion[k] = sh
+        lut = {s_: i for i, s_ in enumerate(cand[k])}
+        keys = sh.view(-1, 2).tolist()
+        sel = torch.tensor([lut[(dy, dx)] for dy, dx in keys], device=dev).view(sh.shape[:2])
+        factor = ADJACENT_DISPERSION if abs(k) == 1 else 1.0
+        raw_chi = chi_all(raw0_t, up(_guide_raw(counts[k], cfa)), cand[k], factor * kappa)
+        chis[k] = torch.gather(raw_chi, 0, sel[None]).squeeze(0)
+    shifts_out: dict[int, np.ndarray] = {}
+    accepted_out: dict[int, np.ndarray] = {}
+    chain = {-1: torch.ones((h, w), dtype=torch.bool, device=dev), 1: torch.ones((h, w), dtype=torch.bool, device=dev)}
+    yy = torch.arange(h, device=dev)[:, None]
+    xx = torch.arange(w, device=dev)[None, :]
+    cap9 = 9.0 * window
+    for d in sorted({abs(k) for k in ks}):
+        box_total = box3(total)
+        box_n = box3(1.0 + pooled)
+        ref = 9.0 * box_total / box_n
+        factor = ADJACENT_DISPERSION if d == 1 else 1.0
+        new_total = torch.zeros((h, w), dtype=torch.float32, device=dev)
+        new_pooled = torch.zeros((h, w), dtype=torch.float32, device=dev)
+        for k in (-d, d):
+            if k not in cnt:
+                continue
+            check_cancelled("while pooling the neighbouring windows")
+            nk = cnt[k]
+            best_k, chi_k = fit(motion[k]), fit(chis[k])
+            ok_tile = (chi_k <= TILE_CHI) & ((best_k * f).abs().amax(dim=-1) <= MAX_SHIFT)
+            shifts_out[k] = (best_k * f).cpu().numpy().astype(np.int64)
+            accepted_out[k] = ok_tile.cpu().numpy()
+            tile_ok_px = ok_tile[ty_of][:, tx_of]
+            best_px = best_k[ty_of][:, tx_of] * f
+            ys = yy + best_px[..., 0]
+            xs = xx + best_px[..., 1]
+            inside = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
+            ys, xs = ys.clamp(0, h - 1), xs.clamp(0, w - 1)
+            aligned = nk[ys, xs]
+            boxk = box3(nk)[ys, xs]
+            margin = (ys >= 2) & (ys < h - 2) & (xs >= 2) & (xs < w - 2)
+            zero = (best_px[..., 0] == 0) & (best_px[..., 1] == 0)
+            z2 = (ref - boxk) ** 2 / (factor * kappa * (binvar(ref, cap9) * 9.0 / box_n + binvar(boxk, cap9)) + 1.0)
+            weight = chain[1 if k > 0 else -1] & tile_ok_px & inside & (margin | zero) & (z2 <= PIXEL_Z ** 2)
+            chain[1 if k > 0 else -1] = weight
+            new_total += torch.where(weight, aligned, torch.zeros_like(aligned))
+            new_pooled += weight
+        total += new_total
+        pooled += new_pooled
+    return total.cpu().numpy(), pooled.cpu().numpy(), shifts_out, accepted_out
 
 
 def describe(pool: Pooling) -> tuple[str, str]:

@@ -80,7 +80,7 @@ def reconstruct_frame(source, center: int, params: GuidedConfig | None = None, *
     """
     p = params if params is not None else GuidedConfig()
     a = resolve_alpha(source, p, alpha)
-    obs = Observation.from_source(source, center, p.window, alpha=a, eta=p.eta, radius=p.temporal_radius)
+    obs = Observation.from_source(source, center, p.window, alpha=a, eta=p.eta, radius=p.temporal_radius, device=p.device)
     return (sampler or GuidedSampler(p)).run(obs, p, callback, cancel)
 
 
@@ -147,16 +147,24 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
     n = len(centers)
     prev: np.ndarray | None = None
     cache = WindowCache(4 * p.temporal_radius + 4)  # neighbouring windows are shared by consecutive frames
-    for fi, c in enumerate(centers):
-        want_prev = prev is not None and p.reuse is not False
+
+    def observe(fi: int, c: int) -> tuple[Observation, Any]:
+        """Frame ``fi``'s observation (counts, pooling) and plan: they depend on the capture and the
+        settings only, never on an earlier frame's result."""
         if fi == 0 and first is not None and _same_window(first, c, p, a):
-            obs = first
+            o = first
         else:
-            obs = Observation.from_source(source, c, p.window, alpha=a, eta=p.eta, previous=want_prev,
-                                          radius=p.temporal_radius, cache=cache)
+            o = Observation.from_source(source, c, p.window, alpha=a, eta=p.eta, previous=fi > 0 and p.reuse is not False,
+                                        radius=p.temporal_radius, cache=cache, device=p.device)
         if roi is not None:
-            obs = _crop_to_roi(obs, roi)
-        plan = make_plan(obs, p)
+            o = _crop_to_roi(o, roi)
+        return o, make_plan(o, p)
+
+    # on a GPU the next window's counting, pooling and plan (CPU and small GPU work) run in a thread of their own
+    # while this window samples: the same observations, built in the same order (one thread touches the cache)
+    ahead = _Prefetch(observe, centers) if (n > 1 and _on_gpu(p)) else None
+    for fi, c in enumerate(centers):
+        obs, plan = ahead.get(fi) if ahead is not None else observe(fi, c)
         cb = None
         if callback is not None:
             def cb(step: int, total: int, preview: np.ndarray, _fi: int = fi) -> None:
@@ -176,6 +184,41 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
             infos.append(smp.info)
         prev = out
         yield out
+
+
+def _on_gpu(p: GuidedConfig) -> bool:
+    """The pixel-space guided path runs on a CUDA device (``guided.device`` resolved)."""
+    if p.device == "cpu" or p.prior == "sd":
+        return False
+    from spikeview.guided.device import resolve_device
+
+    return resolve_device(p.device).type == "cuda"
+
+
+class _Prefetch:
+    """``fn(i, centres[i])`` for every frame in order, one frame ahead, in a worker thread (see reconstruct_sequence)."""
+
+    def __init__(self, fn: Callable[[int, int], Any], centres: list[int]):
+        from concurrent.futures import ThreadPoolExecutor
+
+        self._fn, self._centres = fn, centres
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="spikeview-observe")
+        self._next = self._pool.submit(fn, 0, centres[0]) if centres else None
+
+    def get(self, i: int) -> Any:
+        assert self._next is not None
+        try:
+            out = self._next.result()
+        except BaseException:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        self._next = self._pool.submit(self._fn, i + 1, self._centres[i + 1]) if i + 1 < len(self._centres) else None
+        if self._next is None:
+            self._pool.shutdown(wait=False)
+        return out
+
+    def __del__(self) -> None:
+        self._pool.shutdown(wait=False, cancel_futures=True)
 
 
 def _same_window(obs: Observation, center: int, p: GuidedConfig, alpha: np.ndarray | None) -> bool:

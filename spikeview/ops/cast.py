@@ -20,8 +20,9 @@ from spikeview.errors import ParameterError
 from spikeview.ops._checks import cfa_masks, check_cfa, check_image
 
 
-def _alpha_gain(alpha: torch.Tensor | tuple[float, float, float], like: torch.Tensor) -> torch.Tensor:
-    """Validate α and return it as ``(1 or N, 3, 1, 1)`` in ``like``'s dtype/device."""
+def _alpha_gain(alpha: torch.Tensor | tuple[float, float, float], like: torch.Tensor, values: bool = True) -> torch.Tensor:
+    """Validate α and return it as ``(1 or N, 3, 1, 1)`` in ``like``'s dtype/device (``values=False``: its shape
+    only, for α a :class:`ColourCast` checked when it was made: no device-to-host read per call on a GPU)."""
     a = torch.as_tensor(alpha, dtype=like.dtype, device=like.device)
     if a.shape == (3,):
         a = a.unsqueeze(0)
@@ -29,7 +30,7 @@ def _alpha_gain(alpha: torch.Tensor | tuple[float, float, float], like: torch.Te
         raise ParameterError(
             f"alpha must have shape (3,) (one per sequence) or ({like.shape[0]}, 3) (one per frame), got {tuple(a.shape)}."
         )
-    if not bool(torch.isfinite(a).all()) or bool((a <= 0).any()):
+    if values and (not bool(torch.isfinite(a).all()) or bool((a <= 0).any())):
         raise ParameterError(f"alpha must be finite and positive, got {a.detach().cpu().tolist()}; estimate it with estimate_alpha.")
     return a[:, :, None, None]
 
@@ -128,11 +129,12 @@ class ColourCast(nn.Module):
         self.eta = _check_eta(eta)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return colour_cast(x, self.alpha, self.eta)
+        check_image(x, 3)  # α and η were checked when the module was made
+        return x * (self.eta / _alpha_gain(self.alpha, x, values=False))
 
     def adjoint(self, y: torch.Tensor) -> torch.Tensor:
         """Cᵀ = C (a diagonal scaling)."""
-        return colour_cast(y, self.alpha, self.eta)
+        return self.forward(y)
 
     def inverse(self, y: torch.Tensor) -> torch.Tensor:
         """C⁻¹ (colour correction)."""

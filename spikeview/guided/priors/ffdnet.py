@@ -347,6 +347,9 @@ class FFDNetDenoiser(nn.Module):
             )
         if not x.is_floating_point():
             raise ParameterError(f"x must be a floating-point tensor in [0, 1], got {x.dtype}; call .float() / 255 first.")
+        if x.device != self.weight[0].device:
+            raise ParameterError(f"x is on {x.device} but this FFDNet's weights are on {self.weight[0].device}: move x there "
+                                 "(x.to(...)) or load the prior on x's device (guided.device).")
         h, w = x.shape[-2:]
         if min(h, w) < 2:
             raise ParameterError(f"x of spatial size {(h, w)} is too small for FFDNet; it needs at least 2x2 pixels.")
