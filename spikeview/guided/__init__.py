@@ -7,6 +7,7 @@ The posterior ``p(X | Y) ∝ p(Y | X) p(X)`` is sampled with a pretrained natura
 module              holds
 ==================  ==============================================================================
 ``config``          :class:`GuidedConfig`: every parameter, saved to / loaded from TOML unchanged
+``device``          ``guided.device`` resolved (auto: the first CUDA GPU, else the CPU), refused when absent
 ``observation``     :class:`Observation`: one window's mosaicked TFP, CFA, Δτ, colour cast, noise
 ``plan``            :func:`make_plan` → :class:`Plan`: which stages this window needs, with reasons
 ``schedule``        :class:`VESchedule`: σ ladder, ``set_timesteps`` / ``step`` (x_t = x₀ + σ_t·n)

@@ -213,7 +213,7 @@ class GuidedConfig(Config):
     temporal_radius: int = param(3, label="Temporal radius", unit="windows", lo=0, hi=8, step=1,
                                  help="Neighbouring windows on each side whose spikes a guided frame may borrow, aligned and "
                                       "used only where they match (0 = the window alone).")
-    device: str = param("auto", label="Device",
+    device: str = param("auto", key="", label="Device",
                         help="Where the guided reconstruction runs (prior, data term, tiles, temporal alignment): auto (the "
                              "first CUDA GPU torch sees, else the CPU), cpu, cuda or cuda:N.")
     dtype: str = "float32"
