@@ -162,10 +162,14 @@ class Observation:
             device: where the pooling's alignment runs (``guided.device``; ``None`` = the CPU).
         """
         a, b = window_range(center, window, source.n_frames)
+
+        def count(x: int, y: int) -> np.ndarray:  # through the sequence's cache (and its lock) when there is one
+            return window_counts(source, x, y) if cache is None else cache.counts(source, x, y)
+
         prev = None
         if previous and a - window >= 0:
             pa, pb = a - window, a
-            prev = cls(counts_to_sfr(window_counts(source, pa, pb), window), source.cfa, window, alpha, eta, (pa, pb), None)
+            prev = cls(counts_to_sfr(count(pa, pb), window), source.cfa, window, alpha, eta, (pa, pb), None)
         if radius:
             from spikeview.guided.temporal import pool_counts
 
@@ -176,12 +180,12 @@ class Observation:
                 dev = resolve_device(device)
             counts, pool = pool_counts(source, a, b, radius, parse_cfa(source.cfa), cache, device=dev)
             if pool.dtau is not None:
-                own = cls(counts_to_sfr(window_counts(source, a, b), b - a), source.cfa, b - a, alpha, eta, (a, b), int(center))
+                own = cls(counts_to_sfr(count(a, b), b - a), source.cfa, b - a, alpha, eta, (a, b), int(center))
                 return cls(counts / pool.dtau, source.cfa, b - a, alpha, eta, (a, b), int(center), prev, pool.dtau, pool, own)
             return cls(counts / float(b - a), source.cfa, b - a, alpha, eta, (a, b), int(center), prev, None, pool)
         from spikeview.guided.temporal import Pooling, neighbour_offsets
 
-        y = counts_to_sfr(window_counts(source, a, b), b - a)
+        y = counts_to_sfr(count(a, b), b - a)
         pool = Pooling(0, b - a, neighbour_offsets(a, b, int(source.n_frames), 1), kind="off",
                        reason="off (temporal_radius = 0): the window alone, as in the paper")
         return cls(y, source.cfa, b - a, alpha, eta, (a, b), int(center), prev, None, pool)
@@ -279,9 +283,24 @@ class Observation:
 
     def variance(self) -> np.ndarray:
         """``(H, W)`` float32 per-photosite variance of ``y`` (SFR² units): κ_c × the binomial model
-        at the :meth:`local_rate`."""
+        at the :meth:`local_rate` (computed once per observation: the plan, the start estimate and the data
+        term all read it; do not write into it)."""
+        return self._memo("variance", self._variance)
+
+    def _variance(self) -> np.ndarray:
         kappa = self.noise_scale()
         return (binomial_variance(self.local_rate(), self.effective_window) * kappa[self.channel_map()]).astype(np.float32)
+
+    def _memo(self, name: str, make: Any, *args: Any) -> Any:
+        """``make(*args)`` once per observation and its inputs (``y``, the windows, α, η, κ's class): a value
+        derived from the window, kept out of the dataclass fields (a crop or a copy starts without it); callers
+        treat it as read-only (torch.from_numpy shares it, so it is not flagged read-only)."""
+        key = (name, args, id(self.y), id(self.dtau), self.window, self.eta, type(self).noise_scale,
+               None if self.alpha is None else tuple(np.asarray(self.alpha, dtype=np.float64).ravel().tolist()))
+        memo = self.__dict__.setdefault("_memo_cache", {})
+        if key not in memo:
+            memo[key] = make(*args)
+        return memo[key]
 
 
 def start_variance(obs: Observation, use_mosaic: bool = True, use_cast: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -299,6 +318,14 @@ def start_variance(obs: Observation, use_mosaic: bool = True, use_cast: bool = T
     from spikeview.ops.noise import demosaic_variance
 
     check_cancelled("while planning")
+    return obs._memo("start_variance", lambda m, c: _start_variance(obs, m, c), bool(use_mosaic), bool(use_cast))
+
+
+def _start_variance(obs: Observation, use_mosaic: bool, use_cast: bool) -> tuple[np.ndarray, np.ndarray]:
+    import torch
+
+    from spikeview.ops.noise import demosaic_variance
+
     var = obs.variance()
     if obs.cfa is None or not use_mosaic:
         return var[None], np.ones(1)

@@ -134,10 +134,17 @@ class WindowCache:
     """Counts of recently read windows (a sequence's consecutive frames share most neighbours)."""
 
     def __init__(self, size: int = 24):
+        import threading
+
         self.size = int(size)
         self._d: OrderedDict[tuple[int, int, int], np.ndarray] = OrderedDict()
+        self._lock = threading.Lock()  # a GPU run prepares windows ahead in threads (spikeview.guided.video)
 
     def counts(self, source: Any, a: int, b: int) -> np.ndarray:
+        with self._lock:
+            return self._counts(source, a, b)
+
+    def _counts(self, source: Any, a: int, b: int) -> np.ndarray:
         from spikeview.classical.tfp import window_counts
 
         key = (id(source), int(a), int(b))

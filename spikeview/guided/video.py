@@ -195,25 +195,34 @@ def _on_gpu(p: GuidedConfig) -> bool:
     return resolve_device(p.device).type == "cuda"
 
 
-class _Prefetch:
-    """``fn(i, centres[i])`` for every frame in order, one frame ahead, in a worker thread (see reconstruct_sequence)."""
+#: frames whose observation and plan are prepared ahead on a GPU (each in a thread of its own)
+PREFETCH = 2
 
-    def __init__(self, fn: Callable[[int, int], Any], centres: list[int]):
+
+class _Prefetch:
+    """``fn(i, centres[i])`` for every frame in order, :data:`PREFETCH` frames ahead, in worker threads
+    (see reconstruct_sequence); results come back in frame order."""
+
+    def __init__(self, fn: Callable[[int, int], Any], centres: list[int], depth: int = PREFETCH):
+        from collections import deque
         from concurrent.futures import ThreadPoolExecutor
 
         self._fn, self._centres = fn, centres
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="spikeview-observe")
-        self._next = self._pool.submit(fn, 0, centres[0]) if centres else None
+        self._pool = ThreadPoolExecutor(max(1, depth), thread_name_prefix="spikeview-observe")
+        self._queue: Any = deque(self._pool.submit(fn, j, centres[j]) for j in range(min(max(1, depth), len(centres))))
+        self._submitted = len(self._queue)
 
     def get(self, i: int) -> Any:
-        assert self._next is not None
         try:
-            out = self._next.result()
+            out = self._queue.popleft().result()
         except BaseException:
             self._pool.shutdown(wait=False, cancel_futures=True)
             raise
-        self._next = self._pool.submit(self._fn, i + 1, self._centres[i + 1]) if i + 1 < len(self._centres) else None
-        if self._next is None:
+        if self._submitted < len(self._centres):
+            j = self._submitted
+            self._queue.append(self._pool.submit(self._fn, j, self._centres[j]))
+            self._submitted += 1
+        if not self._queue:
             self._pool.shutdown(wait=False)
         return out
 
