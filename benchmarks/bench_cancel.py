@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         cfa = None if layout == "mono" else layout
         rng = np.random.default_rng(0)
         src = ArraySource(rng.random((40, n, n), dtype=np.float32) < 0.3, cfa=cfa)
-        obs = Observation.from_source(src, 20, 10, alpha=np.ones(3) if cfa else None, eta=2.0)
+        obs = Observation.from_source(src, 20, 10, alpha=np.ones(3) if cfa else None, eta=2.0, radius=0)
         sampler = GuidedSampler(GuidedConfig())
         rows = []
         for d in args.delays:

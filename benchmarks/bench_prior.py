@@ -352,7 +352,7 @@ def user_observation(path: Path, center: int = 100):
     recipe = Recipe().with_values({"run.method": "guided"})
     state = prepare_sequence(src, recipe)
     params = sampler_params(recipe, state)
-    return Observation.from_source(src, center, params.window, alpha=state.alpha, eta=params.eta), params
+    return Observation.from_source(src, center, params.window, alpha=state.alpha, eta=params.eta, radius=0), params
 
 
 def bench_frame(path: Path, repeats: int, variants: tuple[str, ...] = ("float32", "float32-fast", "bfloat16-mixed")) -> dict:

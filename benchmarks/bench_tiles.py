@@ -156,7 +156,7 @@ def seams() -> list[dict]:
     for cfa in ("RGGB", None):
         rng = np.random.default_rng(1)
         src = ArraySource(rng.random((40, 160, 160)) < 0.3, cfa=cfa)
-        obs = Observation.from_source(src, 20, 10, alpha=np.ones(3) if cfa else None, eta=2.0)
+        obs = Observation.from_source(src, 20, 10, alpha=np.ones(3) if cfa else None, eta=2.0, radius=0)
         smp = GuidedSampler(GuidedConfig())
         for precision in ("float32", "auto"):
             p = GuidedConfig(precision=precision)

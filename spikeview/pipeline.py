@@ -186,6 +186,50 @@ def sampler_params(recipe: Recipe, state: SequenceState) -> Any:
     return recipe.guided.replace(eta=exposed_eta(recipe.classical.eta, state.white))
 
 
+@dataclass
+class WindowPlan:
+    """One guided window as every front end plans it (:func:`plan_window`).
+
+    Attributes:
+        state: the sequence's state (α, white point).
+        params: the :class:`~spikeview.guided.GuidedConfig` the sampler runs (:func:`sampler_params`: η at the
+            sequence's exposure).
+        whole: the whole frame's observation (counts, pooling); ``reconstruct_windows(..., first_observation=whole)``
+            reuses it instead of counting and aligning again.
+        obs: the observation the sampler runs on (``whole`` cropped to the region of interest).
+        plan: the window's plan (printed by the CLI, shown by the app).
+        knobs: :func:`spikeview.guided.knobs.knob_status` of the plan: why a knob cannot act here (None where it can).
+    """
+
+    state: SequenceState
+    params: Any
+    whole: Any
+    obs: Any
+    plan: Any
+    knobs: dict[str, str | None]
+
+
+def plan_window(source: Any, recipe: Recipe, at: int, *, state: SequenceState | None = None,
+                roi: tuple[int, int, int, int] | None = None, precision: str | None = None) -> WindowPlan:
+    """The one place a front end turns a capture, its recipe and a centre tick (and a region of interest) into the
+    guided window's observation, plan, knob status and sampler settings (:class:`WindowPlan`).
+
+    The CLI (its printed plan and notes), the app's preview and guided jobs and the benchmark call it; the guided
+    sequence itself plans each window with :func:`spikeview.guided.window.observe_window`, which this wraps.
+    ``precision`` overrides ``guided.precision`` in the plan's settings (the CLI shows ``auto`` as given while the
+    recipe records what it resolved to).
+    """
+    from spikeview.guided.knobs import knob_status
+    from spikeview.guided.window import observe_window
+
+    state = state if state is not None else prepare_sequence(source, recipe)
+    params = sampler_params(recipe, state)
+    if precision is not None:
+        params = params.replace(precision=precision)
+    w = observe_window(source, at, params, state.alpha, roi=roi)
+    return WindowPlan(state, params, w.whole, w.obs, w.plan, knob_status(params, w.plan))
+
+
 def reconstruct_windows(source: Any, centers: Iterable[int], recipe: Recipe, state: SequenceState | None = None, *,
                         roi: tuple[int, int, int, int] | None = None, callback: Callback | None = None,
                         cancel: Any = None, sampler: Any = None, infos: list | None = None,

@@ -169,15 +169,32 @@ def test_the_cycle_scan_finds_a_planted_circle():
     assert _cycles(graph) == [["a", "b", "c"]]
 
 
+def _private_library_imports(path, module: str) -> list[str]:
+    """The library's private names (``_name``, ``spikeview.x._module``) that ``path`` (module ``module`` of the
+    app) imports; the app's own modules (``spikeview.gui`` and below, not ``spikeview.guided``) do not count."""
+    out = []
+    for base, names in _imports_anywhere(path, module):
+        if not base.startswith("spikeview") or base == "spikeview.gui" or base.startswith("spikeview.gui."):
+            continue
+        private = [n for n in names if n.startswith("_") and not n.startswith("__")]  # __version__ is public
+        if private or any(part.startswith("_") for part in base.split(".")):
+            out.append(f"{base} {private}")
+    return out
+
+
 def test_gui_takes_no_private_names_from_the_library():
     """The app is display and interaction only: what it needs from the library is public API
     (no ``from spikeview.x import _name``, no ``spikeview.x._module``)."""
-    offenders = []
-    for path in (PKG / "gui").rglob("*.py"):
-        for base, names in _imports_anywhere(path, _module_name(path)):
-            if not base.startswith("spikeview") or base.startswith("spikeview.gui"):
-                continue
-            private = [n for n in names if n.startswith("_") and not n.startswith("__")]  # __version__ is public
-            if private or any(part.startswith("_") for part in base.split(".")):
-                offenders.append(f"{path.relative_to(PKG)}: {base} {private}")
+    offenders = [f"{path.relative_to(PKG)}: {o}" for path in (PKG / "gui").rglob("*.py")
+                 for o in _private_library_imports(path, _module_name(path))]
     assert offenders == [], f"gui imports private library names: {offenders}"
+
+
+def test_the_private_name_scan_finds_a_planted_import_from_guided(tmp_path):
+    """``spikeview.guided`` starts with ``spikeview.gui``: the scan once skipped it, and two private imports passed."""
+    planted = tmp_path / "planted.py"
+    planted.write_text("def f():\n    from spikeview.guided.video import _crop_obs\n    return _crop_obs\n")
+    assert _private_library_imports(planted, "spikeview.gui.planted") == ["spikeview.guided.video ['_crop_obs']"]
+    fine = tmp_path / "fine.py"
+    fine.write_text("from spikeview.gui import _helpers\nfrom spikeview.guided.window import crop_to_roi\n")
+    assert _private_library_imports(fine, "spikeview.gui.fine") == []

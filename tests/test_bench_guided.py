@@ -63,3 +63,27 @@ def test_spikezoo_clips_found_in_an_unzipped_wheel(tmp_path):
     assert [c.name for c in clips] == ["test/a"]
     assert clips[0].gt.shape == (250, 400) and clips[0].gt.max() == pytest.approx(128 / 255)
     assert spikezoo_clips(tmp_path / "nothing") == []
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", "none"])
+def test_the_benchmarks_default_row_is_what_the_cli_writes(tmp_path, cfa):
+    """`spikeview bench`'s "guided (default)" row is `spikeview reconstruct --method guided --at T --out x.npy`,
+    bit for bit (the row once built its observation without the pooled neighbours the product uses)."""
+    import numpy as np
+
+    from spikeview.bench.guided import DEFAULT_ROW, Sequence, _methods
+    from spikeview.cli.main import main
+    from spikeview.guided.config import GuidedConfig
+    from spikeview.guided.sampler import load_prior
+    from spikeview.io import open_source
+
+    cap = tmp_path / "c.dat"
+    assert main(["simulate", "--demo", "--size", "48", "--ticks", "90", "--cfa", cfa, "--out", str(cap)]) == 0
+    assert main(["reconstruct", str(cap), "--method", "guided", "--at", "45", "--out", str(tmp_path / "x.npy")]) == 0
+    cli = np.load(tmp_path / "x.npy")[0]  # (frames, H, W[, 3])
+    with open_source(str(cap)) as src:
+        prior = load_prior(GuidedConfig(), 3 if cfa != "none" else 1)
+        fn = dict((name, f) for name, _, f in _methods(prior, quick=False))[DEFAULT_ROW]
+        row = fn(Sequence(src), 45)
+    assert row.shape == cli.shape and row.dtype == cli.dtype
+    assert np.array_equal(row, cli)

@@ -37,7 +37,7 @@ def _net(color: bool) -> FFDNetDenoiser:
 def _obs(shape: tuple[int, int], cfa: str | None, rate: float = 0.3, ticks: int = 40) -> Observation:
     rng = np.random.default_rng(0)
     src = ArraySource(rng.random((ticks,) + shape) < rate, cfa=cfa)
-    return Observation.from_source(src, ticks // 2, 10, alpha=GAINS if cfa else None, eta=2.0)
+    return Observation.from_source(src, ticks // 2, 10, alpha=GAINS if cfa else None, eta=2.0, radius=0)
 
 
 class _Trap:

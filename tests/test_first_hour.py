@@ -68,11 +68,10 @@ def test_simulate_names_the_users_file_not_its_temporary(tmp_path, capsys, monke
 
 
 def test_the_scene_plan_prints_the_same_numbers_in_the_cli_and_the_app(tmp_path, capsys):
-    """One unit: the plan of the settings the sampler runs (η at the sequence's exposure) in both."""
-    from spikeview.guided.plan import make_plan
-    from spikeview.gui import jobs
+    """One unit: the plan of the settings the sampler runs (η at the sequence's exposure) in both (the app's jobs
+    plan their window with pipeline.plan_window, as the CLI)."""
     from spikeview.io import open_source
-    from spikeview.pipeline import prepare_sequence, sampler_params
+    from spikeview.pipeline import plan_window, prepare_sequence
     from spikeview.recipe import Recipe
 
     cap = _capture(tmp_path)
@@ -82,6 +81,5 @@ def test_the_scene_plan_prints_the_same_numbers_in_the_cli_and_the_app(tmp_path,
     recipe = Recipe().with_values({"run.method": "guided", "guided.steps": 1})
     with open_source(cap) as src:
         state = prepare_sequence(src, recipe)
-        cfg = sampler_params(recipe, state)
-        app = str(make_plan(jobs.window_observation(src, 100, cfg, state.alpha, None), cfg)).splitlines()[0]
+        app = str(plan_window(src, recipe, 100, state=state).plan).splitlines()[0]
     assert cli == app and "/255 of the image the sampler sees" in cli

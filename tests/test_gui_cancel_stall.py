@@ -65,6 +65,7 @@ def context() -> tuple[JobContext, list]:
 
 def stages(src) -> dict[str, int]:
     """Count calls per stage of one uncancelled build (α/white, observation), without the sampler."""
+    from spikeview.guided.window import observe_window
     from spikeview.pipeline import sampler_params
 
     ctx, _ = context()
@@ -74,7 +75,7 @@ def stages(src) -> dict[str, int]:
     state = jobs.sequence_state(src, recipe, None, ctx)
     n_seq = src.calls
     cfg = sampler_params(recipe, state)
-    obs = jobs.window_observation(src, TICK, cfg, state.alpha, None)
+    obs = observe_window(src, TICK, cfg, state.alpha).whole
     assert obs.pooling is not None and obs.pooling.offsets  # neighbours were pooled: the alignment ran
     out = {"sequence": n_seq, "observation": src.calls - n_seq}
     src.calls = 0
@@ -149,6 +150,7 @@ def test_cancel_stops_the_plan(cfa, monkeypatch):
 @pytest.mark.parametrize("cfa", [None, "RGGB"], ids=["mono", "bayer"])
 def test_an_unset_flag_changes_nothing(cfa):
     """The checks change no number: the observation built inside a scope whose flag stays unset is the same."""
+    from spikeview.guided.window import observe_window
     from spikeview.pipeline import sampler_params
 
     src = capture(cfa)
@@ -156,9 +158,9 @@ def test_an_unset_flag_changes_nothing(cfa):
     recipe = request(src).recipe.with_values({"run.method": "guided"})
     state = jobs.sequence_state(src, recipe, None, ctx)
     cfg = sampler_params(recipe, state)
-    plain = jobs.window_observation(src, TICK, cfg, state.alpha, None)
+    plain = observe_window(src, TICK, cfg, state.alpha).whole
     with cancel_scope(threading.Event()):
-        scoped = jobs.window_observation(src, TICK, cfg, state.alpha, None)
+        scoped = observe_window(src, TICK, cfg, state.alpha).whole
     assert np.array_equal(plain.y, scoped.y) and np.array_equal(plain.dtau, scoped.dtau)
 
 

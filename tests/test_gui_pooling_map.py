@@ -56,7 +56,7 @@ def open_capture(window, qtbot, src: ArraySource, label: str):
 
 def library_pooling(window, src: ArraySource):
     rec = window.session.recipe()
-    obs = Observation.from_source(src, window.session.tick, rec.guided.window, radius=rec.guided.temporal_radius)
+    obs = Observation.from_source(src, window.session.tick, rec.guided.window, radius=rec.guided.temporal_radius, eta=2.0)
     return obs.pooling
 
 

@@ -33,7 +33,7 @@ ALPHA = np.array([1 / 0.6, 1.0, 1 / 0.5]) / 0.6
 
 def _obs(h=32, w=32):
     src = make_source("texture", h, w, ticks=30)
-    return Observation.from_source(src, 15, 10, alpha=ALPHA, eta=1.0)
+    return Observation.from_source(src, 15, 10, alpha=ALPHA, eta=1.0, radius=0)
 
 
 def _run(params, rule, obs=None):

@@ -125,7 +125,7 @@ def test_the_data_term_keeps_every_tensor_on_its_device(capture):
     from spikeview.guided.sampler import GuidedSampler
 
     p = GuidedConfig()
-    obs = Observation.from_source(capture, 45, 10, alpha=None if capture.cfa is None else [1.0, 1.0, 1.0], eta=2.0)
+    obs = Observation.from_source(capture, 45, 10, alpha=None if capture.cfa is None else [1.0, 1.0, 1.0], eta=2.0, radius=0)
     plan = make_plan(obs, p)
     data = GuidedSampler.data_term(obs, plan, p, torch.device("meta"))
     c = 3 if plan.mosaic else 1

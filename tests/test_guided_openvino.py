@@ -178,7 +178,7 @@ def test_plan_and_metadata_name_the_backend(cfa, tmp_path, monkeypatch):
     from spikeview.recipe import Recipe
 
     src = make_source("texture", 24, 24, ticks=40, cfa=cfa)
-    obs = Observation.from_source(src, 20, 10, alpha=np.array([1.6, 1.0, 2.0]) if cfa else None, eta=2.0)
+    obs = Observation.from_source(src, 20, 10, alpha=np.array([1.6, 1.0, 2.0]) if cfa else None, eta=2.0, radius=0)
     label = prec.backend_label()
     assert label == (f"OpenVINO {ov_backend.version()} from ~600×600, torch below" if ov_backend.available() else "torch oneDNN")
     plan = make_plan(obs, GuidedConfig(precision="bfloat16-mixed"))
@@ -201,7 +201,7 @@ def test_sampler_frame_is_the_torch_frame(cfa, monkeypatch):
     """The default policy's frame with OpenVINO on its float32 steps = the frame with torch there."""
     needs_openvino()
     src = make_source("texture", 24, 24, ticks=40, cfa=cfa)
-    obs = Observation.from_source(src, 20, 10, alpha=np.array([1.6, 1.0, 2.0]) if cfa else None, eta=2.0)
+    obs = Observation.from_source(src, 20, 10, alpha=np.array([1.6, 1.0, 2.0]) if cfa else None, eta=2.0, radius=0)
     net = _net(cfa is not None)
     cfg = GuidedConfig(precision="bfloat16-mixed", steps=4, t_start=60 / 255, diffusion="always")
     spy = _Spy(monkeypatch)

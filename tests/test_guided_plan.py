@@ -17,7 +17,7 @@ CAST = np.array([1 / 0.6, 1.0, 1 / 0.5]) / 0.6  # the simulator's default green-
 def _obs(kind="texture", h=32, w=32, window=10, cfa="RGGB", alpha=CAST, eta=1.0, previous=False, src=None, center=None):
     src = src if src is not None else make_source(kind, h, w, ticks=max(4 * window, 40), cfa=cfa)
     c = center if center is not None else src.n_frames // 2
-    return Observation.from_source(src, c, window, alpha=alpha if cfa else None, eta=eta, previous=previous)
+    return Observation.from_source(src, c, window, alpha=alpha if cfa else None, eta=eta, previous=previous, radius=0)
 
 
 def test_mosaic_off_for_monochrome_on_for_bayer():
@@ -110,7 +110,7 @@ def test_data_derived_noise_matches_the_measured_error():
     # the noise level the plan hands the prior is within 25 % of the real error of the estimate
     rates = np.full((64, 64), 0.35)  # 3.5 spikes per window: counts 3 or 4
     src = ArraySource(spikes_from_rates(rates, 40, seed=1), cfa=None)
-    obs = Observation.from_source(src, 20, 10)
+    obs = Observation.from_source(src, 20, 10, eta=2.0, radius=0)
     true_sigma = float(np.std(obs.y - 0.35))
     est = float(make_plan(obs).sigma[0])
     assert est == pytest.approx(true_sigma, rel=0.25)
@@ -161,7 +161,7 @@ def test_demosaic_auto_starts_sparse_counts_bilinearly():
     assert choose_demosaic(0.2, denoised=True, mean_count=2 * SPARSE_COUNT)[0] == "malvar2004"
     rates = scene_rates("texture", 32, 32) * 0.02  # about 0.07 spikes per photosite per 10-tick window
     src = ArraySource(spikes_from_rates(rates, 40, seed=1), cfa="RGGB")
-    plan = make_plan(Observation.from_source(src, 20, 10, alpha=CAST, eta=1.0), GuidedConfig(diffusion="always"))
+    plan = make_plan(Observation.from_source(src, 20, 10, alpha=CAST, eta=1.0, radius=0), GuidedConfig(diffusion="always"))
     assert plan.demosaic == "bilinear" and "sparse counts" in plan.reasons["demosaic"]
 
 
@@ -182,7 +182,7 @@ def test_q_is_on_for_hqs_at_low_rates_only():
     low = ArraySource(spikes_from_rates(scene_rates("texture", 32, 32) * 0.1, 40, seed=1), cfa="RGGB")  # ~0.3 spikes
     high = ArraySource(spikes_from_rates(np.full((32, 32), 0.5), 40, seed=1), cfa="RGGB")  # 5 spikes per window
     for src, on in ((low, True), (high, False)):
-        obs = Observation.from_source(src, 20, 10, alpha=CAST, eta=1.0)
+        obs = Observation.from_source(src, 20, 10, alpha=CAST, eta=1.0, radius=0)
         assert (float(obs.y.mean()) * 10 < Q_COUNT) == on
         plan = make_plan(obs, GuidedConfig(diffusion="always"))
         assert plan.quantise == on and ("low rate" if on else ">=") in plan.reasons["quantise"]
@@ -214,7 +214,7 @@ def test_q_reason_says_what_the_count_counts_when_windows_are_pooled(cfa):
     assert f"{pooled.window_count():.2f} spikes per photosite per 10-tick window, the rate pooled over the aligned windows" in reason
     assert pooled.window_count() == pytest.approx(own, rel=0.2)
     assert f"{own:.2f} in its own 10-tick window" in reason and f">= {Q_COUNT:g}" in reason
-    alone = Observation.from_source(src, 60, 10, alpha=alpha, eta=1.0)
+    alone = Observation.from_source(src, 60, 10, alpha=alpha, eta=1.0, radius=0)
     reason = make_plan(alone, GuidedConfig(diffusion="always")).reasons["quantise"]
     assert f"{alone.mean_count():.2f} spikes per photosite per window" in reason and "pooled" not in reason
 

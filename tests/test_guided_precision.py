@@ -246,7 +246,7 @@ def test_config_and_recipe_know_the_field():
 def test_plan_prints_the_precision_and_the_sampler_uses_it(cfa, monkeypatch):
     src = make_source("texture", 24, 24, ticks=40, cfa=cfa)
     alpha = np.array([1.6, 1.0, 2.0]) if cfa else None
-    obs = Observation.from_source(src, 20, 10, alpha=alpha, eta=2.0)
+    obs = Observation.from_source(src, 20, 10, alpha=alpha, eta=2.0, radius=0)
     plan = make_plan(obs, GuidedConfig(precision="bfloat16-mixed"))
     assert plan.precision == "bfloat16-mixed" and "precision" in str(plan) and "bfloat16" in plan.reasons["precision"]
     net = FFDNetDenoiser(color=cfa is not None, pretrained=False, generator=torch.Generator().manual_seed(0))

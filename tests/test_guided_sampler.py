@@ -26,7 +26,7 @@ FAST = dict(steps=3, diffusion="always", eta=1.0)
 
 def _obs(kind="texture", h=16, w=16):
     src = make_source(kind, h, w, ticks=30)
-    return Observation.from_source(src, 15, 10, alpha=ALPHA, eta=1.0)
+    return Observation.from_source(src, 15, 10, alpha=ALPHA, eta=1.0, radius=0)
 
 
 # ------------------------------------------------------------------------------------ config
@@ -156,7 +156,7 @@ def test_real_ffdnet_guided_beats_tfp_and_the_one_pass_baseline_on_a_small_scene
 
     cap = simulate(MotionScene(data.astronaut()[100:164, 180:244], size=(32, 32)), SimConfig(n_ticks=30, seed=3))
     alpha = 1.0 / (cap.config.rate * np.asarray(cap.config.spectral_gains))
-    obs = Observation.from_source(cap, 15, 10, alpha=alpha, eta=1.0)
+    obs = Observation.from_source(cap, 15, 10, alpha=alpha, eta=1.0, radius=0)
     gt = cap.gt_at(15)
     prior = load_prior(GuidedConfig(), 3)
     p = GuidedConfig(eta=1.0, diffusion="always")

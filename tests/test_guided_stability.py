@@ -36,7 +36,7 @@ def ffdnet():
 
 def _obs(kind="texture", h=16, w=16, window=10, cfa="RGGB", alpha=ALPHA):
     src = make_source(kind, h, w, ticks=max(3 * window, 30), cfa=cfa)
-    return Observation.from_source(src, src.n_frames // 2, window, alpha=alpha if cfa else None, eta=1.0)
+    return Observation.from_source(src, src.n_frames // 2, window, alpha=alpha if cfa else None, eta=1.0, radius=0)
 
 
 def _check(obs, params, prior=None, rule=None):
@@ -139,7 +139,7 @@ def test_zero_mean_channel_in_gray_world_warns_and_falls_back():
     assert np.all(np.isfinite(alpha)) and np.all(alpha > 0)
     # the fallback gain is the mean of the informative channels' means (see classical.colour_cast)
     assert alpha[2] == pytest.approx(1.0 / np.mean([1.0 / alpha[0], 1.0 / alpha[1]]), rel=1e-5)
-    obs = Observation.from_source(src, 15, 10, alpha=alpha, eta=2.0)
+    obs = Observation.from_source(src, 15, 10, alpha=alpha, eta=2.0, radius=0)
     _check(obs, GuidedConfig(**FAST))
 
 

@@ -24,7 +24,7 @@ GAINS = np.array([1.0, 1.0, 1.0])
 def _obs(rates: np.ndarray, cfa: str | None, ticks: int = 40, seed: int = 0) -> Observation:
     rng = np.random.default_rng(seed)
     src = ArraySource(rng.random((ticks,) + rates.shape) < rates, cfa=cfa)
-    return Observation.from_source(src, ticks // 2, 10, alpha=GAINS if cfa else None, eta=2.0)
+    return Observation.from_source(src, ticks // 2, 10, alpha=GAINS if cfa else None, eta=2.0, radius=0)
 
 
 def _net(cfa: str | None) -> FFDNetDenoiser:

@@ -18,7 +18,7 @@ from test_guided_helpers import make_source
 def _obs(cfa, h=16, w=24):
     src = make_source("ramp", h, w, ticks=60, cfa=cfa)
     alpha = np.array([2.0, 2.0, 2.0]) if cfa else None
-    return Observation.from_source(src, src.n_frames // 2, 10, alpha=alpha, eta=2.0)
+    return Observation.from_source(src, src.n_frames // 2, 10, alpha=alpha, eta=2.0, radius=0)
 
 
 @pytest.mark.parametrize("cfa", ["RGGB", None])

@@ -93,7 +93,7 @@ def _run(capture, **guided):
         state = prepare_sequence(src, recipe)
         from spikeview.guided.observation import Observation
 
-        obs = Observation.from_source(src, 60, recipe.guided.window, alpha=state.alpha, eta=recipe.guided.eta)
+        obs = Observation.from_source(src, 60, recipe.guided.window, alpha=state.alpha, eta=recipe.guided.eta, radius=0)
         knobs = knob_status(recipe.guided, make_plan(obs, recipe.guided))
         frame = next(reconstruct_windows(src, [60], recipe, state, sampler=GuidedSampler(recipe.guided)))
     return frame, knobs

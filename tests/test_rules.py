@@ -24,7 +24,7 @@ CFAS = ["RGGB", None]
 def _obs(cfa, window=10, kind="ramp", ticks=60):
     src = make_source(kind, 16, 16, ticks=ticks, cfa=cfa)
     alpha = np.array([2.0, 2.0, 2.0]) if cfa else None
-    return Observation.from_source(src, src.n_frames // 2, window, alpha=alpha, eta=2.0)
+    return Observation.from_source(src, src.n_frames // 2, window, alpha=alpha, eta=2.0, radius=0)
 
 
 # ------------------------------------------------------------------- the plan's diffusion rules

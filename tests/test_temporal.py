@@ -49,7 +49,7 @@ def test_static_scene_pools_every_neighbour_with_zero_shift(cfa):
     # a fully pooled photosite holds exactly the 70 ticks' spikes
     total = src.count(10, 80).astype(np.float32)
     np.testing.assert_array_equal(counts[full], total[full])
-    obs = Observation.from_source(src, 45, 10, radius=3)
+    obs = Observation.from_source(src, 45, 10, radius=3, eta=2.0)
     np.testing.assert_allclose(obs.y, counts / pool.dtau, rtol=1e-6)
     assert obs.mean_count() == pytest.approx(float(counts.mean()), rel=1e-5)
     plan = make_plan(obs, GuidedConfig(temporal_radius=3))
@@ -90,17 +90,17 @@ def test_capture_too_short_and_radius_zero_say_why(cfa):
     from spikeview.guided.knobs import knob_status
 
     src = ArraySource(_spikes(np.full((10, 16, 16), 0.5)), cfa=cfa)
-    obs = Observation.from_source(src, 5, 10, radius=2)
+    obs = Observation.from_source(src, 5, 10, radius=2, eta=2.0)
     assert obs.dtau is None and obs.pooling.kind == "unavailable"
     plan = make_plan(obs, GuidedConfig(temporal_radius=2))
     assert plan.temporal == "off" and "the capture holds 10 ticks" in plan.reasons["temporal"]
     why = knob_status(GuidedConfig(temporal_radius=2), plan)["guided.temporal_radius"]
     assert why is not None and "10 ticks" in why
     long = ArraySource(_spikes(np.full((40, 16, 16), 0.5)), cfa=cfa)
-    obs = Observation.from_source(long, 15, 10, radius=2)
+    obs = Observation.from_source(long, 15, 10, radius=2, eta=2.0)
     assert obs.pooling.offsets == (-1, 1, 2)  # only whole windows inside the capture
     assert knob_status(GuidedConfig(temporal_radius=2), make_plan(obs, GuidedConfig(temporal_radius=2)))["guided.temporal_radius"] is None
-    plain = make_plan(Observation.from_source(long, 15, 10), GuidedConfig())
+    plain = make_plan(Observation.from_source(long, 15, 10, eta=2.0, radius=0), GuidedConfig())
     assert plain.temporal == "off" and "temporal_radius = 0" in plain.reasons["temporal"]
 
 
@@ -141,8 +141,8 @@ def test_q_is_decided_from_the_count_per_window_not_the_pooled_count(cfa):
 
     for rate, on in ((0.05, True), (0.2, False)):
         src = ArraySource(_spikes(np.full((90, 32, 32), rate), seed=4), cfa=cfa)
-        pooled = Observation.from_source(src, 45, 10, radius=3)
-        alone = Observation.from_source(src, 45, 10)
+        pooled = Observation.from_source(src, 45, 10, radius=3, eta=2.0)
+        alone = Observation.from_source(src, 45, 10, eta=2.0, radius=0)
         assert pooled.mean_count() > 3 * pooled.window_count()  # most photosites pooled several windows
         assert pooled.window_count() == pytest.approx(10 * rate, rel=0.2)
         assert alone.window_count() == pytest.approx(alone.mean_count())
@@ -181,7 +181,7 @@ def test_sequence_frames_do_not_depend_on_the_chunking(cfa):
         ref = np.stack(list(reconstruct_windows(src, centres[i:i + 4], recipe, state, sampler=smp)))
         np.testing.assert_array_equal(p, ref)
     # and the pooling did use windows outside each chunk
-    obs = Observation.from_source(src, centres[4], 10, radius=2)
+    obs = Observation.from_source(src, centres[4], 10, radius=2, eta=2.0)
     assert obs.pooling.offsets == (-1, 1, -2, 2) and obs.dtau is not None and obs.dtau.max() > 10
 
 
@@ -206,12 +206,12 @@ def _blur_prior(channels):
 def test_region_of_interest_crops_the_pooled_observation(cfa):
     """The ROI path (the app's Run on a region) crops Δτ_eff with the counts; the plan still says what was pooled."""
     from spikeview.guided.sampler import GuidedSampler
-    from spikeview.guided.video import _crop_to_roi
+    from spikeview.guided.window import crop_to_roi as _crop_to_roi
     from spikeview.pipeline import prepare_sequence, reconstruct_windows
     from spikeview.recipe import Recipe
 
     src = ArraySource(_spikes(np.repeat(_texture(32, 32)[None, 8:40, 8:40] * 0.5, 80, axis=0)), cfa=cfa)
-    obs = Observation.from_source(src, 45, 10, radius=3)
+    obs = Observation.from_source(src, 45, 10, radius=3, eta=2.0)
     sub = _crop_to_roi(obs, (5, 7, 16, 12))
     assert sub.shape == (13, 17) and sub.dtau.shape == (13, 17)  # origin rounded down to even pixels: (6, 4)
     np.testing.assert_array_equal(sub.dtau, obs.dtau[6:19, 4:21])

@@ -74,11 +74,31 @@ class Sequence:
     def observation(self, center: int, level: float | None = None):
         """The guided sampler's observation, exposed so the white point maps to ``level`` (default
         :data:`EXPOSURE_LEVEL`); ``level=0`` gives the un-exposed observation (fixed η)."""
-        from spikeview.guided.observation import EXPOSURE_LEVEL, Observation, exposed_eta
+        from spikeview.guided.observation import EXPOSURE_LEVEL, exposed_eta
 
         level = EXPOSURE_LEVEL if level is None else level
         eta = self.eta if level == 0 else exposed_eta(self.eta, self.white, level)
-        return Observation.from_source(self.source, center, self.window, alpha=self.alpha, eta=eta)
+        from spikeview.guided.config import GuidedConfig
+        from spikeview.guided.window import observe_window
+
+        # the single window (the strong baseline's and the exposure experiments' input, as the paper's)
+        p = GuidedConfig(window=self.window, eta=eta, temporal_radius=0)
+        return observe_window(self.source, center, p, self.alpha, plan=False).obs
+
+    def product(self, center: int, sampler=None, **changes) -> np.ndarray:
+        """The frame ``spikeview reconstruct SOURCE --method guided --at CENTER --out x.npy`` writes, with
+        ``guided.<name> = value`` for each of ``changes`` (the CLI's own path: :func:`spikeview.pipeline.plan_window`'s
+        planning inside :func:`~spikeview.pipeline.reconstruct_windows`, the recipe resolved as the CLI resolves it,
+        the white point's mapping of an ``.npy``); ``sampler`` keeps the prior loaded."""
+        from spikeview.pipeline import SequenceState, exposure_mapping, reconstruct_windows, recipe_for_state
+        from spikeview.recipe import Recipe
+
+        values = {"run.method": "guided", "classical.window": self.window, "classical.eta": self.eta}
+        values.update({f"guided.{k}": v for k, v in changes.items()})
+        state = SequenceState(self.alpha, self.white)
+        recipe = recipe_for_state(Recipe().with_values(values), state)
+        frame = next(reconstruct_windows(self.source, [center], recipe, state, sampler=sampler))
+        return exposure_mapping(recipe, state, "x.npy")[1](frame)
 
     def classical(self, center: int, window: int | None = None, demosaic: str = "bilinear") -> np.ndarray:
         """A TFP frame as a bounded output: the linear frame divided by the white point, clipped to [0, 1]."""
@@ -117,7 +137,10 @@ def _methods(prior, quick: bool) -> list[tuple[str, str, Callable]]:
         m.append((f"baseline σ×{sc:g}", "baseline", lambda s, c, sc=sc: baseline(s.observation(c), prior, sigma_scale=sc)))
 
     def guided(name: str, kind: str, level: float | None = None, **changes):
-        cfg = GuidedConfig(**changes)
+        if level is None:  # the product's path, as the CLI runs it (pooled neighbours, plan, exposure)
+            m.append((name, kind, lambda s, c: s.product(c, smp, **changes)))
+            return
+        cfg = GuidedConfig(**changes)  # an exposure experiment: the sampler on a hand-exposed single window
         m.append((name, kind, lambda s, c: smp.run(s.observation(c, level), cfg)))
 
     quick_steps = dict(steps=2) if quick else {}

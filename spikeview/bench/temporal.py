@@ -121,7 +121,7 @@ CEILING_SHIFT = (1, 2)
 def _method_runs(cap: Any, centres: list[int], prior: Any, steps: dict, radii) -> dict[str, tuple[list[np.ndarray], list[float], list]]:
     """``{method: (bounded frames, seconds per frame, pooling kinds)}`` on the user's path."""
     from spikeview.guided.baseline import baseline
-    from spikeview.guided.observation import Observation
+    from spikeview.guided.window import observe_window
     from spikeview.guided.sampler import GuidedSampler
     from spikeview.pipeline import guided_scale, output_white, prepare_sequence, reconstruct_windows, sampler_params
     from spikeview.recipe import Recipe
@@ -151,7 +151,7 @@ def _method_runs(cap: Any, centres: list[int], prior: Any, steps: dict, radii) -
     fr, ts = [], []
     for c in centres:
         t0 = time.perf_counter()
-        obs = Observation.from_source(cap, c, cfg.window, alpha=state.alpha, eta=cfg.eta)
+        obs = observe_window(cap, c, cfg.replace(temporal_radius=0), state.alpha, plan=False).obs
         fr.append(bounded(baseline(obs, prior, sigma_scale=2.0) * scale))
         ts.append(time.perf_counter() - t0)
     out["FFDNet pass"] = (fr, ts, [])
@@ -223,7 +223,7 @@ def timing(size: int = 256, repeats: int = 5, name: str = "coffee/fast", radius:
     import torch
 
     from spikeview.guided.config import GuidedConfig
-    from spikeview.guided.observation import Observation
+    from spikeview.guided.window import observe_window
     from spikeview.guided.sampler import GuidedSampler, load_prior
     from spikeview.guided.temporal import pool_counts
     from spikeview.pipeline import prepare_sequence, sampler_params
@@ -240,8 +240,9 @@ def timing(size: int = 256, repeats: int = 5, name: str = "coffee/fast", radius:
 
     def once(c: int, rad: int) -> float:
         t0 = time.perf_counter()
-        obs = Observation.from_source(cap, c, cfg.window, alpha=state.alpha, eta=cfg.eta, radius=rad)
-        smp.run(obs, cfg.replace(temporal_radius=rad))
+        p = cfg.replace(temporal_radius=rad)
+        w = observe_window(cap, c, p, state.alpha)
+        smp.run(w.obs, p, plan=w.plan)
         return time.perf_counter() - t0
 
     once(centres[0], 0), once(centres[0], r)  # warm-up

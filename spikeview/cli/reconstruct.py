@@ -77,22 +77,15 @@ def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre
             if path.startswith("guided."):
                 notes.append(f"{BY_PATH[path].flag} applies to --method guided only; it is ignored by --method {recipe.run.method}.")
         return notes, None
-    from spikeview.guided import Observation, make_plan
-    from spikeview.guided.knobs import knob_status
-    from spikeview.pipeline import sampler_params
+    from spikeview.pipeline import plan_window
 
     # the plan of the settings the sampler runs (η at the sequence's exposure), as the app shows it
-    cfg = sampler_params(recipe, state)
-    if asked_precision == "auto":
-        cfg = cfg.replace(precision="auto")
-    obs = Observation.from_source(source, centre, cfg.window, alpha=state.alpha, eta=cfg.eta, radius=cfg.temporal_radius,
-                                  device=cfg.device)
-    plan = make_plan(obs, cfg)
-    print(plan, file=sys.stderr)
-    for path, why in knob_status(cfg, plan).items():
+    wp = plan_window(source, recipe, centre, state=state, precision="auto" if asked_precision == "auto" else None)
+    print(wp.plan, file=sys.stderr)
+    for path, why in wp.knobs.items():
         if why and path in given:
             notes.append(f"{BY_PATH[path].flag} has no effect here: {why}.")
-    return notes, obs
+    return notes, wp.whole
 
 
 def default_out(args: argparse.Namespace, recipe: Recipe) -> Path:

@@ -107,18 +107,6 @@ class DegradationView:
     colour: bool = True
 
 
-def window_observation(source: Any, tick: int, cfg: Any, alpha: np.ndarray | None,
-                       roi: tuple[int, int, int, int] | None):
-    """The guided sampler's :class:`~spikeview.guided.observation.Observation` of the window (ROI-cropped),
-    for the sampler's settings ``cfg`` (:func:`spikeview.pipeline.sampler_params`)."""
-    from spikeview.guided.observation import Observation
-    from spikeview.guided.video import _crop_to_roi
-
-    obs = Observation.from_source(source, int(tick), cfg.window, alpha=alpha, eta=cfg.eta, radius=cfg.temporal_radius,
-                                  device=cfg.device)
-    return obs if roi is None else _crop_to_roi(obs, roi)
-
-
 def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
     """The forward model the guided sampler will run, stage by stage, on the current reconstruction X.
 
@@ -130,17 +118,14 @@ def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
     import torch
 
     from spikeview.guided.baseline import to_tensor
-    from spikeview.guided.knobs import knob_status
-    from spikeview.guided.plan import make_plan
     from spikeview.guided.sampler import GuidedSampler
-    from spikeview.pipeline import guided_scale, reconstruct_windows, sampler_params
+    from spikeview.pipeline import guided_scale, plan_window, reconstruct_windows
 
     recipe = req.recipe if req.recipe is not None else Recipe()
     src = req.source
     state = sequence_state(src, recipe, req.alpha, ctx)
-    cfg = sampler_params(recipe, state)
-    obs = window_observation(src, req.tick, cfg, state.alpha, req.roi)
-    plan = make_plan(obs, cfg)
+    wp = plan_window(src, recipe, req.tick, state=state, roi=req.roi)
+    cfg, obs, plan = wp.params, wp.obs, wp.plan
     channels = 3 if plan.mosaic else 1
     if req.x_override is not None and req.x_override.shape[:2] == obs.shape and (req.x_override.ndim == 3) == (channels == 3):
         x, label = req.x_override, req.x_label
@@ -157,7 +142,7 @@ def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
     with torch.no_grad():
         st = data.stages(to_tensor(np.clip(x / scale, 0.0, 1.0)))
     res = core.stage_images(x, st, req.params, bool(req.params.get("show_pyramid")), scene_scale=float(scale))
-    return DegradationView(res, label, req.tick, obs.shape, str(plan), knob_status(cfg, plan), plan.quantise, plan.pooling,
+    return DegradationView(res, label, req.tick, obs.shape, str(plan), wp.knobs, plan.quantise, plan.pooling,
                            pooling_display(plan.pooling), colour=bool(plan.mosaic))
 
 
@@ -229,21 +214,16 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
 
 def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     from spikeview import metrics
-    from spikeview.guided.knobs import knob_status
-    from spikeview.guided.plan import make_plan
     from spikeview.cfa import crop_roi
-    from spikeview.pipeline import guided_scale, reconstruct_windows, sampler_params
-    from spikeview.guided.video import _crop_to_roi
+    from spikeview.pipeline import guided_scale, plan_window, reconstruct_windows
 
     p = req.params
     recipe = req.recipe.with_values({"run.method": "guided"})
     state = sequence_state(req.source, recipe, req.alpha, ctx)
-    cfg = sampler_params(recipe, state)
-    whole = window_observation(req.source, req.tick, cfg, state.alpha, None)  # the run reuses it (built once)
-    obs = whole if req.roi is None else _crop_to_roi(whole, req.roi)
-    plan = make_plan(obs, cfg)
+    wp = plan_window(req.source, recipe, req.tick, state=state, roi=req.roi)
+    cfg, whole, obs, plan = wp.params, wp.whole, wp.obs, wp.plan  # the run reuses the whole observation (built once)
     origin = crop_roi(np.zeros((req.source.height, req.source.width), np.uint8), req.roi)[1][::-1] if req.roi else (0, 0)
-    ctx.report(GuidedUpdate("plan", req.run, total=cfg.steps * cfg.chains, text=str(plan), knobs=knob_status(cfg, plan),
+    ctx.report(GuidedUpdate("plan", req.run, total=cfg.steps * cfg.chains, text=str(plan), knobs=wp.knobs,
                               pooling=plan.pooling, pooling_image=pooling_display(plan.pooling),
                               tile_map=None if plan.tile_map is None else plan.tile_map.as_dict(),
                               tiles=plan.reasons.get("tiles", "")))

@@ -143,10 +143,14 @@ class Observation:
 
     # -------------------------------------------------------------------------- construction
     @classmethod
-    def from_source(cls, source: SpikeSource, center: int, window: int = 10, *, alpha: np.ndarray | list[float] | None = None,
-                    eta: float = 2.0, previous: bool = False, radius: int = 0, cache: Any = None,
+    def from_source(cls, source: SpikeSource, center: int, window: int, *, alpha: np.ndarray | list[float] | None = None,
+                    eta: float, radius: int, previous: bool = False, cache: Any = None,
                     device: Any = None) -> "Observation":
         """The ``window``-tick TFP window around ``center`` (see :func:`~spikeview.classical.windows.window_range`).
+
+        The settings come from the caller, never from defaults here (``guided.window``, ``guided.eta``,
+        ``guided.temporal_radius`` have one home, the config): a front end plans its window with
+        :func:`spikeview.pipeline.plan_window`, the guided sequence with :func:`spikeview.guided.window.observe_window`.
 
         Args:
             source: spike stream; its CFA names the mosaic.

@@ -27,13 +27,13 @@ from typing import Any
 
 import numpy as np
 
-from spikeview.cfa import crop_roi
 from spikeview.errors import ParameterError
 from spikeview.guided.config import GuidedConfig
 from spikeview.guided.observation import Observation
 from spikeview.guided.plan import BLOCK, make_plan
 from spikeview.guided.sampler import GuidedSampler
 from spikeview.guided.temporal import WindowCache
+from spikeview.guided.window import crop_to_roi, observe_window
 from spikeview.io.source import SpikeSource
 
 #: margin (pixels) around changed blocks when only a region is re-sampled
@@ -79,9 +79,8 @@ def reconstruct_frame(source, center: int, params: GuidedConfig | None = None, *
         ``(H, W, 3)`` float32 in [0, 1] (``(H, W)`` for monochrome).
     """
     p = params if params is not None else GuidedConfig()
-    a = resolve_alpha(source, p, alpha)
-    obs = Observation.from_source(source, center, p.window, alpha=a, eta=p.eta, radius=p.temporal_radius, device=p.device)
-    return (sampler or GuidedSampler(p)).run(obs, p, callback, cancel)
+    w = observe_window(source, center, p, resolve_alpha(source, p, alpha))
+    return (sampler or GuidedSampler(p)).run(w.obs, p, callback, cancel, plan=w.plan)
 
 
 def _crop_box(changed: np.ndarray, shape: tuple[int, int]) -> tuple[int, int, int, int] | None:
@@ -96,19 +95,6 @@ def _crop_box(changed: np.ndarray, shape: tuple[int, int]) -> tuple[int, int, in
 
 def _crop_obs(obs: Observation, y0: int, y1: int, x0: int, x1: int) -> Observation:
     return obs.crop(y0, y1, x0, x1)
-
-
-def _crop_to_roi(obs: Observation, roi: tuple[int, int, int, int]) -> Observation:
-    """The observation (and its previous window) on ``roi = (x, y, w, h)``, origin on even pixels."""
-    y, (y0, x0) = crop_roi(obs.y, roi)
-    if min(y.shape) < 8:
-        raise ParameterError("The region of interest is too small for a guided reconstruction: draw one of at least 8x8 pixels.")
-    out = _crop_obs(obs, y0, y0 + y.shape[0], x0, x0 + y.shape[1])
-    if obs.previous is not None:
-        out.previous = _crop_obs(obs.previous, y0, y0 + y.shape[0], x0, x0 + y.shape[1])
-    if obs.own is not None:
-        out.own = _crop_obs(obs.own, y0, y0 + y.shape[0], x0, x0 + y.shape[1])
-    return out
 
 
 def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: GuidedConfig | None = None, *,
@@ -152,13 +138,10 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
         """Frame ``fi``'s observation (counts, pooling) and plan: they depend on the capture and the
         settings only, never on an earlier frame's result."""
         if fi == 0 and first is not None and _same_window(first, c, p, a):
-            o = first
-        else:
-            o = Observation.from_source(source, c, p.window, alpha=a, eta=p.eta, previous=fi > 0 and p.reuse is not False,
-                                        radius=p.temporal_radius, cache=cache, device=p.device)
-        if roi is not None:
-            o = _crop_to_roi(o, roi)
-        return o, make_plan(o, p)
+            o = first if roi is None else crop_to_roi(first, roi)
+            return o, make_plan(o, p)
+        w = observe_window(source, c, p, a, roi=roi, previous=fi > 0 and p.reuse is not False, cache=cache)
+        return w.obs, w.plan
 
     # on a GPU the next window's counting, pooling and plan (CPU and small GPU work) run in a thread of their own
     # while this window samples: the same observations, built in the same order (one thread touches the cache)

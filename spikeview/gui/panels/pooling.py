@@ -1,7 +1,7 @@
 """The pooling map of the guided panel: Δτ_eff per photosite of the current window, colour-mapped.
 
 The map is the library's: :attr:`spikeview.guided.temporal.Pooling.dtau` of the very observation the
-sampler uses (:func:`spikeview.gui.jobs.window_observation`, reported with the degradation preview and
+sampler uses (:func:`spikeview.pipeline.plan_window`, reported with the degradation preview and
 with a guided run's plan); nothing here pools. Colours count the neighbouring windows a photosite took
 (``Δτ_eff / Δτ − 1``: 0 = its own window only … 2R = every window of ±R); the caption is the plan's
 ``temporal`` reason. Where the pooling cannot act (``temporal_radius = 0``, a capture too short) there

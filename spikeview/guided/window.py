@@ -1,0 +1,77 @@
+"""One guided window's observation and plan: the one place an :class:`Observation` is built from a capture.
+
+:func:`observe_window` turns a source, the sampler's settings (a :class:`~spikeview.guided.config.GuidedConfig`:
+window Δτ, η, temporal radius, device) and a centre tick, with an optional region of interest, into the
+window's :class:`~spikeview.guided.observation.Observation` and its :class:`~spikeview.guided.plan.Plan`.
+The guided sequence (:func:`spikeview.guided.video.reconstruct_sequence`) calls it for every window; the
+front ends (the CLI, the app's jobs, the benchmark, the Dask chunks) reach it through
+:func:`spikeview.pipeline.plan_window`, which adds the recipe, the sequence's state and the knob status.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from spikeview.errors import ParameterError
+from spikeview.guided.config import GuidedConfig
+from spikeview.guided.observation import Observation
+
+
+@dataclass
+class Window:
+    """A planned window.
+
+    Attributes:
+        whole: the whole frame's observation (its counts, pooling, previous window).
+        obs: the observation the sampler runs on: ``whole`` cropped to the region of interest, if any.
+        plan: the plan of ``obs`` under the settings it was observed with.
+    """
+
+    whole: Observation
+    obs: Observation
+    plan: Any
+
+
+def crop_to_roi(obs: Observation, roi: tuple[int, int, int, int]) -> Observation:
+    """The observation (and its previous and own windows) on ``roi = (x, y, w, h)``, origin on even pixels.
+
+    Raises:
+        ParameterError: a region smaller than 8×8 pixels.
+    """
+    from spikeview.cfa import crop_roi
+
+    y, (y0, x0) = crop_roi(obs.y, roi)
+    if min(y.shape) < 8:
+        raise ParameterError("The region of interest is too small for a guided reconstruction: draw one of at least 8x8 pixels.")
+    y1, x1 = y0 + y.shape[0], x0 + y.shape[1]
+    out = obs.crop(y0, y1, x0, x1)
+    if obs.previous is not None:
+        out.previous = obs.previous.crop(y0, y1, x0, x1)
+    if obs.own is not None:
+        out.own = obs.own.crop(y0, y1, x0, x1)
+    return out
+
+
+def observe_window(source: Any, centre: int, params: GuidedConfig, alpha: np.ndarray | None, *,
+                   roi: tuple[int, int, int, int] | None = None, previous: bool = False, cache: Any = None,
+                   plan: bool = True) -> Window:
+    """The window of ``source`` centred on ``centre`` under ``params`` (see the module docstring).
+
+    Args:
+        alpha: the sequence's gains α (``None``: no colour cast).
+        roi: ``(x, y, w, h)``: plan and sample this region only (``Window.whole`` keeps the frame).
+        previous: also read the window before (the plan's reuse test in a sequence).
+        cache: a :class:`~spikeview.guided.temporal.WindowCache` shared by a sequence's windows.
+        plan: make the plan (False: ``Window.plan`` is None).
+    """
+    whole = Observation.from_source(source, int(centre), params.window, alpha=alpha, eta=params.eta,
+                                    radius=params.temporal_radius, previous=previous, cache=cache, device=params.device)
+    obs = whole if roi is None else crop_to_roi(whole, roi)
+    if not plan:
+        return Window(whole, obs, None)
+    from spikeview.guided.plan import make_plan
+
+    return Window(whole, obs, make_plan(obs, params))
