@@ -157,7 +157,12 @@ def bf16_speedup() -> float:
                     best[dt] = min(best[dt], time.perf_counter() - t0)
     except (RuntimeError, TypeError):  # no bfloat16 convolution in this torch/CPU
         return 0.0
-    return best[torch.float32] / max(best[torch.bfloat16], 1e-9)
+    return speedup_of(best[torch.float32], best[torch.bfloat16])
+
+
+def speedup_of(float32_seconds: float, bf16_seconds: float) -> float:
+    """How many times faster bfloat16 ran: float32's time over bfloat16's (2.0 = bfloat16 took half the time)."""
+    return float(float32_seconds) / max(float(bf16_seconds), 1e-9)
 
 
 def native_bf16(summary: dict[str, object] | None = None) -> bool:
