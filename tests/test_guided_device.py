@@ -150,3 +150,18 @@ def test_a_dask_worker_keeps_the_recipe_without_several_gpus():
     r = {"run": {"method": "guided"}, "guided": {"device": "auto"}}
     assert _worker_recipe(r, in_worker=False) is r
     assert _worker_recipe(r, in_worker=True) is r  # fewer than two GPUs here: nothing to place
+
+
+@pytest.mark.filterwarnings("ignore::spikeview.classical.colour_cast.ColourCastWarning")  # a 1-wide Bayer has no B site
+@pytest.mark.parametrize("cfa", ["RGGB", "none"])
+@pytest.mark.parametrize("shape", [(1, 1), (1, 8), (8, 1)])
+def test_a_capture_too_small_for_guided_gets_one_sentence(tmp_path, capsys, cfa, shape):
+    """A 1×1 or 1×N capture once ended in "unexpected ValueError … (this is a bug …)" in the pooling's alignment."""
+    from spikeview.cli.main import main
+
+    path = tmp_path / "c.npy"
+    np.save(path, (np.random.default_rng(0).random((60, *shape)) < 0.4).astype(np.uint8))
+    rc = main(["reconstruct", str(path), "--cfa", cfa, "--method", "guided", "--at", "30", "--out", str(tmp_path / "o.npy")])
+    err = capsys.readouterr().err
+    assert rc != 0 and "this is a bug" not in err and "needs at least 2x2; use --method tfp" in err
+    assert not (tmp_path / "o.npy").exists()

@@ -159,7 +159,7 @@ for key, values in {
     "chunk": [MISSING, 0, 2.5, 3, True],
     "tick_rate": [MISSING, "fast", 0, -1.0],
     "input": [MISSING, 7, ""],
-    "white_point": [MISSING, "bright", 0, 0.0, -1.0, None, [1.0]],
+    "white_point": [MISSING, "bright", 0, 0.0, -1.0, None, [1.0], 1e-300, 1e308],
     "alpha": [MISSING, [1.0, 2.0], "red", [1.0, -1.0, 1.0], [0, 0, 0]],
     "fingerprint": [MISSING, "abc", {}, {"name": 1, "size": 2, "blake2b": "z"}],
     "keyframe": [MISSING, 0, -16, "16"],
@@ -288,6 +288,12 @@ PRESETS = {
     "nan fps": b"[export]\nfps = nan\n",
     "inf fps": b"[export]\nfps = inf\n",
     "tiny fps": b"[export]\nfps = 1e-300\n",
+    # issue 29: export levels by the rules of their flags (a ZeroDivisionError once; the others were accepted)
+    "negative black, zero white": b"[export]\nblack = -0.5\nwhite = 0.0\n",
+    "negative white": b"[export]\nwhite = -0.5\n",
+    "huge white": b"[export]\nwhite = 1e308\n",
+    "negative black": b"[export]\nblack = -0.5\n",
+    "black above full scale": b"[export]\nblack = 2.0\n",
 }
 
 

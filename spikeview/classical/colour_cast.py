@@ -86,7 +86,8 @@ def _channel_means_from_sums(sums: dict[str, tuple[float, int]], cfa: str | None
         c = CHANNEL_INDEX[name[0]]
         tot[c] += s
         cnt[c] += n
-    return tot / cnt
+    # a channel without photosites (a capture one pixel wide or high) has no mean: 0, as a channel without spikes
+    return np.divide(tot, cnt, out=np.zeros(3), where=cnt > 0)
 
 
 def channel_means(frame: np.ndarray, cfa: str | None) -> np.ndarray:

@@ -197,4 +197,8 @@ def run(args: argparse.Namespace) -> int:
           f"CFA {info.cfa or 'none'}, {human_bytes(files.dat.stat().st_size)}), sidecar {files.sidecar.name}, "
           f"ground truth {files.ground_truth.name} ({human_bytes(files.ground_truth.stat().st_size)})",
           file=sys.stdout)
+    if info.cfa is not None and info.width % 2:  # written as asked, but no Bayer sensor has an odd width
+        from spikeview.io.geometry import odd_width_warning
+
+        print(f"spikeview: warning: {odd_width_warning(info.cfa, info.width)}", file=sys.stderr)
     return 0

@@ -171,6 +171,11 @@ def read_frames(group, lo: int = 0, hi: int | None = None) -> np.ndarray:
 _METHODS = ("tfp", "tfi", "guided")
 
 
+from spikeview.export.settings import WHITE_MAX as _WHITE_MAX, WHITE_MIN as _WHITE_MIN  # noqa: E402 (one rule)
+
+_WHITE = (_WHITE_MIN, _WHITE_MAX)
+
+
 def _is_int(v: Any, lo: int = 0) -> bool:
     return isinstance(v, (int, np.integer)) and not isinstance(v, bool) and int(v) >= lo
 
@@ -188,7 +193,8 @@ _ATTR_RULES: dict[str, tuple[Any, str]] = {
     "recipe": (lambda v: isinstance(v, str), "the preset TOML (text)"),
     "alpha": (lambda v: v is None or (isinstance(v, list) and len(v) == 3 and all(_is_pos(a) for a in v)),
               "three positive gains (or null for a monochrome stream)"),
-    "white_point": (_is_pos, "a positive number"),
+    "white_point": (lambda v: _is_pos(v) and _WHITE[0] <= float(v) <= _WHITE[1],
+                    f"a white point from {_WHITE[0]:g} to {_WHITE[1]:g} (the export settings' range)"),
     "method": (lambda v: v in _METHODS, "one of tfp, tfi, guided"),
     "window": (lambda v: _is_int(v, 1), "a whole number of ticks >= 1"),
     "step": (lambda v: _is_int(v, 1), "a whole number of ticks >= 1"),

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from spikeview.config import Config, param
+from spikeview.config import Config, check_value, param
 from spikeview.errors import ParameterError
 from spikeview.transfer import levels_ordered
 
@@ -33,6 +33,10 @@ X264_PRESETS = (
 )
 #: how MP4 export makes an odd width/height even (yuv420p needs even sizes)
 EVEN_SIZE_MODES = ("pad", "crop")
+
+
+#: the range of a white point a preset or store may record (linear frame units; the flag's and control's is (0, 16])
+WHITE_MIN, WHITE_MAX = 1e-6, 1e6
 
 
 @dataclasses.dataclass
@@ -104,8 +108,15 @@ class ExportConfig(Config):
             raise bad("compression", self.compression, f"use one of {', '.join(EXR_COMPRESSIONS)}")
         if self.png_bits not in (8, 16):
             raise bad("png_bits", self.png_bits, "use 8 or 16")
-        if self.white is not None and 0 < self.white < 1e-6:  # 1/white must stay finite in float32 frames
-            raise bad("white", self.white, "use a white point of at least 1e-06 (linear frame units)")
+        # black and white by the rules of their flags and controls (a preset is checked as --black/--white are); a
+        # white point may be recorded beyond the controls' 16 as the sequence found it (dark captures' gains are
+        # large), up to WHITE_MAX, where 1/white stays a normal float32
+        check_value("export.black", float, self.black, 0.0, 1.0)
+        if self.white is not None:
+            w = check_value("export.white", float, self.white)
+            if not WHITE_MIN <= w <= WHITE_MAX:
+                raise bad("white", self.white, f"use a white point from {WHITE_MIN:g} to {WHITE_MAX:g} (linear frame units; "
+                                               "unset, the sequence's own is used)")
         if not levels_ordered(self.black, self.white):
             raise bad("black/white", (self.black, self.white), "black must be less than white, e.g. 0 and 1")
         if self.transfer not in TRANSFERS:

@@ -361,6 +361,10 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
         return n0, Pooling(radius, window, kind="unavailable",
                            reason=(f"the capture holds {int(source.n_frames)} ticks: no whole {window}-tick window beside this "
                                    "one to borrow from (own window only)"))
+    if min(n0.shape) < 2:  # no 2×2 super-pixel: nothing to align
+        h0, w0 = n0.shape
+        return n0, Pooling(radius, window, kind="unavailable",
+                           reason=f"a {w0}x{h0} frame is too small to align neighbouring windows (own window only)")
     f = 2  # guide pixels are 2×2 super-pixels: shifts keep the CFA phase, and the search costs a quarter
     tile_g = max(1, TILE // f)
     raw0 = _guide_raw(n0, cfa)

@@ -67,6 +67,10 @@ def observe_window(source: Any, centre: int, params: GuidedConfig, alpha: np.nda
         cache: a :class:`~spikeview.guided.temporal.WindowCache` shared by a sequence's windows.
         plan: make the plan (False: ``Window.plan`` is None).
     """
+    h, w = int(source.height), int(source.width)
+    if min(h, w) < 2:
+        raise ParameterError(f"the capture's frames are {w}x{h} pixels: a guided reconstruction needs at least 2x2; "
+                             "use --method tfp (or tfi) for it.")
     whole = Observation.from_source(source, int(centre), params.window, alpha=alpha, eta=params.eta,
                                     radius=params.temporal_radius, previous=previous, cache=cache, device=params.device)
     obs = whole if roi is None else crop_to_roi(whole, roi)

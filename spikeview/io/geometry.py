@@ -671,6 +671,12 @@ def colour_filter_alike_warning(rates: np.ndarray, cfa: str) -> str | None:
             "as on a monochrome sensor: pass --cfa none if the capture is monochrome.")
 
 
+def odd_width_warning(cfa: str, width: int) -> str:
+    """The one sentence for a colour filter on frames of odd width (what the file says, whatever its rates)."""
+    return (f"a colour filter ({cfa}) with an odd width ({width}) shifts the Bayer pattern on every row, which no "
+            "sensor does; check --width, or pass --cfa none for a monochrome capture.")
+
+
 def rate_warnings(src, *, check_width: bool = True) -> list[str]:
     """Sentences for people when the firing rates suggest a wrong width, colour filter or flip.
 
@@ -725,8 +731,7 @@ def rate_warnings(src, *, check_width: bool = True) -> list[str]:
         if note is not None:
             out.append(note)
     if cfa is not None and w % 2:
-        out.append(f"a colour filter ({cfa_to_str(cfa)}) with an odd width ({w}) shifts the Bayer pattern on every "
-                   "row, which no sensor does; check --width, or pass --cfa none for a monochrome capture.")
+        out.append(odd_width_warning(cfa_to_str(cfa), w))
     elif cfa is not None and not out and (note := colour_filter_alike_warning(rates, cfa_to_str(cfa))):
         out.append(note)
     elif cfa is not None and not out:

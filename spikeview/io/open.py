@@ -158,6 +158,11 @@ def open_source(path: str | os.PathLike[str], *, format: str | None = None, widt
         from spikeview.io.geometry import rate_warnings
 
         src.info.warnings.extend(rate_warnings(src, check_width=fmt == "plain"))
+    elif src.cfa is not None and src.width % 2:
+        # a sidecar's geometry is trusted (no rate check), but an odd width under a colour filter is a fact of the file
+        from spikeview.io.geometry import odd_width_warning
+
+        src.info.warnings.append(odd_width_warning(src.cfa, src.width))
     if side is not None:
         src.info.extra.update(side.tables)
         src.info.extra.setdefault("sidecar", str(side.path))
