@@ -34,6 +34,7 @@ from typing import Any
 from spikeview.classical.config import ClassicalConfig
 from spikeview.config import Config, ParamMeta, check_value, load_toml, param, param_fields
 from spikeview.errors import InputFileError, ParameterError
+from spikeview.io.source import FORMATS  # the file formats: one list (spikeview.io.source)
 from spikeview.export.settings import ExportConfig
 from spikeview.guided.config import GuidedConfig
 
@@ -85,7 +86,7 @@ class StreamTable(Config):
     """
 
     format: str | None = _stream("file format (default: sidecar, suffix or detection)",
-                                 choices=("plain", "raw400", "raw1m", "npz"))
+                                 choices=FORMATS)
     width: int | None = _stream("frame width in pixels")
     height: int | None = _stream("frame height in pixels")
     cfa: str | None = _stream("colour filter: top-left 2x2 after the flips, or 'none' for monochrome",

@@ -91,8 +91,8 @@ def test_dps_steps_lower_the_data_residual():
 def test_hqs_steps_lower_the_data_residual():
     """Mutation: a data step of the wrong sign in DataTerm.prox makes this fail."""
     p = dict(guidance="hqs", steps=4, diffusion="always", eta=1.0, self_ensemble=False)
-    free, _ = _run(GuidedConfig(data_steps=0, **p), HQSGuidance(2.0, 0, False))
-    guided, _ = _run(GuidedConfig(lam=2.0, data_steps=1, **p), HQSGuidance(2.0, 1, False))
+    free, _ = _run(GuidedConfig(data_steps=0, **p), HQSGuidance(2.0, 0, False, 1.0))
+    guided, _ = _run(GuidedConfig(lam=2.0, data_steps=1, **p), HQSGuidance(2.0, 1, False, 1.0))
     assert all(guided.finite) and all(free.finite)
     # every x̂₀ is much closer to the data than without data steps (along the steps the residual then
     # rises towards the noise level as ρ_t = λσ_n²/σ_t² grows: the prior is trusted more at low σ_t)

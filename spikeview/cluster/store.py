@@ -161,11 +161,6 @@ def check_compatible(path: str | os.PathLike[str], attrs: dict[str, Any], *, fin
         )
 
 
-def read_frames(group, lo: int = 0, hi: int | None = None) -> np.ndarray:
-    """Frames ``[lo, hi)`` as float32 ``(n, H, W, C)``."""
-    return np.asarray(group["frames"][lo:hi], dtype=np.float32)
-
-
 # ------------------------------------------------------------------------------- validation
 #: attributes every store records, with a check and what the value must be (for the message)
 _METHODS = ("tfp", "tfi", "guided")

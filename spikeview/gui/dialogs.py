@@ -8,14 +8,17 @@ from typing import Any
 import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from spikeview.io import FORMATS as IO_FORMATS
 from spikeview.cfa import BAYER_PATTERNS
 from spikeview.errors import SpikeviewError
 from spikeview.gui.model import OpenedStream
 from spikeview.gui.panels.rates import cfa_hint
 from spikeview.gui.widgets import ImagePane
 
-FORMATS = (("auto", "Automatic (sidecar / suffix)"), ("plain", "Plain packed .dat"), ("raw400", "Raw 400×250 camera"),
-           ("raw1m", "Raw 1000×1000 camera"), ("npz", ".npy / .npz array"))
+#: the format choices of the dialog: "auto" and spikeview.io.FORMATS (one list), each with its words
+_FORMAT_WORDS = {"plain": "Plain packed .dat", "raw400": "Raw 400×250 camera", "raw1m": "Raw 1000×1000 camera",
+                 "npz": ".npy / .npz array"}
+FORMATS = (("auto", "Automatic (sidecar / suffix)"),) + tuple((f, _FORMAT_WORDS.get(f, f)) for f in IO_FORMATS)
 
 
 def settings_preview(stream: OpenedStream) -> tuple[np.ndarray, np.ndarray, str, str]:

@@ -21,6 +21,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from spikeview.io import FORMATS
 from spikeview.gui.model import Session
 from spikeview.recipe import Recipe, StreamTable
 
@@ -37,7 +38,7 @@ def session_recipe(session: Session) -> Recipe:
         else:
             values.update({"run.at": int(session.tick), "run.range": None})
         info = src.info
-        if info.format in ("plain", "raw400", "raw1m", "npz"):
+        if info.format in FORMATS:
             stream = StreamTable.from_info(info, recipe.stream.layout)
             values.update({f"stream.{k}": v for k, v in stream.to_dict().items()})
     if not values:

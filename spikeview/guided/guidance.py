@@ -73,7 +73,7 @@ class DPSGuidance:
 
     needs_grad = True
 
-    def __init__(self, s: float = 1.0):
+    def __init__(self, s: float):
         self.s = float(s)
 
     def step(self, prior, schedule, data, x_t, index, sigma, *, zeta=0.0, generator=None, transform=None):
@@ -106,7 +106,7 @@ class HQSGuidance:
 
     needs_grad = False
 
-    def __init__(self, lam: float = 1.0, data_steps: int = 1, renoise: bool = True, s: float = 1.0):
+    def __init__(self, lam: float, data_steps: int, renoise: bool, s: float):
         self.lam = float(lam)
         self.s = float(s)
         self.data_steps = int(data_steps)

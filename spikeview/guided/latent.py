@@ -200,6 +200,3 @@ def make_ladder(prior: Any, steps: int, t_start: float) -> DDIMLadder:
     return ladder
 
 
-def to_hwc(x: torch.Tensor) -> np.ndarray:
-    """``(1, 3, H, W)`` tensor → ``(H, W, 3)`` float32 numpy."""
-    return np.ascontiguousarray(x[0].detach().float().permute(1, 2, 0).cpu().numpy(), dtype=np.float32)

@@ -37,7 +37,7 @@ class DataTerm:
         levels: pyramid levels (band-pass levels; ``levels + 1`` bands, 0 = plain residual).
     """
 
-    def __init__(self, forward: ForwardModel, y: torch.Tensor, variance: torch.Tensor, levels: int = 0):
+    def __init__(self, forward: ForwardModel, y: torch.Tensor, variance: torch.Tensor, levels: int):
         self.forward = forward
         self.y = y
         inv = 1.0 / variance.clamp_min(1e-8)
@@ -45,11 +45,6 @@ class DataTerm:
         self.w = (inv * self.sigma_n2).to(y.dtype)
         self.sqrt_w = self.w.sqrt()
         self.bands = int(levels) + 1
-
-    @property
-    def sigma_n(self) -> float:
-        """RMS-like noise level of the observation (SFR units): ``σ_n = (mean 1/Var)^(-1/2)``."""
-        return self.sigma_n2 ** 0.5
 
     def _loss(self, x: torch.Tensor, norm: str) -> torch.Tensor:
         pred = self.forward(x)

@@ -316,10 +316,7 @@ def start_variance(obs: Observation, use_mosaic: bool = True, use_cast: bool = T
     demosaicking (:func:`spikeview.ops.noise.demosaic_variance`). :func:`estimate_sigma` averages it over
     the frame, the per-tile plan (:func:`spikeview.guided.tiles.plan_tiles`) over each tile.
     """
-    import torch
-
     from spikeview.errors import check_cancelled
-    from spikeview.ops.noise import demosaic_variance
 
     check_cancelled("while planning")
     return obs._memo("start_variance", lambda m, c: _start_variance(obs, m, c), bool(use_mosaic), bool(use_cast))

@@ -41,8 +41,8 @@ class VESchedule:
             to each channel's start.
     """
 
-    sigma_start: float | tuple[float, ...] = 50.0 / 255.0
-    sigma_end: float | tuple[float, ...] = 2.0 / 255.0
+    sigma_start: float | tuple[float, ...]  # the sampler's: guided.t_start (topped up per channel); no default here
+    sigma_end: float | tuple[float, ...]  # guided.sigma_end
 
     def __post_init__(self) -> None:
         start = np.atleast_1d(np.asarray(self.sigma_start, dtype=np.float64))

@@ -80,8 +80,6 @@ PIXEL_Z = 2.5
 #: spikeview.bench.temporal, 6 frames: fast pan −0.15 dB, fans +0.34 dB against no limit; 6 px: −0.01, +0.10)
 MAX_SHIFT = 4
 
-#: largest radius accepted by the config
-MAX_RADIUS = 8
 
 
 @dataclass
@@ -112,12 +110,6 @@ class Pooling:
     def active(self) -> bool:
         """Whether neighbours could be pooled at all (radius > 0 and neighbouring windows exist)."""
         return self.radius > 0 and bool(self.offsets)
-
-    def neighbours(self) -> np.ndarray | None:
-        """``(H, W)`` float32 number of neighbouring windows pooled per photosite (the pooling map), or None."""
-        if self.dtau is None:
-            return None
-        return (self.dtau / float(self.window) - 1.0).astype(np.float32)
 
     def crop(self, y0: int, y1: int, x0: int, x1: int) -> "Pooling":
         """The same pooling on the photosites ``[y0:y1, x0:x1]`` (tile maps kept whole)."""

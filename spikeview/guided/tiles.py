@@ -59,11 +59,9 @@ PAY_WORK = 0.8
 #: tiles short; 2.5 → −0.38 dB; 2 → −0.67 dB: a late start costs the data step its early iterations)
 JOIN_FACTOR = 3.0
 KINDS = ("skipped", "short", "full")
-#: kept for callers of the first tiled version (tiles no longer overlap: the margin does that work)
-OVERLAP = 0
 
 
-def margin(levels: int = 0) -> int:
+def margin(levels: int) -> int:
     """Context (even, pixels) around a rectangle: FFDNet's receptive field (15 layers at half
     resolution: 30 pixels, gray) + the data step's reach (5×5 local rate, 3×3 spread) + the
     pyramid's reach for ``levels > 0`` (approximate)."""

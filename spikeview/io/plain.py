@@ -82,12 +82,6 @@ class PlainDatSource(PackedFileSource):
     def _frame_offsets(self, a: int, b: int) -> np.ndarray:
         return np.arange(a, b, dtype=np.int64) * self.frame_bytes
 
-    def read_packed(self, a: int, b: int) -> np.ndarray:
-        """The stored bytes of frames ``[a, b)``: ``(b - a, H·W/8)`` uint8 (a read-only view; no flips)."""
-        a, b = self.check_range(a, b)
-        fb = self.frame_bytes
-        return self._buffer()[a * fb:b * fb].reshape(b - a, fb)
-
 
 # ------------------------------------------------------------------------------------- writing
 def check_spikes(spikes: np.ndarray, name: str = "spikes") -> np.ndarray:

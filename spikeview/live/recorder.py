@@ -178,11 +178,6 @@ class Recorder:
         return self._written
 
     @property
-    def frames_received(self) -> int:
-        """Frames submitted (written, queued or dropped)."""
-        return self._received
-
-    @property
     def queued_bytes(self) -> int:
         return self._queued_bytes
 

@@ -11,7 +11,7 @@ from spikeview.errors import ParameterError
 from spikeview.ops._checks import check_cfa, check_image, check_positive_int
 from spikeview.ops.cast import ColourCast, colour_cast_inverse, estimate_alpha
 from spikeview.ops.mosaic import Mosaic, demosaic_bilinear
-from spikeview.ops.noise import binomial_vst, effective_sigma, tfp_variance
+from spikeview.ops.noise import binomial_vst, effective_sigma
 from spikeview.ops.pyramid import multiscale_loss
 from spikeview.ops.quantise import SoftQuantise
 
@@ -33,7 +33,8 @@ class ForwardModel(nn.Module):
         k: sharpness of Q (the sampler passes ``GuidedConfig.k``, the one default), or ``None`` (default) for no Q.
         dense_grad: bilinear-spread gradient of M (SpikeDiff) instead of the exact one.
         cast: apply C (ignored for monochrome).
-        bands: bands of the Laplacian pyramid in :meth:`loss` (1 = single scale).
+        bands: bands of the Laplacian pyramid in :meth:`loss` (1 = single scale, ``guided.levels = 0``, the
+            sampler's default; the sampler passes ``levels + 1``).
         weights: per-band weights of the loss (finest first); default all 1.
         norm: ``"l2"`` (non-squared, DPS reference) or ``"l2sq"``.
         vst: compare :func:`~spikeview.ops.noise.binomial_vst` of both sides, so the residual is
@@ -52,7 +53,7 @@ class ForwardModel(nn.Module):
         k: float | None = None,
         dense_grad: bool = True,
         cast: bool = True,
-        bands: int = 3,
+        bands: int = 1,
         weights: Sequence[float] | None = None,
         norm: str = "l2",
         vst: bool = False,
@@ -156,10 +157,6 @@ class ForwardModel(nn.Module):
             return y
         rgb = demosaic_bilinear(y, self.cfa)
         return rgb if self.cast is None else colour_cast_inverse(rgb, self.cast.alpha, self.cast.eta)
-
-    def observation_variance(self, y: torch.Tensor, prior: float = 0.5) -> torch.Tensor:
-        """Per-photosite ``Var[Y]`` of the observation (see :func:`~spikeview.ops.noise.tfp_variance`)."""
-        return tfp_variance(y, self.window, prior)
 
     def effective_sigma(self, y: torch.Tensor, prior: float = 0.5, per_pixel: bool = False) -> torch.Tensor:
         """Noise level of :meth:`initial_estimate` per frame and channel (see :func:`~spikeview.ops.noise.effective_sigma`)."""

@@ -361,10 +361,6 @@ class SimulatedCapture(SpikeSource):
             raise ParameterError(f"Tick {t} is outside the simulated stream, which holds ticks [0, {self.n_frames}): choose one inside.")
         return self._sim.gt_at(t)
 
-    def gt_frames(self) -> np.ndarray:
-        """Ground truth at every tick of :attr:`gt_ticks`: (N, H, W, 3) float32."""
-        return np.stack([self.gt_at(int(t)) for t in self.gt_ticks])
-
     def _read(self, a: int, b: int) -> np.ndarray:
         h, w = self.height, self.width
         bits = np.unpackbits(self._packed[a:b], axis=1, count=h * w, bitorder="little")

@@ -240,9 +240,6 @@ class ExportPanel(QtWidgets.QWidget):
         self.progress.setRange(0, max(total, 1))
         self.progress.setValue(done)
 
-    def folder_for_dialogs(self) -> Path:
-        return self.folder
-
     def remember_folder(self, folder: Path) -> None:
         """The folder of a started export: the default for the next capture's exports (not the capture's own)."""
         self._chosen_folder = Path(folder)
