@@ -1,7 +1,10 @@
-"""What the benchmark scripts share: the CPU's name for the report header, and writing the report."""
+"""What the benchmark scripts share: the CPU's name and the load for the report header, waiting on a Qt event
+loop, and writing the report."""
 
 from __future__ import annotations
 
+import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +19,24 @@ def cpu_model(default: str = "unknown CPU") -> str:
     except OSError:
         pass
     return default
+
+
+def load_average(sep: str = " / ") -> str:
+    """The 1-, 5- and 15-minute load averages (``"n/a"`` where the system has none)."""
+    try:
+        return sep.join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:
+        return "n/a"
+
+
+def wait(app, cond, timeout: float = 120.0, pause: float = 0.001) -> None:
+    """Run ``app``'s event loop until ``cond()`` holds (``TimeoutError`` after ``timeout`` s)."""
+    end = time.perf_counter() + timeout
+    while not cond():
+        if time.perf_counter() > end:
+            raise TimeoutError("benchmark step timed out")
+        app.processEvents()
+        time.sleep(pause)
 
 
 def write_report(out: Path, lines: list[str]) -> int:

@@ -42,7 +42,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from _common import cpu_model, synthetic_capture as _capture  # noqa: E402  (benchmarks/_common.py)
+from _common import cpu_model, load_average as load, synthetic_capture as _capture, wait  # noqa: E402  (benchmarks/_common.py)
 
 
 def synthetic_capture(folder: Path, size: int, ticks: int, seed: int = 0) -> Path:
@@ -63,25 +63,9 @@ def machine() -> str:
             f"Qt platform {os.environ.get('QT_QPA_PLATFORM')}")
 
 
-def load() -> str:
-    try:
-        return " / ".join(f"{x:.2f}" for x in os.getloadavg())
-    except OSError:
-        return "n/a"
-
-
 def spin(app, seconds: float) -> None:
     end = time.perf_counter() + seconds
     while time.perf_counter() < end:
-        app.processEvents()
-        time.sleep(0.001)
-
-
-def wait(app, cond, timeout: float = 120.0) -> None:
-    end = time.perf_counter() + timeout
-    while not cond():
-        if time.perf_counter() > end:
-            raise TimeoutError("benchmark step timed out")
         app.processEvents()
         time.sleep(0.001)
 

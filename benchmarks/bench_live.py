@@ -37,8 +37,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from _common import cpu_model, write_report  # noqa: E402  (benchmarks/_common.py)
-
+from _common import cpu_model, load_average, write_report  # noqa: E402  (benchmarks/_common.py)
 from spikeview.io.raw1m import RAW1M_FRAME_BYTES, Raw1MDecoder, encode_raw1m  # noqa: E402
 from spikeview.live.decode import raw1m_to_packed  # noqa: E402
 from spikeview.live.mockusb import MOCK_PID, MOCK_VID, MockBackend  # noqa: E402
@@ -145,13 +144,6 @@ def machine() -> str:
             f"numpy {np.__version__}")
 
 
-def load() -> str:
-    try:
-        return "/".join(f"{v:.2f}" for v in os.getloadavg())
-    except OSError:
-        return "n/a"
-
-
 def findings(rows: list[tuple[str, float, float, int, str]]) -> list[str]:
     """A short reading of the table, from its numbers (per CPU-second, so other jobs on the machine matter less)."""
     per_cpu = {name.split(":")[0] if name.startswith("stage") else name: nbytes / max(cpu, 1e-9)
@@ -202,7 +194,7 @@ def main(argv: list[str] | None = None) -> int:
     frame_total = int(args.mb * 1e6) // RAW1M_FRAME_BYTES
     total = frame_total * RAW1M_FRAME_BYTES
     slow_total = max(total // 8, 32 * RAW1M_FRAME_BYTES)
-    load_before = load()
+    load_before = load_average("/")
     rows: list[tuple[str, float, float, int, str]] = []
 
     def run(name: str, fn: Callable[[], int], note: str = "") -> None:
@@ -225,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
         run("stage: raw1m_to_packed (tag stripping)", lambda: case_strip(raw, total))
         run("stage: Raw1MDecoder.feed (sync + unpack to uint8 frames)", lambda: case_feed_decoded(raw, slow_total),
             "not used by the live path")
-    load_after = load()
+    load_after = load_average("/")
 
     lines = [
         "# Live capture: sustained decode throughput of the raw 1000×1000 stream",

@@ -54,7 +54,11 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
-from _common import cpu_model, synthetic_capture, write_report  # noqa: E402
+from _common import cpu_model, synthetic_capture, wait as _wait, write_report  # noqa: E402
+
+
+def wait(app, cond, timeout: float = 300.0) -> None:
+    _wait(app, cond, timeout, pause=0.002)
 
 SCENARIOS = ("idle", "burst", "open_first", "open", "playback", "export", "guided")
 BURST_MS = 20
@@ -166,15 +170,6 @@ def measure(app, start, done, timeout: float, sampler: Sampler | None = None) ->
             seen = Counter(k for ts, k in sampler.samples if lo <= ts <= hi)
             out["worst"].append([float(gaps[i]), seen.most_common(8), float(busy[i])])
     return out
-
-
-def wait(app, cond, timeout: float = 300.0) -> None:
-    end = time.perf_counter() + timeout
-    while not cond():
-        if time.perf_counter() > end:
-            raise TimeoutError("benchmark step timed out")
-        app.processEvents()
-        time.sleep(0.002)
 
 
 def spin(app, seconds: float) -> None:
