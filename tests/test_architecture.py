@@ -198,3 +198,59 @@ def test_the_private_name_scan_finds_a_planted_import_from_guided(tmp_path):
     fine = tmp_path / "fine.py"
     fine.write_text("from spikeview.gui import _helpers\nfrom spikeview.guided.window import crop_to_roi\n")
     assert _private_library_imports(fine, "spikeview.gui.fine") == []
+
+
+FIRST_ROW = {"errors", "cfa", "config", "transfer", "_files", "_lazy", "memory", "metrics"}
+
+
+def _package_imports() -> dict[str, set[str]]:
+    """``{package: packages it imports}`` (spikeview's top-level names; module-level and lazy imports)."""
+    out: dict[str, set[str]] = {}
+    for mod, targets in _import_graph().items():
+        p = mod.split(".")[1] if "." in mod else mod
+        for t in targets:
+            q = t.split(".")[1] if "." in t else t
+            if q != p:
+                out.setdefault(p, set()).add(q)
+    return out
+
+
+def _doc_table() -> list[tuple[list[str], str]]:
+    """The rows of docs/ARCHITECTURE.md's package table: ``(packages, imports cell)``."""
+    import re
+
+    text = (PKG.parent / "docs" / "ARCHITECTURE.md").read_text(encoding="utf-8")
+    table = text.split("| package | holds | imports |", 1)[1].split("\n\n", 1)[0]
+    rows = []
+    for line in table.strip().splitlines()[1:]:
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        rows.append((re.findall(r"`([\w.]+)`", cells[0]), cells[-1]))
+    return rows
+
+
+def test_the_architecture_docs_package_table_is_the_code():
+    """Each row's imports column is what its packages import beyond the first row, no more and no less."""
+    import re
+
+    actual = _package_imports()
+    rows = _doc_table()
+    named = {p for pkgs, _ in rows for p in pkgs}
+    real = {p for p in actual} | {t for ts in actual.values() for t in ts}
+    assert real - {"__main__"} <= named, f"packages missing from the table: {sorted(real - named - {'__main__'})}"
+    for pkgs, cell in rows:
+        if pkgs and set(pkgs) == FIRST_ROW:
+            for p in pkgs:
+                assert actual.get(p, set()) <= FIRST_ROW, f"{p} imports {sorted(actual[p] - FIRST_ROW)} beyond the first row"
+            continue
+        if cell.startswith("everything"):
+            continue
+        stated = set(re.findall(r"`([\w.]+)`", cell))
+        got = set().union(*(actual.get(p, set()) for p in pkgs)) - FIRST_ROW - set(pkgs)
+        assert got == stated, f"docs/ARCHITECTURE.md row {pkgs}: says {sorted(stated)}, the code imports {sorted(got)}"
+
+
+def test_an_observation_is_built_from_a_capture_in_one_module():
+    """The one window planner: ``Observation.from_source(`` is called from guided/window.py only."""
+    callers = sorted(str(p.relative_to(PKG)) for p in PKG.rglob("*.py")
+                     if "from_source(" in p.read_text(encoding="utf-8") and p.name != "observation.py")
+    assert callers == ["guided/window.py"], callers
