@@ -299,19 +299,46 @@ class _FirstOnly(list):
             super().append(item)
 
 
-def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str | Path, *,
-                   state: SequenceState | None = None, roi: tuple[int, int, int, int] | None = None,
-                   step: int | None = None, callback: Callback | None = None, cancel: Any = None,
-                   sampler: Any = None, progress: Callable[[int, int], Any] | None = None,
-                   overwrite: bool = False, source_name: str | None = None, inputs: Sequence[Any] = (),
-                   extra_outputs: Sequence[Any] = (), announce: Callable[[str], Any] | None = None,
-                   first_observation: Any = None) -> list[Path]:
+@dataclass
+class WriteOptions:
+    """How :func:`write_sequence` runs and writes (everything but what it writes: source, recipe, centres, output).
+
+    Attributes:
+        state: the sequence's state (default: :func:`prepare_sequence`).
+        roi: ``(x, y, w, h)`` region of interest.
+        step: ticks between centres (recorded in the metadata).
+        callback: progress per sampler step / frame (see :data:`Callback`); ``cancel``: checked before every step.
+        sampler: a guided sampler to reuse (its prior loaded); ``first_observation``: the first window's observation
+            when the caller built it already (:func:`reconstruct_windows`).
+        progress: ``progress(done, total)`` of the exporter.
+        overwrite: replace an existing output; never the source or one of ``inputs``.
+        source_name: the source's name in the metadata (default: its path).
+        inputs: files the run reads besides the source (never replaced); ``extra_outputs``: files written beside
+            the output (e.g. its preset), checked with it before any work.
+        announce: gets one sentence about a large output's size first.
+    """
+
+    state: SequenceState | None = None
+    roi: tuple[int, int, int, int] | None = None
+    step: int | None = None
+    callback: Callback | None = None
+    cancel: Any = None
+    sampler: Any = None
+    progress: Callable[[int, int], Any] | None = None
+    overwrite: bool = False
+    source_name: str | None = None
+    inputs: Sequence[Any] = ()
+    extra_outputs: Sequence[Any] = ()
+    announce: Callable[[str], Any] | None = None
+    first_observation: Any = None
+
+
+def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str | Path,
+                   options: WriteOptions | None = None) -> list[Path]:
     """Reconstruct ``centers`` and write them to ``out`` (format from its suffix), with the recipe in the metadata.
 
-    Nothing existing is replaced without ``overwrite``, and never the source or one of ``inputs``
-    (checked for ``out`` and ``extra_outputs``, e.g. the preset written beside it, before any work);
-    ``announce`` gets one sentence about a large output's size first; ``first_observation`` is the first window's
-    observation if the caller built it already (see :func:`reconstruct_windows`).
+    Nothing existing is replaced without ``options.overwrite``, and never the source or one of ``options.inputs``
+    (checked for ``out`` and ``options.extra_outputs``, e.g. the preset written beside it, before any work).
 
     Returns:
         The files written (one for MP4/npy, one per frame for EXR/PNG patterns).
@@ -319,18 +346,19 @@ def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str
     from spikeview.classical.windows import window_range
     from spikeview.export import ExportMetadata, open_exporter
 
-    state = state if state is not None else prepare_sequence(source, recipe)
+    o = options if options is not None else WriteOptions()
+    state = o.state if o.state is not None else prepare_sequence(source, recipe)
     recipe = recipe_for_state(recipe, state)
     span = recipe.span()
     centers = list(centers)
     first = window_range(centers[0], span, source.n_frames)
-    meta = ExportMetadata(source=source_name if source_name is not None else str(getattr(source.info, "path", "") or ""),
+    meta = ExportMetadata(source=o.source_name if o.source_name is not None else str(getattr(source.info, "path", "") or ""),
                           method=recipe.run.method, tick_rate=float(source.tick_rate), window=first,
-                          centre_tick=int(centers[0]), step_ticks=step if len(centers) > 1 else None,
+                          centre_tick=int(centers[0]), step_ticks=o.step if len(centers) > 1 else None,
                           params=recipe.to_dict())
     infos = _FirstOnly()
-    frames = reconstruct_windows(source, centers, recipe, state, roi=roi, callback=callback, cancel=cancel, sampler=sampler,
-                                 infos=infos, first_observation=first_observation)
+    frames = reconstruct_windows(source, centers, recipe, state, roi=o.roi, callback=o.callback, cancel=o.cancel,
+                                 sampler=o.sampler, infos=infos, first_observation=o.first_observation)
     cfg, expose = exposure_mapping(recipe, state, out)
     head = expose(next(frames))
     plan = getattr(infos[0], "plan", None) if infos else None
@@ -338,13 +366,13 @@ def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str
         meta.plan = {k: plan.reasons[k] for k in ("tiles", "precision") if plan.reasons.get(k)}
         meta.plan["device"] = f"{getattr(plan, 'device', 'cpu')} ({plan.reasons.get('device', '')})"
     kwargs: dict[str, Any] = {}
-    if progress is not None:
-        kwargs["progress"] = progress
-    if cancel is not None:
-        kwargs["cancel"] = cancel.is_set if hasattr(cancel, "is_set") else cancel
-    ex = open_exporter(Path(out), len(centers), head.shape, cfg, meta, overwrite=overwrite,
-                       inputs=[getattr(source.info, "path", None), *inputs], extra_outputs=extra_outputs,
-                       announce=announce, **kwargs)
+    if o.progress is not None:
+        kwargs["progress"] = o.progress
+    if o.cancel is not None:
+        kwargs["cancel"] = o.cancel.is_set if hasattr(o.cancel, "is_set") else o.cancel
+    ex = open_exporter(Path(out), len(centers), head.shape, cfg, meta, overwrite=o.overwrite,
+                       inputs=[getattr(source.info, "path", None), *o.inputs], extra_outputs=o.extra_outputs,
+                       announce=o.announce, **kwargs)
     with ex:
         ex.write(head, window=first, centre_tick=int(centers[0]))
         for c, frame in zip(centers[1:], frames):

@@ -14,7 +14,7 @@ import OpenImageIO as oiio
 
 from spikeview.classical.colour_cast import estimate_white
 from spikeview.io.source import ArraySource
-from spikeview.pipeline import prepare_sequence, reconstruct_windows, write_sequence
+from spikeview.pipeline import WriteOptions, prepare_sequence, reconstruct_windows, write_sequence
 from spikeview.recipe import Recipe
 from test_guided_helpers import spikes_from_rates
 
@@ -39,18 +39,18 @@ def test_unclipped_tfp_exr_is_scene_linear_and_the_white_point_clips_at_most_a_t
     # quantisation step (the white point may split the top level, whose values then clip by up to 2 %)
     assert (frames > state.white * 1.02).mean() <= 0.001
     brightest = int(np.argmax(frames.reshape(len(centers), -1).max(axis=1)))
-    out = write_sequence(src, recipe, centers[brightest:brightest + 1], tmp_path / "f.exr", state=state)
+    out = write_sequence(src, recipe, centers[brightest:brightest + 1], tmp_path / "f.exr", WriteOptions(state=state))
     img = oiio.ImageBuf(str(out[0])).get_pixels(oiio.FLOAT)
     # EXR is scene-linear relative to the white point: the frame divided by it, highlights above 1 kept
     np.testing.assert_allclose(img, frames[brightest] / state.white, rtol=2e-3, atol=1e-4)
     assert img.max() >= 1.0 and (img == 1.0).mean() < 0.01
     # with a lower white point (--white) the highlights lie above 1 in the EXR and nothing is lost
     darker = recipe.with_values({"export.white": state.white / 2})
-    out = write_sequence(src, darker, centers[brightest:brightest + 1], tmp_path / "g.exr", state=state)
+    out = write_sequence(src, darker, centers[brightest:brightest + 1], tmp_path / "g.exr", WriteOptions(state=state))
     img2 = oiio.ImageBuf(str(out[0])).get_pixels(oiio.FLOAT)
     assert img2.max() > 1.5
     np.testing.assert_allclose(img2, 2 * img, rtol=2e-3, atol=1e-4)
-    npy = write_sequence(src, recipe, centers, tmp_path / "f.npy", state=state)
+    npy = write_sequence(src, recipe, centers, tmp_path / "f.npy", WriteOptions(state=state))
     # bounded: the white point maps to 1, the (at most 0.1 %) values above it clip
     np.testing.assert_array_equal(np.load(npy[0]), np.clip(frames * np.float32(1.0 / state.white), 0.0, 1.0))
 

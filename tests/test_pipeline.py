@@ -12,6 +12,7 @@ from spikeview.errors import Cancelled, ParameterError
 from spikeview.io import ArraySource
 from spikeview.pipeline import (
     SequenceState,
+    WriteOptions,
     exposure_mapping,
     output_white,
     parse_range,
@@ -130,7 +131,7 @@ def test_write_sequence_writes_the_exposed_frames(tmp_path, cfa):
     recipe = _recipe()
     state = prepare_sequence(src, recipe)
     out = tmp_path / "f.npy"
-    write_sequence(src, recipe, [40, 80, 120], out, state=state)
+    write_sequence(src, recipe, [40, 80, 120], out, WriteOptions(state=state))
     _, expose = exposure_mapping(recipe, state, out)
     want = np.stack([expose(f) for f in reconstruct_windows(src, [40, 80, 120], recipe, state)])
     got = np.load(out)

@@ -119,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
         return batch.run_zarr(args)
     from spikeview.export import describe_slow_motion, slow_motion_factor
     from spikeview.pipeline import prepare_sequence, recipe_for_state, white_point_line, window_centres, write_sequence
+    from spikeview.pipeline import WriteOptions
 
     recipe = recipe if recipe is not None else recipe_from_args(args)
     out = Path(args.out)
@@ -168,10 +169,10 @@ def run(args: argparse.Namespace) -> int:
                 begun[0] = max(begun[0], fi)
 
             try:
-                write_sequence(src, recipe, centres, out, state=state, step=step, callback=on_step,
-                               overwrite=bool(getattr(args, "overwrite", False)), inputs=[getattr(args, "preset", None)],
-                               extra_outputs=[preset_path(out)], announce=lambda text: print(text, file=sys.stderr),
-                               first_observation=first)
+                write_sequence(src, recipe, centres, out, WriteOptions(
+                    state=state, step=step, callback=on_step, overwrite=bool(getattr(args, "overwrite", False)),
+                    inputs=[getattr(args, "preset", None)], extra_outputs=[preset_path(out)],
+                    announce=lambda text: print(text, file=sys.stderr), first_observation=first))
             except BaseException:
                 if "%" in out.name and begun[0] > 0:  # a stopped sequence keeps its finished frames: and their recipe
                     try:

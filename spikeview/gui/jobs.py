@@ -294,7 +294,7 @@ def export_job(req: ExportRequest, ctx: Any) -> list[Path]:
     """Reconstruct and write every frame with :func:`spikeview.pipeline.write_sequence` (the CLI's
     function: α once, the sequence path with reuse and warm start as configured); progress
     ``(done, total)``; Cancel keeps finished frames."""
-    from spikeview.pipeline import window_centres, write_sequence
+    from spikeview.pipeline import WriteOptions, window_centres, write_sequence
 
     if req.out.suffix.lower() == ".zarr":
         return store_job(req, ctx)
@@ -307,9 +307,10 @@ def export_job(req: ExportRequest, ctx: Any) -> list[Path]:
         sampler = ctx.state["sampler"] = GuidedSampler(req.recipe.guided)
     step = window_centres(req.recipe, req.source.n_frames)[1]
     state = sequence_state(req.source, req.recipe, req.alpha, ctx)
-    return write_sequence(req.source, req.recipe, list(req.ticks), req.out, state=state, roi=req.roi,
-                          step=step, cancel=ctx.cancelled, sampler=sampler, overwrite=req.overwrite,
-                          progress=lambda done, total: ctx.report((done, total)), source_name=req.source_name)
+    return write_sequence(req.source, req.recipe, list(req.ticks), req.out,
+                          WriteOptions(state=state, roi=req.roi, step=step, cancel=ctx.cancelled, sampler=sampler,
+                                       overwrite=req.overwrite, progress=lambda done, total: ctx.report((done, total)),
+                                       source_name=req.source_name))
 
 
 def store_job(req: ExportRequest, ctx: Any) -> list[Path]:

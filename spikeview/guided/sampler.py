@@ -268,16 +268,15 @@ class GuidedSampler:
 
     def _sample(self, obs: Observation, p: GuidedConfig, plan: Plan, channels: int, callback: Callback | None,
                 cancel: Any, init: np.ndarray | None, noise: torch.Tensor | None = None) -> np.ndarray:
-        """The one sampling loop, for a pixel-space denoiser (VE schedule) and a latent model (DDIM) alike."""
+        """The one sampling loop, for a pixel-space denoiser (VE schedule) and a latent model (DDIM) alike: what
+        differs between the two is one strategy object (:class:`PixelSpace`, :class:`LatentSpaceStrategy`)."""
         prior = self.prior_for(channels, p)
-        latent = is_latent(prior)
-        # the window runs where its prior runs (guided.device); a latent model moves its own tensors
-        dev = torch.device("cpu") if latent else module_device(prior)
-        self.info.device = str(getattr(prior, "device", dev)) if latent else str(dev)
-        self.info.precision = "float32" if latent else (plan.precision or prec.resolve_precision(p.precision, device=dev)[0])
+        space: SampleSpace = LatentSpaceStrategy(prior) if is_latent(prior) else PixelSpace(prior)
+        self.info.device = space.device_label
+        self.info.precision = space.precision(plan, p)
         rule = self._guidance if self._guidance is not None else self.guidance_for(p, prior, obs.shape)
         gen = torch.Generator().manual_seed(int(p.seed))  # on the CPU: the same numbers on every device
-        data = self.data_term(obs, plan, p, dev)
+        data = self.data_term(obs, plan, p, space.dev)
 
         sigma_obs = np.asarray(plan.sigma, dtype=np.float64) * p.sigma_scale
         if sigma_obs.size != channels:
@@ -295,50 +294,128 @@ class GuidedSampler:
             sigma_add = np.sqrt(np.maximum(t_s ** 2 - sigma_obs ** 2, 0.0))
         else:
             sigma_add = np.full(channels, t_s)
-        start = to_tensor(x_start).to(dev, non_blocking=True)
-
-        if latent:
-            from spikeview.guided.latent import LatentSpace, make_ladder
-
-            schedule: Any = make_ladder(prior, p.steps, t_s)
-            space = LatentSpace(prior, obs.shape, channels)
-            self.info.sigma_start = [float(t_s)] * channels
-            _to_device(data, prior.device)
-        else:
-            sigma_first = np.minimum(np.sqrt(sigma_obs ** 2 + sigma_add ** 2), getattr(prior, "sigma_max", math.inf))
-            sigma_first = np.maximum(sigma_first, 1e-4)
-            self.info.sigma_start = sigma_first.tolist()
-            schedule = VESchedule(tuple(sigma_first), p.sigma_end)
-            schedule.set_timesteps(p.steps)
-            add = torch.as_tensor(sigma_add, dtype=start.dtype, device=dev).view(1, -1, 1, 1)
+        start = to_tensor(x_start).to(space.dev, non_blocking=True)
+        schedule = space.setup(data, start, obs.shape, channels, p, t_s, sigma_obs, sigma_add)
+        self.info.sigma_start = space.sigma_start
         # the prior's arithmetic per step (bfloat16 only at high noise levels: spikeview.guided.precision)
-        layer_prec = prec.step_precisions(self.info.precision, p.steps if latent else schedule.sigmas[:p.steps].min(axis=1))
+        layer_prec = prec.step_precisions(self.info.precision, space.step_levels(schedule, p))
         total = p.steps * p.chains
         acc = torch.zeros_like(start)
         for chain in range(p.chains):
             # chains differ in their start noise and in the order of the dihedral transforms
-            if latent:
-                x = space.start(start, schedule, gen)
-            elif noise is not None and chain == 0:
-                x = start + add * noise.to(dev, start.dtype)
-            else:
-                x = schedule.add_noise(start, add, gen)
+            x = space.start(start, schedule, gen, noise if chain == 0 else None)
             for i in range(p.steps):
                 done = chain * p.steps + i
                 if is_cancelled(cancel):
                     raise Cancelled(f"guided reconstruction cancelled at step {done + 1} of {total}")
                 sigma = schedule.sigma(i, x)
-                transform = ((i + 3 * chain) % 8) if (p.self_ensemble and not latent) else None
                 x, x0 = rule.step(prec.at_precision(prior, layer_prec[i]), schedule, data, x, i, sigma, zeta=p.zeta,
-                                  generator=gen, transform=transform)
+                                  generator=gen, transform=space.transform(p, i, chain))
                 if not (bool(torch.isfinite(x).all()) and bool(torch.isfinite(x0).all())):
                     raise ParameterError(_diverged(p, done + 1, total))
-                x0 = x0.float().cpu() if latent else x0.float()  # a latent run accumulates on the CPU
+                x0 = space.estimate(x0)
                 self.info.steps = done + 1
                 if callback is not None:
                     callback(done + 1, total, to_image((acc + x0) / (chain + 1)))
-            acc = acc + (space.finish(x) if latent else x0)
+            acc = acc + space.finish(x, x0)
         return to_image(acc / p.chains)
+
+
+class SampleSpace:
+    """Where the sampler's loop runs: what a pixel-space denoiser and a latent model do differently (the
+    schedule, the start, the dihedral self-ensemble, where estimates accumulate and what a chain returns)."""
+
+    dev: Any
+    device_label: str
+    sigma_start: list[float]
+
+    def precision(self, plan: Plan, p: GuidedConfig) -> str: ...
+    def setup(self, data: DataTerm, start: torch.Tensor, shape: tuple[int, int], channels: int, p: GuidedConfig,
+              t_s: float, sigma_obs: np.ndarray, sigma_add: np.ndarray) -> Any: ...
+    def step_levels(self, schedule: Any, p: GuidedConfig) -> Any: ...
+    def start(self, start: torch.Tensor, schedule: Any, gen: torch.Generator, noise: torch.Tensor | None) -> torch.Tensor: ...
+    def transform(self, p: GuidedConfig, i: int, chain: int) -> int | None: ...
+    def estimate(self, x0: torch.Tensor) -> torch.Tensor: ...
+    def finish(self, x: torch.Tensor, x0: torch.Tensor) -> torch.Tensor: ...
+
+
+class PixelSpace(SampleSpace):
+    """A pixel-space denoiser (FFDNet): the VE σ ladder, start ``Y₀ + σ_add·z``, the dihedral self-ensemble, on
+    the prior's device (``guided.device``)."""
+
+    def __init__(self, prior: Any):
+        self.prior = prior
+        self.dev = module_device(prior)
+        self.device_label = str(self.dev)
+        self.sigma_start: list[float] = []
+        self.add: torch.Tensor | None = None
+
+    def precision(self, plan: Plan, p: GuidedConfig) -> str:
+        return plan.precision or prec.resolve_precision(p.precision, device=self.dev)[0]
+
+    def setup(self, data, start, shape, channels, p, t_s, sigma_obs, sigma_add):
+        sigma_first = np.minimum(np.sqrt(sigma_obs ** 2 + sigma_add ** 2), getattr(self.prior, "sigma_max", math.inf))
+        sigma_first = np.maximum(sigma_first, 1e-4)
+        self.sigma_start = sigma_first.tolist()
+        schedule = VESchedule(tuple(sigma_first), p.sigma_end)
+        schedule.set_timesteps(p.steps)
+        self.add = torch.as_tensor(sigma_add, dtype=start.dtype, device=self.dev).view(1, -1, 1, 1)
+        return schedule
+
+    def step_levels(self, schedule, p):
+        return schedule.sigmas[:p.steps].min(axis=1)
+
+    def start(self, start, schedule, gen, noise):
+        if noise is not None:  # a tile's cut of the whole frame's start noise
+            return start + self.add * noise.to(self.dev, start.dtype)
+        return schedule.add_noise(start, self.add, gen)
+
+    def transform(self, p, i, chain):
+        return ((i + 3 * chain) % 8) if p.self_ensemble else None
+
+    def estimate(self, x0):
+        return x0.float()
+
+    def finish(self, x, x0):
+        return x0
+
+
+class LatentSpaceStrategy(SampleSpace):
+    """A latent model (the optional Stable Diffusion prior): its DDIM ladder and VAE, on its own device; estimates
+    accumulate on the CPU, no dihedral transforms (the VAE's latents are not equivariant)."""
+
+    def __init__(self, prior: Any):
+        self.prior = prior
+        self.dev = torch.device("cpu")  # the data term and the start stay on the CPU; the model moves its own tensors
+        self.device_label = str(getattr(prior, "device", self.dev))
+        self.sigma_start: list[float] = []
+        self.space: Any = None
+
+    def precision(self, plan, p):
+        return "float32"
+
+    def setup(self, data, start, shape, channels, p, t_s, sigma_obs, sigma_add):
+        from spikeview.guided.latent import LatentSpace, make_ladder
+
+        self.space = LatentSpace(self.prior, shape, channels)
+        self.sigma_start = [float(t_s)] * channels
+        _to_device(data, self.prior.device)
+        return make_ladder(self.prior, p.steps, t_s)
+
+    def step_levels(self, schedule, p):
+        return p.steps
+
+    def start(self, start, schedule, gen, noise):
+        return self.space.start(start, schedule, gen)
+
+    def transform(self, p, i, chain):
+        return None
+
+    def estimate(self, x0):
+        return x0.float().cpu()
+
+    def finish(self, x, x0):
+        return self.space.finish(x)
 
 
 def _to_device(data: DataTerm, device: Any) -> None:
