@@ -109,10 +109,15 @@ def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> Seque
     return SequenceState(a, white, note)
 
 
-def recipe_for_state(recipe: Recipe, state: SequenceState) -> Recipe:
-    """``recipe`` with the sequence's α, white point and, for the guided method, the prior's precision
-    (``auto`` resolved for this CPU) recorded (a saved preset then reproduces the frames exactly)."""
+def recipe_for_state(recipe: Recipe, state: SequenceState, source: Any = None) -> Recipe:
+    """``recipe`` with the sequence's α, white point, for the guided method the prior's precision (``auto``
+    resolved for this CPU or GPU) and, given the ``source``, its display curve (``export.transfer = auto`` resolved:
+    :func:`spikeview.transfer.resolve_transfer`) recorded (a saved preset then reproduces the frames exactly)."""
     values: dict[str, Any] = {}
+    if source is not None and recipe.export.transfer == "auto":
+        from spikeview.transfer import resolve_transfer
+
+        values["export.transfer"] = resolve_transfer("auto", source.info)[0]
     if state.alpha is not None and recipe.classical.alpha is None:
         values["classical.alpha"] = [float(v) for v in state.alpha]
     out = recipe.with_values(values) if values else recipe
@@ -348,7 +353,7 @@ def write_sequence(source: Any, recipe: Recipe, centers: Sequence[int], out: str
 
     o = options if options is not None else WriteOptions()
     state = o.state if o.state is not None else prepare_sequence(source, recipe)
-    recipe = recipe_for_state(recipe, state)
+    recipe = recipe_for_state(recipe, state, source)
     span = recipe.span()
     centers = list(centers)
     first = window_range(centers[0], span, source.n_frames)

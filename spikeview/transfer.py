@@ -9,8 +9,38 @@ float64 out), so each caller keeps its own precision; they do not clip.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
+
+#: the display curves of PNG/MP4 and the app (``export.transfer``; ``"auto"`` = the capture's own, :func:`source_transfer`)
+TRANSFERS = ("srgb", "gamma", "linear")
+#: where a file source records its display convention (``StreamInfo.extra``; the sidecar's ``[stream] transfer``)
+DISPLAY_KEY = "display_transfer"
+
+
+def source_transfer(info: Any) -> tuple[str, str]:
+    """The display curve a capture's rates want, and why: the sidecar's ``transfer``; ``srgb`` for spikeview's own
+    captures (a sidecar without it, the simulator, live cameras: rates in proportion to linear light); ``linear``
+    for a file without a sidecar, the convention of the ecosystem's tools (SpikeCV, Spike-Zoo show spike rates
+    linearly, and their data sets are made from display-referred frames)."""
+    extra = getattr(info, "extra", None) or {}
+    value = extra.get(DISPLAY_KEY)
+    if value in TRANSFERS:
+        if "sidecar" in extra:
+            return value, f"the capture's sidecar says transfer = {value}"
+        if value == "linear":
+            return value, ("a capture without a sidecar: spike rates shown linearly, as the ecosystem's tools (SpikeCV, "
+                           "Spike-Zoo) do; --transfer srgb for a camera's linear light")
+        return value, f"the capture says transfer = {value}"
+    return "srgb", "rates in proportion to linear light (a spikeview capture, the simulator or a camera): the sRGB curve"
+
+
+def resolve_transfer(requested: str, info: Any) -> tuple[str, str]:
+    """``export.transfer`` for a capture: ``auto`` → :func:`source_transfer`; a curve the user chose, as is."""
+    if requested == "auto":
+        return source_transfer(info)
+    return requested, f"set by --transfer {requested}"
 
 
 def levels_ordered(black: float, white: float | None) -> bool:

@@ -109,17 +109,16 @@ def test_a_stopped_png_sequence_keeps_its_frames_and_their_preset(tmp_path, monk
 
 
 @pytest.mark.parametrize("cfa", ["none", "RGGB"])
-def test_an_8bit_output_of_a_capture_without_sidecar_names_the_display_curve(tmp_path, capsys, cfa):
-    """The walk-through found Spike-Zoo clips' PNGs too bright against their ground truth (spikes simulated from
-    display values; the default sRGB curve is for linear light): such a run says which curve matches them."""
-    from spikeview.cli.reconstruct import DISPLAY_CURVE_NOTE
+def test_an_8bit_output_takes_the_captures_display_curve_and_says_so(tmp_path, capsys, cfa):
+    """A capture without a sidecar (a Spike-Zoo or SpikeCV clip: spikes simulated from display values) is shown
+    linearly by default, as its ecosystem shows it (the walk-through measured its PNGs 30-50 % too bright with the
+    sRGB curve); spikeview's own captures (sidecar) keep sRGB; --transfer overrides; the line says which and why."""
     from spikeview.sim import SimConfig, simulate_to_file
     from spikeview.sim.scenes import StaticScene
 
     scene = StaticScene(np.full((24, 32, 3), 0.4, dtype=np.float32))
     files = simulate_to_file(scene, SimConfig(n_ticks=60, width=32, height=24, cfa=cfa, seed=1), tmp_path / "sim.dat")
     flags = ["--method", "tfp", "--cfa", cfa]
-    note = f"note: {DISPLAY_CURVE_NOTE}"
 
     def err_of(*extra):
         capsys.readouterr()
@@ -127,12 +126,24 @@ def test_an_8bit_output_of_a_capture_without_sidecar_names_the_display_curve(tmp
         assert main(["reconstruct", str(files.dat), *flags, *at, *extra]) == 0
         return capsys.readouterr().err
 
-    assert note not in err_of("--out", str(tmp_path / "a.png"))  # spikeview's own sidecar: linear light, sRGB is right
+    def png_mean(name):
+        import OpenImageIO as oiio
+
+        return float(np.asarray(oiio.ImageBuf(str(tmp_path / name)).get_pixels(oiio.UINT8)).mean())
+
+    own = err_of("--out", str(tmp_path / "a.png"))
+    assert "display curve srgb (" in own  # spikeview's own sidecar: linear light, the sRGB curve
     files.sidecar.unlink()
     plain = ["--width", "32", "--height", "24"]
-    assert err_of(*plain, "--out", str(tmp_path / "b.png")).count(note) == 1
-    assert note in err_of(*plain, "--range", "10:50:10", "--out", str(tmp_path / "b.mp4"))
-    assert note not in err_of(*plain, "--out", str(tmp_path / "b.exr"))  # linear values: no display curve
-    assert note not in err_of(*plain, "--transfer", "srgb", "--out", str(tmp_path / "c.png"))  # the user's choice
-    lin = err_of(*plain, "--transfer", "linear", "--out", str(tmp_path / "d.png"))
-    assert note not in lin
+    eco = err_of(*plain, "--out", str(tmp_path / "b.png"))
+    assert eco.count("display curve linear (a capture without a sidecar") == 1
+    assert "display curve linear" in err_of(*plain, "--range", "10:50:10", "--out", str(tmp_path / "b.mp4"))
+    assert "display curve" not in err_of(*plain, "--out", str(tmp_path / "b.exr"))  # linear values: no display curve
+    assert "display curve" not in err_of(*plain, "--transfer", "srgb", "--out", str(tmp_path / "c.png"))  # the user's
+    assert png_mean("b.png") < png_mean("c.png") - 20  # linear is darker than sRGB on a mid-grey scene
+    assert png_mean("a.png") == pytest.approx(png_mean("c.png"), abs=1)  # the sidecar's sRGB = the flag's
+    from spikeview.recipe import Recipe
+
+    assert Recipe.load(tmp_path / "b.png.preset.toml").export.transfer == "linear"  # recorded as resolved
+
+

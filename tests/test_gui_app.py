@@ -790,3 +790,25 @@ def test_export_asks_before_replacing_a_file(opened, qtbot, tmp_path):
     w.export_to(str(out))
     qtbot.waitUntil(lambda: w.notice.kind == "success", timeout=WAIT_MS)
     assert len(asked) == 2 and out.read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", None], ids=["bayer", "mono"])
+def test_the_display_curve_auto_follows_the_capture_as_an_export_does(window, qtbot, tmp_path, cfa):
+    """Issue 26: a capture without a sidecar (the ecosystem's) is shown linearly, spikeview's own captures with the
+    sRGB curve; the view's curve is the one an export of the same capture writes (pipeline.recipe_for_state)."""
+    from spikeview.io import open_source
+    from spikeview.pipeline import SequenceState, recipe_for_state
+    from spikeview.recipe import Recipe
+
+    assert window.session.params["transfer"] == "auto"
+    window.set_stream(demo_stream())  # in memory, simulated: linear light
+    assert window.controller.display_params()["transfer"] == "srgb"
+    path = tmp_path / "eco.npy"
+    np.save(path, _demo().read(0, 120))
+    src = open_source(str(path), cfa=cfa)
+    window.set_stream(core.OpenedStream(src, "eco.npy", path))
+    assert window.controller.display_params()["transfer"] == "linear"
+    exported = recipe_for_state(Recipe(), SequenceState(), src).export.transfer
+    assert exported == window.controller.display_params()["transfer"]
+    window.session.set("transfer", "srgb")
+    assert window.controller.display_params()["transfer"] == "srgb"  # the user's choice wins

@@ -50,18 +50,16 @@ def add_args(p: argparse.ArgumentParser) -> None:
     batch.add_args(p)
 
 
-#: said when a PNG/MP4 of a capture without a sidecar takes the default sRGB curve (the walk-through found Spike-Zoo
-#: clips "too bright" against their ground truth: mean grey 186 against 123; --transfer linear matched it, 25 dB)
-DISPLAY_CURVE_NOTE = ("PNG/MP4 use the sRGB display curve, right for linear light (real cameras, spikeview's simulator); a capture "
-                      "simulated from video frames (Spike-Zoo, SpikeCV) fires in proportion to display values: --transfer linear "
-                      "matches its ground truth.")
+def display_curve_line(out: Path, asked: str, source: Any) -> str | None:
+    """The one line about the display curve of an 8-bit output (PNG/MP4) whose curve comes from the capture
+    (``asked`` = ``export.transfer`` before it was resolved: ``auto``, the default), which curve and why
+    (:func:`spikeview.transfer.resolve_transfer`); ``None`` for other outputs and a curve the user chose."""
+    from spikeview.transfer import resolve_transfer
 
-
-def display_curve_note_applies(out: Path, recipe: Recipe, args: argparse.Namespace, source: Any) -> bool:
-    """An 8-bit output of a capture file without a sidecar, with the sRGB curve by default (no --transfer, no preset)."""
-    return (out.suffix.lower() in (".png", ".mp4") and recipe.export.transfer == "srgb"
-            and "export.transfer" not in given_flags(args) and not getattr(args, "preset", None)
-            and source.info.path is not None and "sidecar" not in source.info.extra)
+    if out.suffix.lower() not in (".png", ".mp4") or asked != "auto":
+        return None
+    curve, why = resolve_transfer("auto", source.info)
+    return f"display curve {curve} ({why})."
 
 
 def inactive_notes(recipe: Recipe, args: argparse.Namespace, source: Any, centre: int, state: Any,
@@ -143,13 +141,15 @@ def run(args: argparse.Namespace) -> int:
                       f"the last window is centred on tick {centres[-1]}.", file=sys.stderr)
         state = prepare_sequence(src, recipe)
         asked_precision = recipe.guided.precision
-        recipe = recipe_for_state(recipe, state)
+        asked_transfer = recipe.export.transfer
+        recipe = recipe_for_state(recipe, state, src)
         how = "set by --white" if "export.white" in given_flags(args) else (
             "from the preset" if getattr(args, "preset", None) and state.white is not None and
             recipe.export.white != state.white else "the 99.9th percentile of the sequence's rates")
         print(white_point_line(recipe, state, how), file=sys.stderr)
-        if display_curve_note_applies(out, recipe, args, src):
-            print(f"note: {DISPLAY_CURVE_NOTE}", file=sys.stderr)
+        line = display_curve_line(out, asked_transfer, src)
+        if line is not None:
+            print(line, file=sys.stderr)
         notes, first = inactive_notes(recipe, args, src, centres[0], state, asked_precision)
         for note in notes:
             print(f"note: {note}", file=sys.stderr)

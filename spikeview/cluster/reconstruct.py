@@ -207,7 +207,7 @@ def _run_store(input_path, recipe, out: Path, chunk: int, attrs, client, progres
         else:
             _check_chunk_memory(chunk, frame_shape)
             state = prepare_sequence(src, recipe)
-            full = recipe_for_state(recipe, state)  # the α estimate recorded: the preset reproduces the frames
+            full = recipe_for_state(recipe, state, src)  # α, the display curve recorded: the preset reproduces the frames
             recipe_toml = f"# spikeview reconstruct preset for {src.info.path}\n" + full.to_toml()
             windows = [window_range(c, window, src.n_frames) for c in centres]
             created[0] = True

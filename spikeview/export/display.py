@@ -26,9 +26,9 @@ def encode_display(frame: np.ndarray, config: ExportConfig) -> np.ndarray:
     white = config.white_or()
     x = (frame.astype(np.float32) - np.float32(config.black)) / np.float32(white - config.black)
     x = np.clip(x, 0.0, 1.0)
-    if config.transfer == "srgb":
+    if config.curve() == "srgb":
         return srgb_encode(x)
-    if config.transfer == "gamma":
+    if config.curve() == "gamma":
         return np.power(x, np.float32(1.0 / config.gamma)).astype(np.float32)
     return x
 

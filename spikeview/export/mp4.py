@@ -124,7 +124,7 @@ class Mp4Exporter(Exporter):
                 raise ParameterError(
                     f"{self.path}: a {w}×{h} frame is too small to crop to an even size; use even_size='pad'."
                 )
-        trc = {"srgb": ColorTrc.IEC61966_2_1, "linear": ColorTrc.LINEAR}.get(self.config.transfer)
+        trc = {"srgb": ColorTrc.IEC61966_2_1, "linear": ColorTrc.LINEAR}.get(self.config.curve())
         if trc is None:  # pure gamma: only 2.2 and 2.8 have tags, other exponents stay unspecified
             trc = {2.2: ColorTrc.GAMMA22, 2.8: ColorTrc.GAMMA28}.get(round(self.config.gamma, 3), ColorTrc.UNSPECIFIED)
         self._colour = {

@@ -41,9 +41,9 @@ class PngExporter(SequenceExporter):
             pixels, names = pixels[:, :, None], ("Y",)
         else:
             names = ("R", "G", "B")
-        if self.config.transfer == "srgb":
+        if self.config.curve() == "srgb":
             colorspace = "sRGB"
-        elif self.config.transfer == "gamma":
+        elif self.config.curve() == "gamma":
             colorspace = f"Gamma{self.config.gamma:g}"
         else:
             colorspace = "linear"

@@ -12,12 +12,10 @@ import numpy as np
 
 from spikeview.config import Config, check_value, param
 from spikeview.errors import ParameterError
-from spikeview.transfer import levels_ordered
+from spikeview.transfer import TRANSFERS, levels_ordered
 
 #: EXR compressions offered (all lossless); OpenImageIO names
 EXR_COMPRESSIONS = ("zip", "piz", "none")
-#: display transfer functions for PNG and MP4
-TRANSFERS = ("srgb", "gamma", "linear")
 #: libx264 presets, fastest first
 X264_PRESETS = (
     "ultrafast",
@@ -59,8 +57,10 @@ class ExportConfig(Config):
             used directly treats ``None`` as 1. Never chosen per frame (no
             auto-levels), so brightness is comparable across a sequence. EXR and npy ignore
             them and keep the linear values as they are.
-        transfer: display encoding for PNG and MP4 after the levels: ``"srgb"`` (IEC 61966-2-1
-            curve, the default), ``"gamma"`` (pure power ``1/gamma``) or ``"linear"`` (none).
+        transfer: display encoding for PNG and MP4 after the levels: ``"auto"`` (the capture's convention,
+            :func:`spikeview.transfer.resolve_transfer`, resolved by the pipeline where the capture is known; an
+            exporter given ``auto`` alone uses sRGB, :meth:`curve`), ``"srgb"`` (IEC 61966-2-1 curve),
+            ``"gamma"`` (pure power ``1/gamma``) or ``"linear"`` (none).
         gamma: exponent for ``transfer="gamma"`` (> 0).
         first_frame: number of the first file of an EXR/PNG sequence; file ``i`` of the export
             is numbered ``first_frame + i``.
@@ -88,8 +88,10 @@ class ExportConfig(Config):
                                 help="Exposure: the linear value (Y·α/η with a colour cast, Y in spikes per tick for monochrome) that becomes 1.0 in EXR and full scale in "
                                      "npy/PNG/MP4 and the app; unset, the sequence's 99.9th percentile, chosen once and "
                                      "printed.")
-    transfer: str = param("srgb", label="Display curve", choices=TRANSFERS,
-                          help="Display encoding of PNG/MP4 and the app: srgb, gamma (power 1/gamma) or linear.")
+    transfer: str = param("auto", label="Display curve", choices=("auto",) + TRANSFERS,
+                          help="Display encoding of PNG/MP4 and the app: auto (the capture's: its sidecar's, sRGB for "
+                               "spikeview's own captures and cameras, linear for a file without a sidecar, as the "
+                               "ecosystem's tools show it), srgb, gamma (power 1/gamma) or linear.")
     gamma: float = param(2.2, label="Gamma", lo=0.2, hi=5.0, step=0.05, help="Exponent of the gamma display curve.")
     first_frame: int = 0
     even_size: str = "pad"
@@ -119,14 +121,18 @@ class ExportConfig(Config):
                                                "unset, the sequence's own is used)")
         if not levels_ordered(self.black, self.white):
             raise bad("black/white", (self.black, self.white), "black must be less than white, e.g. 0 and 1")
-        if self.transfer not in TRANSFERS:
-            raise bad("transfer", self.transfer, f"use one of {', '.join(TRANSFERS)}")
+        if self.transfer not in ("auto",) + TRANSFERS:
+            raise bad("transfer", self.transfer, f"use one of auto, {', '.join(TRANSFERS)}")
         if not (math.isfinite(self.gamma) and self.gamma > 0):
             raise bad("gamma", self.gamma, "use a positive exponent such as 2.2")
         if self.first_frame < 0:
             raise bad("first_frame", self.first_frame, "use 0 or a positive number")
         if self.even_size not in EVEN_SIZE_MODES:
             raise bad("even_size", self.even_size, f"use one of {', '.join(EVEN_SIZE_MODES)}")
+
+    def curve(self) -> str:
+        """The curve the writers apply: :attr:`transfer`, with ``auto`` (no capture to ask) as sRGB."""
+        return "srgb" if self.transfer == "auto" else self.transfer
 
     def white_or(self, estimate: float | None = None) -> float:
         """The white point outputs and the app use — the one "unset" rule: :attr:`white` when set, else

@@ -250,9 +250,20 @@ class Controller(QtCore.QObject):
         return (len(recent) - 1) / max(recent[-1] - recent[0], 1e-6) if len(recent) > 1 else 0.0
 
     # ------------------------------------------------------------------------------ previews
+    def display_params(self) -> dict[str, Any]:
+        """A snapshot of the session's parameters for a job, with the display curve ``auto`` resolved for the open
+        capture (:func:`spikeview.transfer.resolve_transfer`: what an export of it writes, pipeline.recipe_for_state)."""
+        from spikeview.transfer import resolve_transfer
+
+        params = dict(self.session.params)
+        if params.get("transfer") == "auto":
+            src = self.session.source
+            params["transfer"] = resolve_transfer("auto", getattr(src, "info", None))[0]
+        return params
+
     def _request(self, **overrides: Any) -> jobs.PreviewRequest:
         s = self.session
-        kw: dict[str, Any] = {"source": s.source, "tick": s.tick, "params": dict(s.params), "alpha": self.alpha,
+        kw: dict[str, Any] = {"source": s.source, "tick": s.tick, "params": self.display_params(), "alpha": self.alpha,
                               "roi": s.roi, "want_tfi": self.enabled["tfi"], "factor": self.display_factor}
         kw.update(overrides)
         return jobs.PreviewRequest(**kw)
@@ -343,7 +354,7 @@ class Controller(QtCore.QObject):
         except Exception as e:
             self._error(str(e))
             return self.guided_run
-        req = jobs.GuidedRequest(s.source, s.tick, dict(s.params), self.alpha, s.roi, gt, self.guided_run, recipe)
+        req = jobs.GuidedRequest(s.source, s.tick, self.display_params(), self.alpha, s.roi, gt, self.guided_run, recipe)
         self._guided_pending_key = self._guided_context()
         self.guided.submit("guided", lambda ctx, r=req: _guided_then_release(r, ctx), cancel_running=True)
         self.guided_state.emit("running", f"Guided run {self.guided_run} started.")

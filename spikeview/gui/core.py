@@ -226,8 +226,8 @@ def window_range(tick: int, window: int, n_frames: int) -> tuple[int, int]:
 
 def display_gamma(params: dict[str, Any]) -> str | float:
     """The ``gamma`` argument of :func:`spikeview.classical.to_display` for the session's curve."""
-    t = params["transfer"]
-    return "srgb" if t == "srgb" else (1.0 if t == "linear" else 1.0 / float(params["gamma"]))
+    t = params["transfer"]  # "auto" resolved by the controller's snapshot; alone (no capture) it is sRGB, as an export's
+    return "srgb" if t in ("srgb", "auto") else (1.0 if t == "linear" else 1.0 / float(params["gamma"]))
 
 
 def to_display(img: np.ndarray, black: float = 0.0, white: float = 1.0, gamma: str | float = 1.0) -> np.ndarray:

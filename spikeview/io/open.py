@@ -163,9 +163,15 @@ def open_source(path: str | os.PathLike[str], *, format: str | None = None, widt
         from spikeview.io.geometry import odd_width_warning
 
         src.info.warnings.append(odd_width_warning(src.cfa, src.width))
+    from spikeview.transfer import DISPLAY_KEY
+
     if side is not None:
         src.info.extra.update(side.tables)
         src.info.extra.setdefault("sidecar", str(side.path))
+        # a sidecar says how its rates map to display; spikeview's own (simulator, recorder) without the key: linear light
+        src.info.extra[DISPLAY_KEY] = (st.transfer if st is not None and st.transfer else "srgb")
+    else:
+        src.info.extra[DISPLAY_KEY] = "linear"  # a file of the ecosystem's: its tools show rates linearly
     return src
 
 

@@ -45,6 +45,8 @@ class StreamSettings(Config):
         cfa: top-left 2×2 of the decoded frame after the flips (``"RGGB"`` …) or ``"none"``.
         flip_vertical, flip_horizontal: flips applied after decoding.
         tick_rate: readouts per second (Hz).
+        transfer: the display curve the rates want (``srgb`` for linear light, ``linear`` for rates made from
+            display-referred frames); omitted: sRGB (spikeview's own captures).
     """
 
     format: str
@@ -54,8 +56,14 @@ class StreamSettings(Config):
     flip_vertical: bool = False
     flip_horizontal: bool = False
     tick_rate: float = DEFAULT_TICK_RATE
+    #: how the rates map to display (:func:`spikeview.transfer.source_transfer`); ``None``: not recorded
+    transfer: str | None = None
 
     def __post_init__(self) -> None:
+        from spikeview.transfer import TRANSFERS
+
+        if self.transfer is not None and self.transfer not in TRANSFERS:
+            raise ParameterError(f"transfer {self.transfer!r} is unknown: use one of {', '.join(TRANSFERS)}.")
         if self.format not in FORMATS:
             raise ParameterError(f"format {self.format!r} is unknown: use one of {', '.join(FORMATS)}.")
         if self.width < 1 or self.height < 1:
@@ -66,9 +74,11 @@ class StreamSettings(Config):
     @classmethod
     def from_info(cls, info: StreamInfo) -> StreamSettings:
         """The settings that reproduce ``info`` when the file is opened again."""
+        from spikeview.transfer import DISPLAY_KEY
+
         return cls(format=info.format, width=int(info.width), height=int(info.height), cfa=cfa_to_str(info.cfa),
                    flip_vertical=bool(info.flip_vertical), flip_horizontal=bool(info.flip_horizontal),
-                   tick_rate=float(info.tick_rate))
+                   tick_rate=float(info.tick_rate), transfer=(info.extra or {}).get(DISPLAY_KEY))
 
 
 @dataclasses.dataclass

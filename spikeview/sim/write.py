@@ -245,6 +245,9 @@ def simulate_to_file(scene: Scene | str | Path, config: SimConfig, out_path: str
         fgt = None
         writer.close()
         info = writer.info.replace(path=dat)
+        from spikeview.transfer import DISPLAY_KEY
+
+        info.extra[DISPLAY_KEY] = "srgb"  # rates in proportion to the scene's linear light (its ground truth is linear)
         tables: dict[str, Any] = {
             "simulation": config.to_dict(),
             "scene": sim.scene.describe(),

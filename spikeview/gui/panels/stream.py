@@ -134,7 +134,8 @@ class StreamPanel(QtWidgets.QWidget):
         # --- display
         self.black = ParamSlider(session, "black", label="Black")
         self.white = ParamSlider(session, "white", label="White")
-        self.curve = ParamCombo(session, "transfer", {"srgb": "sRGB", "gamma": "Gamma", "linear": "Linear"})
+        self.curve = ParamCombo(session, "transfer", {"auto": "Auto", "srgb": "sRGB", "gamma": "Gamma",
+                                                      "linear": "Linear"})
         self.demosaic = ParamCombo(session, "demosaic", {"bilinear": "Bilinear", "malvar2004": "Malvar 2004", "menon2007": "Menon 2007"})
         self.cast = ParamCheck(session, "colour_cast", "Colour cast")
         #: controls that act only through a colour filter, with their tooltips for a colour capture
