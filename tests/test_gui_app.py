@@ -471,21 +471,26 @@ def test_presets_save_and_load_and_a_bad_one_keeps_parameters(opened, tmp_path):
     assert s.get("k") == 77.0 and "bad.toml" in w.notice.text()
 
 
-def test_parameters_and_layout_survive_a_restart(qtbot, settings):
+def test_preferences_and_layout_survive_a_restart_but_no_result_setting_does(qtbot, settings):
+    """Issue 27: every recipe parameter (what a result depends on) and the export range start at the CLI's
+    defaults in a new launch (the next launch's Ctrl+E once started a 200-frame guided export of an unmarked
+    capture); the user's preferences (playback, layout) stay."""
     configure_pyqtgraph()
     a = MainWindow(settings=settings)
     qtbot.addWidget(a)
     a.show()
     a.session.set("k", 33.0)
+    a.session.set("eta", 3.0)
+    a.session.set("export_range", "marked")
     a.session.set("speed", "realtime")
     a.docks["rates"].hide()
     a.close()
     b = MainWindow(settings=settings)
     qtbot.addWidget(b)
     b.show()
-    assert b.session.get("k") == 33.0 and b.session.get("speed") == "realtime"
-    assert not b.docks["rates"].isVisible()
-    assert b.guided_panel.k.spin.value() == 33.0
+    assert b.session.get("speed") == "realtime" and not b.docks["rates"].isVisible()
+    assert b.session.get("k") == 20.0 and b.session.get("eta") == 2.0 and b.session.get("export_range") == "frame"
+    assert b.guided_panel.k.spin.value() == 20.0
     b.close()
 
 
@@ -712,7 +717,8 @@ def test_opening_another_capture_clears_the_previous_run_and_errors(opened, qtbo
     qtbot.waitUntil(lambda: frames_at(w, s.tick), timeout=WAIT_MS)
     assert w.session.stream is other and w.windowTitle() == "another capture — spikeview"
     assert g.curves == {} and g.preview.image() is None and g.plan.toPlainText() == ""
-    assert g.status.text() == "Idle." and g.progress.text() == "0 / 2 steps"
+    assert s.get("steps") == 6  # the previous capture's knobs do not carry over (issue 27)
+    assert g.status.text() == "Idle." and g.progress.text() == "0 / 6 steps"
     assert w.controller.guided_result is None
     assert w.export_panel.status.text() == "" and w.notice.text() == ""
 
@@ -812,3 +818,51 @@ def test_the_display_curve_auto_follows_the_capture_as_an_export_does(window, qt
     assert exported == window.controller.display_params()["transfer"]
     window.session.set("transfer", "srgb")
     assert window.controller.display_params()["transfer"] == "srgb"  # the user's choice wins
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", "none"])
+def test_an_export_after_knob_changes_a_restart_a_file_switch_and_reset_equals_the_cli(qtbot, settings, tmp_path, cfa):
+    """Issue 27, "state that never lies": η changed in the demo, the app quit, a capture opened, η changed again,
+    Edit ▸ Reset parameters, the current frame exported as PNG: the same bytes' pixels as `spikeview reconstruct
+    --at T --out x.png` (the reset white point is the CLI's for the default η, not the old η's)."""
+    import OpenImageIO as oiio
+
+    from spikeview.cli.main import main
+
+    cap = tmp_path / "cap.dat"
+    assert main(["simulate", "--demo", "--size", "48", "--ticks", "120", "--cfa", cfa, "--out", str(cap)]) == 0
+    configure_pyqtgraph()
+    a = MainWindow(settings=settings)
+    qtbot.addWidget(a)
+    a.show()
+    a.set_stream(demo_stream())
+    a.session.set("eta", 3.0)
+    a.session.set("white", 0.15)
+    a.close()
+    b = MainWindow(settings=settings)
+    qtbot.addWidget(b)
+    b.show()
+    b.open_path(cap)
+    qtbot.waitUntil(lambda: b.session.stream is not None and b.session.stream.path == cap, timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: b.controller.capture_white is not None, timeout=WAIT_MS)
+    first_white = b.controller.capture_white
+    assert b.session.get("eta") == 2.0 and b.session.get("white") == first_white  # nothing carried over
+    b.session.set("eta", 3.5)
+    if cfa != "none":  # Y·α/η: re-estimated for η 3.5 (a monochrome capture's white point is its plain rate)
+        qtbot.waitUntil(lambda: b.controller.capture_white != first_white, timeout=WAIT_MS)
+    b.reset_params()
+    qtbot.waitUntil(lambda: b.controller.capture_white == first_white and b.session.get("white") == first_white,
+                    timeout=WAIT_MS)
+    tick = b.session.tick
+    b.session.set("export_format", "png")
+    b.session.set("export_range", "frame")
+    app_out = tmp_path / "app.png"
+    b.export_to(str(app_out))
+    qtbot.waitUntil(lambda: b.notice.kind == "success", timeout=WAIT_MS)
+    b.close()
+    assert main(["reconstruct", str(cap), "--at", str(tick), "--out", str(tmp_path / "cli.png")]) == 0
+
+    def pixels(p):
+        return np.asarray(oiio.ImageBuf(str(p)).get_pixels(oiio.UINT8))
+
+    assert np.array_equal(pixels(app_out), pixels(tmp_path / "cli.png"))

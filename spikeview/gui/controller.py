@@ -65,6 +65,9 @@ def _guided_then_release(req: jobs.GuidedRequest, ctx: Any) -> jobs.GuidedResult
         memory.release_free_memory()
 
 
+#: parameters the sequence's white point depends on (Y·α/η over the window): changing one re-estimates it
+EXPOSURE_PARAMS = frozenset({"eta", "window", "colour_cast"})
+
 class Controller(QtCore.QObject):
     """Session → jobs → views (see module docstring)."""
 
@@ -195,12 +198,29 @@ class Controller(QtCore.QObject):
         self.capture_white: float | None = None  # the sequence's white point (Edit ▸ Reset parameters returns to it)
         self._alpha_hist.clear()
         self.alpha_history.emit((np.zeros(0), np.zeros((0, 3))))
-        src = self.session.source
-        if src is not None:  # α (Bayer streams) and the white point (every stream), once per sequence
-            recipe = self.session.recipe()
-            self.preview.submit("alpha", lambda ctx, s=src, r=recipe: jobs.alpha_job(s, r, ctx))
+        self._white_follows = True
+        self.refresh_exposure()
         self.request_frames()
         self.request_degradation()
+
+    def refresh_exposure(self) -> None:
+        """The sequence's α (Bayer streams) and white point (every stream) for the recipe as it is now, as the CLI
+        estimates them (when a capture opens, and when η, the window or the colour cast change)."""
+        src = self.session.source
+        if src is None:
+            return
+        try:
+            recipe = self.session.recipe()
+        except Exception as e:  # noqa: BLE001 - a setting the recipe refuses: said, the estimate waits
+            self._error(str(e))
+            return
+        self.preview.submit("alpha", lambda ctx, s=src, r=recipe: jobs.alpha_job(s, r, ctx))
+
+    def follow_capture_white(self) -> None:
+        """The white point follows the capture's estimate again (Reset parameters, a new capture), re-estimated
+        for the parameters as they are now."""
+        self._white_follows = True
+        self.refresh_exposure()
 
     def _on_tick(self, tick: int) -> None:
         self.request_frames()
@@ -208,6 +228,11 @@ class Controller(QtCore.QObject):
             self.request_degradation()
 
     def _on_param(self, name: str, value: Any) -> None:
+        if name == "white":  # a white point typed or dragged by the user stays; the estimate's follows the capture
+            cw = getattr(self, "capture_white", None)
+            self._white_follows = cw is not None and value == cw
+        elif name in EXPOSURE_PARAMS and self.session.source is not None:
+            self.refresh_exposure()  # the white point is Y·α/η of the window: the CLI's changes with them
         group = SPECS[name].group
         if group in _FRAME_GROUPS:
             self.request_frames()
@@ -444,7 +469,8 @@ class Controller(QtCore.QObject):
 
                 spec = SPECS["white"]
                 self.capture_white = float(min(max(white, spec.minimum or 0.0), spec.maximum or white))
-                self.session.set("white", self.capture_white, record=False)
+                if getattr(self, "_white_follows", True):
+                    self.session.set("white", self.capture_white, record=False)
             self.alpha_ready.emit(self.alpha)
             self.request_frames()
             self.request_degradation()

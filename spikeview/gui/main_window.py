@@ -414,6 +414,10 @@ class MainWindow(QtWidgets.QMainWindow):
         old = self.session.stream
         if self.notice.kind != "" and not self.controller.exporter.is_active():
             self.notice.dismiss()  # messages about the previous capture (an export error…) no longer apply
+        if old is not None and old is not stream:
+            # a capture's settings belong to it: nothing of the previous capture's (exposure, η, range, knobs) carries
+            # over; every recipe parameter starts where the CLI starts, the white point at this capture's own
+            self._reset_recipe_params("New capture: parameters at their defaults")
         self.session.open_stream(stream)
         if old is not None and old is not stream and old.path is not None and old.path != stream.path:
             old.source.close()
@@ -492,6 +496,7 @@ class MainWindow(QtWidgets.QMainWindow):
         return [i for i in items if isinstance(i, dict) and "path" in i][:MAX_RECENT]
 
     def _add_recent(self, path: Path, kwargs: dict[str, Any]) -> None:
+        path = Path(path).resolve()  # absolute: a recent file opens from any working folder
         items = [i for i in self.recent_files() if i["path"] != str(path)]
         clean = {k: v for k, v in kwargs.items() if isinstance(v, (str, int, float, bool))}
         items.insert(0, {"path": str(path), "kwargs": clean})
@@ -564,15 +569,29 @@ class MainWindow(QtWidgets.QMainWindow):
             self.save_preset(path if path.endswith(".toml") else path + ".toml")
 
     def reset_params(self) -> None:
-        """Every parameter back to its default; the exposure back to the capture's own white point
-        (as when it opened), not to the recipe's unset default."""
+        """Every parameter back to its default, the white point to the one the CLI would use with them: the
+        capture's exposure is estimated again for the default η and window (it depends on both)."""
         from spikeview.gui.model import default_params
 
         values = default_params()
         white = getattr(self.controller, "capture_white", None)
         if white is not None:
-            values["white"] = white
+            values["white"] = white  # shown until the new estimate arrives
         self.session.update_params(values, label="Reset parameters")
+        self.controller.follow_capture_white()
+
+    def _reset_recipe_params(self, label: str) -> None:
+        """The recipe's parameters (and the export's range) at their defaults, as one undo step; the app's own
+        preferences (playback, the export format, the display panels) stay."""
+        from spikeview.gui.model import default_params
+        from spikeview.recipe import BY_KEY
+
+        defaults = default_params()
+        values = {k: v for k, v in defaults.items() if k in BY_KEY or k == "export_range"}
+        changed = {k: v for k, v in values.items() if self.session.params.get(k) != v}
+        if changed:
+            self.session.update_params(changed, label=label)
+        self.controller.follow_capture_white()
 
     # ------------------------------------------------------------------------------ export
     def export_now(self) -> None:
@@ -687,6 +706,11 @@ class MainWindow(QtWidgets.QMainWindow):
         except (TypeError, ValueError):
             return
         if isinstance(values, dict):
+            # a launch keeps the user's preferences only: every recipe parameter (what a result depends on) and the
+            # export's range start at the CLI's defaults, so nothing remembered changes a result silently
+            from spikeview.recipe import BY_KEY
+
+            values = {k: v for k, v in values.items() if k not in BY_KEY and k != "export_range"}
             skipped = self.session.update_params(values, record=False, strict=False)
             if skipped:
                 self.session.events.message.emit(f"Ignored saved settings that no longer apply: {', '.join(skipped)}.")
