@@ -116,3 +116,35 @@ def align_ground_truth(gt: np.ndarray, y: np.ndarray, cfa: str | None, alpha: np
         gain = float((obs_c * g_c).sum() / max((g_c * g_c).sum(), 1e-12))
         out[..., c] = gt[..., c] * gain
     return np.clip(out, 0, 1).astype(np.float32)
+
+
+def colour_scores(x: np.ndarray, ref: np.ndarray) -> dict[str, float]:
+    """The colour errors a per-channel gain hides, for linear frames ``x`` and ``ref`` (``(H, W, 3)`` or ``(H, W)``):
+
+    * ``psnr_1gain``: PSNR (data range 1) after ONE least-squares gain for all channels (the exposure), not one per
+      channel, so a colour cast costs;
+    * ``delta_e00``: mean CIEDE2000 of the two through the sRGB curve (both clipped to [0, 1] after that gain);
+    * ``wb_angle``: angle in degrees between their mean RGB vectors (the white balance; 0 for monochrome).
+
+    Monochrome frames get ``psnr_1gain`` and 0 for the other two.
+    """
+    xs = np.asarray(x, dtype=np.float64)
+    rs = np.asarray(ref, dtype=np.float64)
+    _check(xs, rs, 1.0)
+    den = float((xs * xs).sum())
+    g = float((xs * rs).sum()) / den if den > 0 else 1.0
+    y = np.clip(xs * g, 0.0, 1.0)
+    out = {"psnr_1gain": psnr(y.astype(np.float32), rs.astype(np.float32), data_range=1.0), "delta_e00": 0.0, "wb_angle": 0.0}
+    if xs.ndim == 3 and xs.shape[-1] == 3:
+        from skimage.color import deltaE_ciede2000, rgb2lab
+
+        from spikeview.transfer import srgb_encode
+
+        lab_x = rgb2lab(srgb_encode(y))
+        lab_r = rgb2lab(srgb_encode(np.clip(rs, 0.0, 1.0)))
+        out["delta_e00"] = float(np.mean(deltaE_ciede2000(lab_x, lab_r)))
+        a, b = xs.reshape(-1, 3).mean(axis=0), rs.reshape(-1, 3).mean(axis=0)
+        na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
+        if na > 0 and nb > 0:
+            out["wb_angle"] = float(np.degrees(np.arccos(np.clip(a @ b / (na * nb), -1.0, 1.0))))
+    return out

@@ -87,3 +87,19 @@ def test_the_benchmarks_default_row_is_what_the_cli_writes(tmp_path, cfa):
         row = fn(Sequence(src), 45)
     assert row.shape == cli.shape and row.dtype == cli.dtype
     assert np.array_equal(row, cli)
+
+
+def test_colour_scores_show_what_a_per_channel_gain_hides():
+    import numpy as np
+
+    from spikeview.metrics import colour_scores
+
+    rng = np.random.default_rng(0)
+    truth = rng.random((32, 32, 3)).astype(np.float32) * 0.8
+    same = colour_scores(truth * 0.5, truth)  # an exposure: one gain undoes it
+    assert same["psnr_1gain"] > 60 and same["delta_e00"] < 1e-3 and same["wb_angle"] < 1e-3
+    cast = colour_scores(truth * np.array([0.6, 1.0, 0.5], np.float32), truth)  # a sensor's colour cast
+    p, _ = score(np.clip(truth * np.array([0.6, 1.0, 0.5], np.float32), 0, 1), truth)
+    assert cast["wb_angle"] > 5 and cast["delta_e00"] > 3 and cast["psnr_1gain"] < p - 5
+    mono = colour_scores(truth[..., 0] * 0.7, truth[..., 0])
+    assert mono["psnr_1gain"] > 60 and mono["delta_e00"] == 0.0 and mono["wb_angle"] == 0.0

@@ -44,6 +44,7 @@ import numpy as np
 
 from spikeview.bench.data import GROUPS, SCENES, TUNE_SCENES, Case, make_cases, spikezoo_clips
 from spikeview.bench.score import clipped_fraction, fit_gain, score  # noqa: F401 (fit_gain: also the benchmark's API)
+from spikeview.metrics import colour_scores
 
 BASELINE_SCALES = (1.5, 2.0, 2.5, 3.0)
 #: the row that runs exactly the CLI's default guided reconstruction
@@ -238,7 +239,8 @@ def run_benchmark(out_dir: str | os.PathLike[str] | None = "benchmarks/results",
             dt = time.perf_counter() - t0
             p, s = score(out, case.gt)
             results.append(dict(scene=case.scene, group=case.group, tuning=case.tuning, center=case.center, method=name,
-                                kind=kind, psnr=p, ssim=s, seconds=dt, clipped=clipped_fraction(out)))
+                                kind=kind, psnr=p, ssim=s, seconds=dt, clipped=clipped_fraction(out),
+                                **colour_scores(out, case.gt)))
         print(f"  {case.scene} @{case.center}: " + ", ".join(f"{r['method']} {r['psnr']:.2f}" for r in results[-len(methods):]
                                                              if r["method"] in (DEFAULT_ROW, "baseline σ×2", "TFP-10 + bilinear")),
               flush=True)
@@ -291,7 +293,7 @@ def timing(size: int = 256, repeats: int = 5, scene: str = "astronaut") -> list[
 
 # -------------------------------------------------------------------------------------- report
 def _mean(rows, key, **where) -> float:
-    v = [r[key] for r in rows if all(r[k] == w for k, w in where.items())]
+    v = [r[key] for r in rows if key in r and all(r[k] == w for k, w in where.items())]
     return float(np.mean(v)) if v else float("nan")
 
 
@@ -307,6 +309,10 @@ def summarise(res: dict) -> dict:
              "ssim_all": _mean(rows, "ssim", method=m),
              "seconds": float(statistics.median([r["seconds"] for r in rows if r["method"] == m])),
              "clipped": _mean(rows, "clipped", method=m),
+             # colour (issue 26): one global gain, CIEDE2000, white-balance angle; NaN for rows of an older run
+             "psnr1_held": _mean(rows, "psnr_1gain", method=m, tuning=False),
+             "de_held": _mean(rows, "delta_e00", method=m, tuning=False),
+             "angle_held": _mean(rows, "wb_angle", method=m, tuning=False),
              "groups": {g: (_mean(rows, "psnr", method=m, group=g, tuning=False), _mean(rows, "ssim", method=m, group=g, tuning=False))
                         for g in GROUPS}}
         out["methods"][m] = d
@@ -345,7 +351,9 @@ def write_report(res: dict, out: Path, notes: list[str] | None = None) -> None:
          "Path: gray-world α and white point (99.9th percentile of the corrected 10-tick rates) estimated from the spikes once per "
          "sequence, as the CLI; no calibration from the simulator. The guided sampler sees the exposure that puts the white point at 0.9.",
          "Score: bounded frame (clipping counts) after a per-channel least-squares gain to the ground truth; skimage PSNR/SSIM, "
-         "data_range 1. Seconds: median per frame.",
+         "data_range 1. Seconds: median per frame. The colour columns (held-out) are what that gain hides: PSNR after ONE "
+         "global gain, mean CIEDE2000 through the sRGB curve, and the angle between the mean RGB of output and truth "
+         "(spikeview.metrics.colour_scores).",
          f"Reference baseline (best σ scale on the tuning scenes): **{s['reference']}**. ★ = Pareto front (held-out PSNR vs s/frame).", "",
          f"**Targets** (held-out scenes, default guided = what `spikeview reconstruct --method guided --out x.npy` writes "
          f"(its planner, ±3 pooled windows, exposure; bit-identical, tested), vs {s['reference']}):", "",
@@ -361,12 +369,14 @@ def write_report(res: dict, out: Path, notes: list[str] | None = None) -> None:
     names = list(M)
     pts = [(M[m]["seconds"], M[m]["psnr_held"]) for m in names]
     front = set(pareto(pts))
-    L += ["| method | PSNR tune | PSNR held-out | SSIM held-out | ΔPSNR vs baseline (held-out) | ΔSSIM | clipped % | s/frame |",
-          "|---|---|---|---|---|---|---|---|"]
+    L += ["| method | PSNR tune | PSNR held-out | SSIM held-out | ΔPSNR vs baseline (held-out) | ΔSSIM | clipped % | s/frame | "
+          "one-gain PSNR | ΔE00 | WB angle ° |",
+          "|---|---|---|---|---|---|---|---|---|---|---|"]
     for i, m in enumerate(names):
         d = M[m]
         L.append(f"| {m}{' ★' if i in front else ''} | {d['psnr_tune']:.2f} | {d['psnr_held']:.2f} | {d['ssim_held']:.3f} | "
-                 f"{d['psnr_held'] - ref['psnr_held']:+.2f} | {d['ssim_held'] - ref['ssim_held']:+.3f} | {100 * d['clipped']:.2f} | {d['seconds']:.2f} |")
+                 f"{d['psnr_held'] - ref['psnr_held']:+.2f} | {d['ssim_held'] - ref['ssim_held']:+.3f} | {100 * d['clipped']:.2f} | {d['seconds']:.2f} | "
+                 f"{fmt(d.get('psnr1_held'), '.2f')} | {fmt(d.get('de_held'), '.2f')} | {fmt(d.get('angle_held'), '.1f')} |")
     L += ["", "## Per scene group (held-out scenes): PSNR / SSIM", "",
           "| group | TFP-10 + bilinear | " + s["reference"] + " | guided (default) | Δ vs baseline | fast preset |", "|---|---|---|---|---|---|"]
     for g in GROUPS:
