@@ -21,6 +21,11 @@ def cpu_model(default: str = "unknown CPU") -> str:
     return default
 
 
+def machine_words(m: dict) -> str:
+    """The machine of a result's ``machine`` record in a report's words: model, CPUs, the flags that matter, torch."""
+    return f"{m['model']}, {m['cpus']} CPUs, flags {' '.join(m['flags'])}; torch {m['torch']}"
+
+
 def load_average(sep: str = " / ") -> str:
     """The 1-, 5- and 15-minute load averages (``"n/a"`` where the system has none)."""
     try:

@@ -24,6 +24,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from _common import machine_words  # noqa: E402
 from bench_prior import machine, run_cli, save_results, simulate  # noqa: E402
 
 #: the defaults, the exact float32 path (the baseline), and the mixed policy that ``auto`` picked on every CPU with native
@@ -54,8 +55,8 @@ def bench(path: Path, flags: list[str], repeats: int) -> dict:
 
 def write_report(res: dict, out: Path) -> None:
     m = res["machine"]
-    L = ["# The CLI end to end at full resolution (benchmarks/bench_cli.py)", "",
-         f"Machine: {m['model']}, {m['cpus']} CPUs, flags {' '.join(m['flags'])}; torch {m['torch']}; 1-min load {m['load_before']:.1f} before, "
+    head = f"Machine: {machine_words(m)}; 1-min load {m['load_before']:.1f} before, "
+    L = ["# The CLI end to end at full resolution (benchmarks/bench_cli.py)", "", head +
          f"{res['load_after']:.1f} after; {res['repeats']} runs per path after a warm-up, each a fresh process "
          f"(`spikeview reconstruct FILE --method guided --at 100`, wall time and peak RSS of the child, start-up included). "
          "Baseline in the same run: `--precision float32` (the exact float32 path); × = its median / the defaults' median.", "",

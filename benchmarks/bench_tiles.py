@@ -36,6 +36,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from _common import machine_words  # noqa: E402
 from bench_prior import machine, run_cli, save_results, simulate  # noqa: E402
 
 
@@ -185,13 +186,14 @@ def peak_rss(path: Path, extra: list[str]) -> dict:
 
 
 def write_report(res: dict, out: Path) -> None:
-    m = res["machine"]
-    L = ["# Per-tile plan: step-synchronous tiles against the whole frame", "",
-         f"`python benchmarks/bench_tiles.py --tile {res['tile']}` — {m['model']}, {m['cpus']} CPUs, flags "
-         f"{' '.join(m['flags'])}, torch {m['torch']}; load {m['load_before']:.1f} → {res['load_after']:.1f}; "
-         f"{res['minutes']:.0f} min. Sampler: the default recipe (`GuidedConfig()`), `tile = {res['tile']}` against `tile = 0`."
-         + (f" Sections {', '.join(res['kept'])}: from earlier runs of this script in this session, before the last two commits to tiles.py (neither changes a full tile or the whole-frame path; tiles.json keeps them)."
-            if res.get("kept") else ""), ""]
+    kept = (f" Sections {', '.join(res['kept'])}: from earlier runs of this script in this session, before the last two "
+            "commits to tiles.py (neither changes a full tile or the whole-frame path; tiles.json keeps them)."
+            if res.get("kept") else "")
+    L = ["# Per-tile plan: step-synchronous tiles against the whole frame", ""]
+    L.append(f"`python benchmarks/bench_tiles.py --tile {res['tile']}` — {machine_words(res['machine'])}; load "
+             f"{res['machine']['load_before']:.1f} → {res['load_after']:.1f}; {res['minutes']:.0f} min. Sampler: the default "
+             f"recipe (`GuidedConfig()`), `tile = {res['tile']}` against `tile = 0`." + kept)
+    L.append("")
     if res.get("seams"):
         L += ["## Seams (uniform noise 160², tile 64, cut into 9 rectangles, vs the whole frame)", "",
               "| stream | precision | max \\|tiled − whole\\| (/255, every pixel) | mean (/255) | gradient at tile borders / inside |",
