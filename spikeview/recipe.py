@@ -19,7 +19,7 @@ table that repeats one with another value is refused.
 from the field's name). :data:`PARAMS` is generated from those fields: every parameter by dotted
 path (``guided.k``) with its command-line flag (``--k``), its app control (the session key ``k``),
 label, unit, range and one-sentence help. The CLI's flags (:func:`add_flags`, :func:`apply_flags`),
-the app's controls (:mod:`spikeview.gui.model`), the README table (:func:`markdown_table`) and the
+the app's controls (:mod:`spikeview.session.model`), the README table (:func:`markdown_table`) and the
 configs' range checks (:meth:`~spikeview.config.Config.check_params`) all come from it; nothing else
 translates names. A new parameter is its field and the code that uses it.
 """

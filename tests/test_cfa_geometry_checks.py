@@ -42,7 +42,7 @@ def test_guess_cfa_names_each_phase_and_none_for_monochrome():
 
 
 def test_the_app_open_dialog_starts_from_the_guess(tmp_path):
-    from spikeview.gui import core
+    from spikeview.session import core
 
     assert core.probe_file(write_capture(tmp_path / "b.dat", 128, 96, 200, cfa=True))[0]["cfa"] == "RGGB"
     assert core.probe_file(write_capture(tmp_path / "m.dat", 128, 96, 200, cfa=False))[0]["cfa"] == "none"

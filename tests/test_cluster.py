@@ -325,11 +325,11 @@ def test_monochrome_store_has_one_channel_and_exports_2d_frames(tmp_path):
 
 # ---------------------------------------------------------------------------------- the app
 def test_app_export_of_a_marked_range_to_zarr_matches_the_cli(cap, tmp_path):
-    """The export panel's job (no Qt: spikeview.gui.jobs) with a .zarr output writes the CLI's store,
+    """The export panel's job (no Qt: spikeview.session.jobs) with a .zarr output writes the CLI's store,
     reports (windows done, total) and returns the store."""
     import threading
 
-    from spikeview.gui import jobs
+    from spikeview.session import jobs
     from spikeview.io import open_source
     from spikeview.recipe import Recipe
 
@@ -360,7 +360,7 @@ def test_app_export_panel_sends_the_marked_range_to_a_scheduler(cap, tmp_path, q
     pytest.importorskip("PySide6")
     from PySide6 import QtCore
 
-    from spikeview.gui import core
+    from spikeview.session import core
     from spikeview.gui.main_window import MainWindow
 
     _, client = cluster

@@ -16,9 +16,9 @@ from test_gui_model import Ctx  # the worker's job context, as the app's jobs se
 
 @pytest.mark.parametrize("cfa", ["RGGB", "none"])
 def test_forward_model_of_x_matches_the_observation(cfa):
-    from spikeview.gui.core import memory_stream
-    from spikeview.gui.jobs import PreviewRequest, degradation_job
-    from spikeview.gui.model import Session
+    from spikeview.session.core import memory_stream
+    from spikeview.session.jobs import PreviewRequest, degradation_job
+    from spikeview.session.model import Session
     from spikeview.sim.demo import demo_capture
 
     s = Session()

@@ -19,10 +19,10 @@ import pytest
 pytest.importorskip("pytestqt")
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from spikeview.gui import core
+from spikeview.session import core
 from spikeview.gui.app import configure_pyqtgraph
 from spikeview.gui.main_window import MainWindow
-from spikeview.gui.model import SPECS
+from spikeview.session.model import SPECS
 from spikeview.gui.widgets import ParamSlider
 
 OFFSCREEN_NOISE = r"This plugin does not support propagateSizeHints"
@@ -357,7 +357,7 @@ def test_window_keeps_ticking_while_a_guided_run_works(opened, qtbot):
 
 def test_the_stall_measurement_sees_a_freeze(opened, qtbot):
     """Control for the test above: a sampler run on the GUI thread stalls the timer for all its length."""
-    from spikeview.gui import jobs
+    from spikeview.session import jobs
 
     w, s = opened, opened.session
     s.set("steps", 120)  # ~0.5 s on the test capture: well beyond 2 × the stall limit on a fast machine too
@@ -759,9 +759,11 @@ def test_messages_name_menus_that_exist(window):
     install_live(window, backend=MockBackend())
     menus = {a.text().replace("&", ""): [x.text().replace("&", "") for x in a.menu().actions()]
              for a in window.menuBar().actions() if a.menu() is not None}
-    root = Path(core.__file__).parent
+    import spikeview.gui
+
+    roots = (Path(spikeview.gui.__file__).parent, Path(core.__file__).parent)  # the app's views and its session
     found = 0
-    for path in root.rglob("*.py"):
+    for path in (p for root in roots for p in root.rglob("*.py")):
         for menu, rest in re.findall(r"(\w+) ▸ ([^\n]+)", path.read_text("utf-8")):
             found += 1
             assert menu in menus, f"{path.name}: no menu {menu!r} (for {rest!r})"

@@ -17,7 +17,7 @@ import pytest
 pytest.importorskip("PySide6")
 from PySide6 import QtCore, QtWidgets  # noqa: E402
 
-from spikeview.gui import core  # noqa: E402
+from spikeview.session import core  # noqa: E402
 from spikeview.gui.main_window import MainWindow  # noqa: E402
 
 OFFSCREEN_NOISE = r"This plugin does not support propagateSizeHints"

@@ -141,7 +141,7 @@ def test_pane_titles_that_do_not_fit_are_elided_with_the_full_text_in_a_tooltip(
 def test_the_open_dialog_warns_about_a_colour_filter_read_as_monochrome(tmp_path, qapp):
     from test_geometry_guess import write_capture
 
-    from spikeview.gui import core
+    from spikeview.session import core
     from spikeview.gui.dialogs import settings_preview
 
     bayer = write_capture(tmp_path / "b.dat", 128, 96, 200, cfa=True)

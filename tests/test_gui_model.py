@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from spikeview.errors import Cancelled, InputFileError, ParameterError
-from spikeview.gui import core, jobs
-from spikeview.gui.model import (
+from spikeview.session import core, jobs
+from spikeview.session.model import (
     SPECS,
     Event,
     OpenedStream,
@@ -59,7 +59,7 @@ def test_event_connect_emit_disconnect_in_order():
 
 
 def test_model_imports_no_qt():
-    code = "import sys, spikeview.gui.model, spikeview.gui.core, spikeview.gui.jobs, spikeview.gui.presets; " \
+    code = "import sys, spikeview.session.model, spikeview.session.core, spikeview.session.jobs, spikeview.session.presets; " \
            "print([m for m in ('PySide6', 'pyqtgraph') if m in sys.modules])"
     import subprocess
 
@@ -345,7 +345,7 @@ APP_ONLY = {"speed", "slowmo", "loop", "show_pyramid", "export_format", "export_
 
 def test_preset_round_trip_through_the_core_configs(tmp_path):
     from spikeview.config import load_toml
-    from spikeview.gui.presets import load_preset, save_preset
+    from spikeview.session.presets import load_preset, save_preset
 
     a = Session()
     a.update_params({"k": 75.0, "steps": 12, "guidance": "dps", "eta": 1.5, "window": 20, "demosaic": "malvar2004",
@@ -364,7 +364,7 @@ def test_preset_round_trip_through_the_core_configs(tmp_path):
 def test_the_cli_runs_the_apps_preset_and_the_app_loads_the_clis(tmp_path):
     from spikeview.cli.main import main
     from spikeview.config import load_toml
-    from spikeview.gui.presets import load_preset, save_preset
+    from spikeview.session.presets import load_preset, save_preset
     from spikeview.io import write_plain
 
     spikes = periodic_stream(16, 16, n=60, period=3).source.read(0, 60)
@@ -387,7 +387,7 @@ def test_the_cli_runs_the_apps_preset_and_the_app_loads_the_clis(tmp_path):
 
 
 def test_bad_preset_names_the_file_and_changes_nothing(tmp_path):
-    from spikeview.gui.presets import load_preset
+    from spikeview.session.presets import load_preset
 
     bad = tmp_path / "bad.toml"
     bad.write_text("[guided]\nsteps = 0\n")

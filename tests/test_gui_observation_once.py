@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import spikeview.guided.video as video
-from spikeview.gui import jobs
-from spikeview.gui.model import default_params
+from spikeview.session import jobs
+from spikeview.session.model import default_params
 from spikeview.gui.workers import JobContext
 from spikeview.io.source import ArraySource
 from spikeview.recipe import Recipe

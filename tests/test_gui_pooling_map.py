@@ -14,7 +14,7 @@ import pytest
 
 pytest.importorskip("pytestqt")
 
-from spikeview.gui import core
+from spikeview.session import core
 from spikeview.gui.panels.pooling import palette
 from spikeview.guided.observation import Observation
 from spikeview.io.source import ArraySource

@@ -26,7 +26,7 @@ def test_alpha_shown_only_for_colour_captures(window, qtbot, tmp_path, cfa):
 
 @pytest.mark.parametrize("cfa", ["none", "RGGB"])
 def test_open_dialog_hint_fits_the_cfa(qtbot, tmp_path, cfa):
-    from spikeview.gui import core
+    from spikeview.session import core
     from spikeview.gui.dialogs import StreamSettingsDialog
 
     path = _simulate(tmp_path, cfa)

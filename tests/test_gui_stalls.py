@@ -17,7 +17,7 @@ import pytest
 
 pytest.importorskip("pytestqt")
 
-from spikeview.gui import core  # noqa: E402
+from spikeview.session import core  # noqa: E402
 from spikeview.io.source import ArraySource  # noqa: E402
 
 OFFSCREEN_NOISE = r"This plugin does not support propagateSizeHints"
@@ -62,9 +62,9 @@ def test_display_conversions_run_in_workers(window, qtbot, monkeypatch, cfa):
     import spikeview.gui.panels.pooling as pooling
 
     to_display = Threads(core.to_display)
-    colours = Threads(pooling.pooling_image)
+    colours = Threads(core.POOLING_PALETTE or pooling.palette)  # the app's palette, as the session's jobs call it
     monkeypatch.setattr(core, "to_display", to_display)
-    monkeypatch.setattr(pooling, "pooling_image", colours)
+    monkeypatch.setattr(core, "POOLING_PALETTE", colours)
     open_capture(window, qtbot, cfa)
     s, c = window.session, window.controller
     s.set("steps", 2)

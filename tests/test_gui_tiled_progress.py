@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("pytestqt")
 
-from spikeview.gui import core  # noqa: E402
+from spikeview.session import core  # noqa: E402
 
 OFFSCREEN_NOISE = r"This plugin does not support propagateSizeHints"
 pytestmark = [pytest.mark.gui, pytest.mark.qt_log_level_fail("WARNING"), pytest.mark.qt_log_ignore(OFFSCREEN_NOISE)]

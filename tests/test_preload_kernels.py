@@ -12,7 +12,7 @@ import sys
 _CHILD = r"""
 import json, sys
 import numpy as np
-from spikeview.gui import core
+from spikeview.session import core
 from spikeview.io import _packed, open_source, write_plain
 
 core.preload()

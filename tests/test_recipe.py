@@ -26,7 +26,7 @@ def capture(tmp_path_factory):
 
 # ------------------------------------------------------------------------------ generated views
 def test_every_flag_and_control_is_generated_from_the_one_table():
-    from spikeview.gui.model import SPECS
+    from spikeview.session.model import SPECS
 
     sub = next(a for a in build_parser()._actions if hasattr(a, "choices") and isinstance(a.choices, dict))
     options = {o for a in sub.choices["reconstruct"]._actions for o in a.option_strings}
@@ -143,13 +143,13 @@ def test_t_start_acts_above_the_datas_noise_and_says_why_below(capture):
 
 
 def test_the_apps_controls_are_disabled_with_the_reason():
-    from spikeview.gui.jobs import PreviewRequest, degradation_job
-    from spikeview.gui.model import Session
+    from spikeview.session.jobs import PreviewRequest, degradation_job
+    from spikeview.session.model import Session
     from spikeview.sim.demo import demo_capture
 
     cap = demo_capture(size=32, n_ticks=60)
     s = Session()
-    from spikeview.gui.core import memory_stream
+    from spikeview.session.core import memory_stream
 
     s.open_stream(memory_stream(cap, "demo"))
     s.set_tick(30)
@@ -162,8 +162,8 @@ def test_the_apps_controls_are_disabled_with_the_reason():
 
 # ------------------------------------------------------------------------------- equivalence
 def _app_session(capture, **values):
-    from spikeview.gui import core
-    from spikeview.gui.model import Session
+    from spikeview.session import core
+    from spikeview.session.model import Session
 
     s = Session()
     s.open_stream(core.open_file(capture))
@@ -176,8 +176,8 @@ def _app_session(capture, **values):
     ("guided", {"steps": 2, "s": 0.5, "levels": 1, "quantise": "on", "k": 20.0}),
 ])
 def test_a_recipe_saved_by_the_app_gives_the_cli_the_apps_pixels(capture, tmp_path, method, values):
-    from spikeview.gui import jobs
-    from spikeview.gui.presets import save_preset, session_recipe
+    from spikeview.session import jobs
+    from spikeview.session.presets import save_preset, session_recipe
 
     s = _app_session(capture, export_method=method, export_range="marked", **values)
     s.set_mark_in(40)
@@ -198,7 +198,7 @@ def test_a_recipe_saved_by_the_app_gives_the_cli_the_apps_pixels(capture, tmp_pa
 
 def test_loading_a_preset_and_saving_it_back_changes_no_field(capture, tmp_path):
     from spikeview.config import load_toml
-    from spikeview.gui.presets import load_preset, save_preset
+    from spikeview.session.presets import load_preset, save_preset
 
     s = _app_session(capture)
     s.set_tick(50)
@@ -219,7 +219,7 @@ def test_loading_a_preset_and_saving_it_back_changes_no_field(capture, tmp_path)
 
 
 def test_session_values_map_to_recipe_paths_both_ways():
-    from spikeview.gui.model import Session, from_recipe_value, to_recipe_value
+    from spikeview.session.model import Session, from_recipe_value, to_recipe_value
 
     s = Session()
     r = s.recipe()
@@ -254,8 +254,8 @@ def test_the_shipped_fast_preset_is_a_valid_recipe():
 def test_the_apps_guided_metrics_compare_like_with_like():
     """The app scores its guided run at the sampler's exposure against the aligned ground truth (a unit
     mix-up once read 6 dB where the frame was fine)."""
-    from spikeview.gui import core, jobs
-    from spikeview.gui.model import Session
+    from spikeview.session import core, jobs
+    from spikeview.session.model import Session
 
     st = core.demo_stream(size=48, n_ticks=120)
     s = Session()

@@ -76,6 +76,44 @@ def site_rates(frame: np.ndarray, cfa: str | None) -> dict[str, float]:
     return {k: s / n for k, (s, n) in _site_sums(arr, parse_cfa(cfa)).items()}
 
 
+def site_histograms(sfr: np.ndarray, cfa: str | None, window: int, roi: tuple[int, int, int, int] | None = None
+                    ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, float], np.ndarray]:
+    """Histograms of the SFR per Bayer site (``R``, ``Gr``, ``Gb``, ``B``; ``all`` for mono), their means, and the
+    channel means (R, G, B; greens weighted by their photosites; ``(1,)`` for mono).
+
+    One bin per TFP level ``{0, 1/Δτ, …, 1}`` (for Δτ ≤ 64; longer windows use 65 bins), so the
+    histogram shows the quantisation exactly. The ROI ``(x, y, w, h)`` is cut from the full frame and sites keep
+    their full-frame parity (the CFA phase does not depend on the ROI).
+
+    Returns:
+        ``(edges, hists, means, channel_means)``: ``(n_bins + 1,)`` bin edges, per site the fraction of photosites
+        per bin, per site the mean SFR, the channel means.
+    """
+    n = int(min(max(window, 1), 64))
+    edges = np.linspace(-0.5 / n, 1 + 0.5 / n, n + 2)
+    x0 = y0 = 0
+    sub = sfr
+    if roi is not None:
+        x0, y0, w, h = roi
+        sub = sfr[y0:y0 + h, x0:x0 + w]
+    planes = {"all": sub} if cfa is None else {
+        name: sub[(py - y0) % 2::2, (px - x0) % 2::2] for name, (py, px) in site_offsets(parse_cfa(cfa)).items()}
+    hists, means, sizes = {}, {}, {}
+    for name, plane in planes.items():
+        idx = np.rint(plane * np.float32(n)).astype(np.intp).ravel()
+        np.clip(idx, 0, n, out=idx)
+        sizes[name] = idx.size
+        hists[name] = np.bincount(idx, minlength=n + 1).astype(np.float64) / max(idx.size, 1)
+        means[name] = float(plane.mean(dtype=np.float64)) if plane.size else 0.0
+    if cfa is None:
+        ch = np.array([means["all"]])
+    else:
+        ngr, ngb = sizes["Gr"], sizes["Gb"]
+        g = (means["Gr"] * ngr + means["Gb"] * ngb) / max(ngr + ngb, 1)
+        ch = np.array([means["R"], g, means["B"]])
+    return edges, hists, means, ch
+
+
 def _channel_means_from_sums(sums: dict[str, tuple[float, int]], cfa: str | None) -> np.ndarray:
     if cfa is None:
         s, n = sums["Y"]

@@ -1,7 +1,7 @@
 """The glue between the session model and the background workers (Qt, but no widgets).
 
-:class:`Controller` listens to the :class:`~spikeview.gui.model.Session`'s events, decides which
-previews are stale, submits jobs (:mod:`spikeview.gui.jobs`) to the workers
+:class:`Controller` listens to the :class:`~spikeview.session.model.Session`'s events, decides which
+previews are stale, submits jobs (:mod:`spikeview.session.jobs`) to the workers
 (:mod:`spikeview.gui.workers`), drops stale results by job id and hands fresh ones to the views
 through Qt signals. It also drives playback with a timer.
 
@@ -33,8 +33,8 @@ import numpy as np
 from PySide6 import QtCore
 
 from spikeview import memory
-from spikeview.gui import jobs
-from spikeview.gui.model import SPECS, Session
+from spikeview.session import jobs
+from spikeview.session.model import SPECS, Session
 from spikeview.gui.workers import Worker
 
 #: parameter groups whose change makes the stream previews stale
@@ -405,7 +405,7 @@ class Controller(QtCore.QObject):
         if self.exporter.is_active():
             self._error("An export is already running: wait for it or cancel it first.")
             return False
-        from spikeview.gui.presets import session_recipe
+        from spikeview.session.presets import session_recipe
 
         try:
             recipe = session_recipe(s)
@@ -465,7 +465,7 @@ class Controller(QtCore.QObject):
             if self.alpha_note:
                 self._error(self.alpha_note)
             if white is not None:  # the exposure: the sequence's white point, as the CLI chooses it
-                from spikeview.gui.model import SPECS
+                from spikeview.session.model import SPECS
 
                 spec = SPECS["white"]
                 self.capture_white = float(min(max(white, spec.minimum or 0.0), spec.maximum or white))

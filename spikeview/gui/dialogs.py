@@ -11,7 +11,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 from spikeview.io import FORMATS as IO_FORMATS
 from spikeview.cfa import BAYER_PATTERNS
 from spikeview.errors import SpikeviewError
-from spikeview.gui.model import OpenedStream
+from spikeview.session.model import OpenedStream
 from spikeview.gui.panels.rates import cfa_hint
 from spikeview.gui.widgets import ImagePane
 
@@ -31,7 +31,8 @@ def settings_preview(stream: OpenedStream) -> tuple[np.ndarray, np.ndarray, str,
     from spikeview.classical.colour_cast import sequence_alpha
     from spikeview.classical.config import ClassicalConfig
     from spikeview.classical.reconstruct import preview_rgb
-    from spikeview.gui import core
+    from spikeview.classical.tfp import counts_to_sfr, window_counts
+    from spikeview.session import core
 
     src = stream.source
     n = src.n_frames
@@ -40,7 +41,7 @@ def settings_preview(stream: OpenedStream) -> tuple[np.ndarray, np.ndarray, str,
     alpha = sequence_alpha(src, ClassicalConfig(alpha_max_windows=16), warn=False)[0]  # a quick look: 16 windows
     rgb = preview_rgb(src, centre, window, alpha=alpha, colour_cast=src.cfa is not None, eta=2.0)
     a, b = core.window_range(centre, window, n)
-    sfr = src.count(a, b).astype(np.float32) / np.float32(b - a)
+    sfr = counts_to_sfr(window_counts(src, a, b), b - a)  # the classical TFP of the window
     mosaic = core.to_display(sfr, 0.0, 1.0, "srgb")
     info = src.info
     desc = (f"{info.width}×{info.height}, {n} ticks ({n / src.tick_rate * 1e3:.1f} ms), CFA {info.cfa or 'none'}, "

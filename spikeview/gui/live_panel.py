@@ -74,7 +74,7 @@ class OpenCameraDialog(QtWidgets.QDialog):
 
     Args:
         backend: pyusb backend to list and open devices with (``None``: libusb; tests pass a mock).
-        replay: the :class:`~spikeview.gui.model.OpenedStream` open in the app, offered for replay, or ``None``.
+        replay: the :class:`~spikeview.session.model.OpenedStream` open in the app, offered for replay, or ``None``.
         initial: last :class:`~spikeview.live.usb.CameraConfig` settings, as a dict.
     """
 
@@ -247,30 +247,18 @@ class OpenCameraDialog(QtWidgets.QDialog):
 
     # ------------------------------------------------------------------------------ result
     def camera_settings(self) -> dict[str, Any]:
-        """The USB settings as :class:`~spikeview.live.usb.CameraConfig` keyword arguments (may raise ParameterError)."""
-        from spikeview.errors import ParameterError
+        """The USB settings as :class:`~spikeview.live.usb.CameraConfig` keyword arguments (may raise ParameterError;
+        the text fields are read by :func:`spikeview.live.usb.parse_hex_id` and :func:`~spikeview.live.usb.parse_roi`,
+        an empty endpoint leaves ``CameraConfig``'s default)."""
+        from spikeview.live.usb import parse_hex_id, parse_roi
 
-        def hexval(edit: QtWidgets.QLineEdit, name: str) -> int | None:
-            text = edit.text().strip().lower().removeprefix("0x")
-            if not text:
-                return None
-            try:
-                return int(text, 16)
-            except ValueError:
-                raise ParameterError(f"{name} {edit.text()!r} is not a hexadecimal number; copy it from 'lsusb' "
-                                     f"(e.g. 1234).") from None
-
-        roi_text = self.roi.text().strip()
-        roi = None
-        if roi_text:
-            try:
-                roi = [int(v) for v in roi_text.replace(",", " ").split()]
-            except ValueError:
-                raise ParameterError(f"ROI {roi_text!r} is not four whole numbers; write top, left, height, width.") from None
-        kw: dict[str, Any] = {"vid": hexval(self.vid, "Vendor id"), "pid": hexval(self.pid, "Product id"),
-                              "endpoint": hexval(self.endpoint, "Endpoint") or 0x81, "format": self.format.currentData(),
-                              "cfa": self.cfa.currentData(), "flip_vertical": self.flip.isChecked(), "roi": roi,
+        kw: dict[str, Any] = {"vid": parse_hex_id(self.vid.text(), "Vendor id"), "pid": parse_hex_id(self.pid.text(), "Product id"),
+                              "format": self.format.currentData(), "cfa": self.cfa.currentData(),
+                              "flip_vertical": self.flip.isChecked(), "roi": parse_roi(self.roi.text()),
                               "decimate": self.decimate.value(), "frame_step": self.frame_step.value()}
+        endpoint = parse_hex_id(self.endpoint.text(), "Endpoint")
+        if endpoint is not None:
+            kw["endpoint"] = endpoint
         if kw["format"] == "plain":
             kw.update(width=self.width.value(), height=self.height.value())
         for item in (self.list.currentItem(),):
@@ -461,7 +449,7 @@ class LivePanel(QtWidgets.QWidget):
         src = self.source
         if src is None or src.n_frames == 0:
             return False
-        from spikeview.gui.model import OpenedStream
+        from spikeview.session.model import OpenedStream
 
         if self.window.session.source is not src:
             self.window.set_stream(OpenedStream(source=src, label=src.label))

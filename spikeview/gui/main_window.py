@@ -1,6 +1,6 @@
 """The main window: dockable panels over one session, menus, shortcuts, status bar, settings.
 
-Ownership: the window owns a :class:`~spikeview.gui.model.Session` (the state), a
+Ownership: the window owns a :class:`~spikeview.session.model.Session` (the state), a
 :class:`~spikeview.gui.controller.Controller` (jobs and playback) and the five panels (views).
 Opening files goes through a loader worker so a slow file or the demo simulation never blocks
 the window. Everything the user sets is remembered in :class:`QtCore.QSettings` (layout, last
@@ -17,10 +17,10 @@ from typing import Any
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from spikeview.errors import SpikeviewError
-from spikeview.gui import core
+from spikeview.session import core
 from spikeview.gui.controller import Controller
 from spikeview.gui.dialogs import ShortcutsDialog, StreamSettingsDialog, app_icon
-from spikeview.gui.model import OpenedStream, Session, format_us
+from spikeview.session.model import OpenedStream, Session, format_us
 from spikeview.gui.panels.degradation import DegradationPanel
 from spikeview.gui.panels.export import ExportPanel
 from spikeview.gui.panels.guided import GuidedPanel
@@ -381,7 +381,9 @@ class MainWindow(QtWidgets.QMainWindow):
         starting from what detection found. A ``.toml`` file is loaded as a preset.
         """
         path = Path(path)
-        if path.suffix.lower() == ".toml" and not path.name.endswith((".dat.toml", ".npy.toml", ".npz.toml")):
+        from spikeview.io.sidecar import is_sidecar
+
+        if path.suffix.lower() == ".toml" and not is_sidecar(path):  # a preset (a sidecar opens its spike file)
             self.load_preset(path)
             return
         self.statusBar().showMessage(f"Opening {path.name}…")
@@ -535,12 +537,12 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # ------------------------------------------------------------------------------ presets
     def load_preset(self, path: str | os.PathLike[str]) -> bool:
-        from spikeview.gui.presets import load_preset
+        from spikeview.session.presets import load_preset
 
         return self._preset_file(load_preset, path, "load", f"Loaded preset {Path(path).name} (Ctrl+Z undoes it).")
 
     def save_preset(self, path: str | os.PathLike[str]) -> bool:
-        from spikeview.gui.presets import save_preset
+        from spikeview.session.presets import save_preset
 
         return self._preset_file(save_preset, path, "save", f"Saved preset {path}.")
 
@@ -571,7 +573,7 @@ class MainWindow(QtWidgets.QMainWindow):
     def reset_params(self) -> None:
         """Every parameter back to its default, the white point to the one the CLI would use with them: the
         capture's exposure is estimated again for the default η and window (it depends on both)."""
-        from spikeview.gui.model import default_params
+        from spikeview.session.model import default_params
 
         values = default_params()
         white = getattr(self.controller, "capture_white", None)
@@ -583,7 +585,7 @@ class MainWindow(QtWidgets.QMainWindow):
     def _reset_recipe_params(self, label: str) -> None:
         """The recipe's parameters (and the export's range) at their defaults, as one undo step; the app's own
         preferences (playback, the export format, the display panels) stay."""
-        from spikeview.gui.model import default_params
+        from spikeview.session.model import default_params
         from spikeview.recipe import BY_KEY
 
         defaults = default_params()

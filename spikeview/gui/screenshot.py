@@ -72,7 +72,7 @@ def make_screenshot(out: Path, size: tuple[int, int] = (1800, 1080)) -> dict[str
 
 
 def _populate(app, w, tmp: Path, out: Path) -> None:
-    from spikeview.gui.model import SPECS
+    from spikeview.session.model import SPECS
 
     w.open_demo()
     _wait(app, lambda: w.session.stream is not None, what="the demo capture")

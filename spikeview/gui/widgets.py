@@ -1,6 +1,6 @@
 """Small Qt widgets shared by the panels: image panes and parameter editors bound to the session.
 
-Binding rule (napari style): a widget writes to the :class:`~spikeview.gui.model.Session` with
+Binding rule (napari style): a widget writes to the :class:`~spikeview.session.model.Session` with
 ``session.set(name, value)`` and reads back only through ``session.events.param_changed``; it
 keeps no state of its own. A slider drag is one undo step (``begin_group`` on press,
 ``end_group`` on release).
@@ -15,7 +15,7 @@ import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from spikeview.errors import ParameterError
-from spikeview.gui.model import SPECS, Session
+from spikeview.session.model import SPECS, Session
 
 # ------------------------------------------------------------------------------------ messages
 

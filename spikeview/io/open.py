@@ -29,7 +29,7 @@ import numpy as np
 from spikeview.cfa import parse_cfa
 from spikeview.errors import GeometryError, InputFileError, ParameterError
 from spikeview.io._base import check_dims, check_tick_rate, open_bytes
-from spikeview.io.sidecar import SIDECAR_SUFFIX, read_sidecar
+from spikeview.io.sidecar import is_sidecar, read_sidecar
 from spikeview.io.source import DEFAULT_TICK_RATE, FORMATS, SpikeSource
 
 #: plain-file geometries tried by size detection, as (width, height)
@@ -181,7 +181,7 @@ def _check_path(path: Path) -> None:
         raise InputFileError(f"{path}: file not found; check the path.")
     if path.is_dir():
         raise InputFileError(f"{path}: is a folder; point to a spike file (.dat, .npy, .npz) inside it.")
-    if path.suffix == SIDECAR_SUFFIX and path.with_suffix("").is_file():
+    if is_sidecar(path):
         raise InputFileError(f"{path}: is a sidecar (settings), not spike data; open {path.with_suffix('').name} instead.")
     try:
         size = path.stat().st_size

@@ -96,6 +96,13 @@ def sidecar_path(path: str | os.PathLike[str]) -> Path:
     return path.with_name(path.name + SIDECAR_SUFFIX)
 
 
+def is_sidecar(path: str | os.PathLike[str]) -> bool:
+    """``path`` is a sidecar (settings of the spike file beside it: ``scene.dat.toml`` next to ``scene.dat``), not a
+    preset or another TOML file: the one rule of the app's Open and :func:`spikeview.io.open.open_source`."""
+    path = Path(path)
+    return path.suffix == SIDECAR_SUFFIX and path.with_suffix("").is_file()
+
+
 def read_sidecar(path: str | os.PathLike[str]) -> Sidecar | None:
     """Read the sidecar of spike file ``path``; ``None`` when there is none.
 

@@ -53,6 +53,37 @@ CAMERA_FORMATS = ("raw1m", "plain")
 _PACKET = 1024
 
 
+
+def parse_hex_id(text: str, name: str) -> int | None:
+    """A USB id or endpoint as typed (``1234``, ``0x81``; hexadecimal), ``None`` when empty.
+
+    Raises:
+        ParameterError: not a hexadecimal number (one sentence naming ``name``).
+    """
+    t = str(text).strip().lower().removeprefix("0x")
+    if not t:
+        return None
+    try:
+        return int(t, 16)
+    except ValueError:
+        raise ParameterError(f"{name} {text!r} is not a hexadecimal number; copy it from 'lsusb' (e.g. 1234).") from None
+
+
+def parse_roi(text: str) -> list[int] | None:
+    """A camera ROI as typed (``top, left, height, width``; commas or spaces), ``None`` when empty.
+
+    Raises:
+        ParameterError: not whole numbers.
+    """
+    t = str(text).strip()
+    if not t:
+        return None
+    try:
+        return [int(v) for v in t.replace(",", " ").split()]
+    except ValueError:
+        raise ParameterError(f"ROI {t!r} is not four whole numbers; write top, left, height, width.") from None
+
+
 @dataclass
 class CameraConfig(Config):
     """How to find, read and decode a USB spike camera; saves to TOML and loads back unchanged.

@@ -354,3 +354,32 @@ def load_ground_truth(path: str | Path) -> GroundTruth:
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.shape[0] != ticks.shape[0]:
         raise InputFileError(f"{p}: frames {frames.shape} and ticks {ticks.shape} do not match; re-run the simulation.")
     return GroundTruth(frames=frames.astype(np.float32, copy=False), ticks=ticks, tick_rate=tick_rate)
+
+
+def ground_truth_reader(dat_path: str | Path, shape: tuple[int, int], tolerance: int
+                        ) -> Callable[[int], np.ndarray | None] | None:
+    """``ground_truth(tick)``: the clean linear frame stored nearest ``tick`` in the ``.gt.npz`` beside ``dat_path``
+    (loaded on first use), or ``None`` when no frame is stored within ``tolerance`` ticks or it is not ``shape``
+    (``(H, W)``); ``None`` instead of a reader when there is no ground-truth file (a damaged one reads as none)."""
+    from spikeview.errors import SpikeviewError
+
+    gt_file = ground_truth_path(dat_path)
+    if not gt_file.is_file():
+        return None
+    cache: dict[str, Any] = {}
+
+    def gt(tick: int) -> np.ndarray | None:
+        if "gt" not in cache:
+            try:
+                cache["gt"] = load_ground_truth(gt_file)
+            except SpikeviewError:
+                cache["gt"] = None
+        g = cache["gt"]
+        if g is None or not len(g):
+            return None
+        stored, frame = g.nearest(tick)
+        if abs(stored - tick) > tolerance or frame.shape[:2] != tuple(shape):
+            return None
+        return np.asarray(frame, dtype=np.float32)
+
+    return gt

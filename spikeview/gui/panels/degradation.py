@@ -13,8 +13,8 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
-from spikeview.gui.core import RESIDUAL_RANGE
-from spikeview.gui.model import SPECS, Session
+from spikeview.session.core import RESIDUAL_RANGE
+from spikeview.session.model import SPECS, Session
 from spikeview.gui.widgets import (
     ElidedLabel,
     ImagePane,
@@ -144,7 +144,7 @@ class DegradationPanel(QtWidgets.QWidget):
             self.band_box.setVisible(bool(value))
 
     def show_result(self, view: Any) -> None:
-        """Show a :class:`~spikeview.gui.jobs.DegradationView`."""
+        """Show a :class:`~spikeview.session.jobs.DegradationView`."""
         self.last = view
         self.updates += 1
         r = view.result

@@ -9,8 +9,8 @@ from PySide6 import QtCore, QtWidgets
 
 from spikeview.errors import SpikeviewError
 from spikeview.export.base import strip_frame_field
-from spikeview.gui import jobs
-from spikeview.gui.model import Session
+from spikeview.session import jobs
+from spikeview.session.model import Session
 from spikeview.gui.widgets import ParamCombo, ParamSpin, form, hbox, job_controls, subscribe
 
 FORMAT_TEXT = {"png": "PNG (8-bit, display)", "exr": "EXR (half float, linear)", "mp4": "MP4 (H.264)"}
@@ -153,7 +153,7 @@ class ExportPanel(QtWidgets.QWidget):
         s = self.session
         if s.source is None:
             return ()
-        from spikeview.gui.presets import session_recipe
+        from spikeview.session.presets import session_recipe
 
         try:
             return jobs.export_ticks(session_recipe(s), s.n_frames)

@@ -9,7 +9,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from spikeview.gui.model import SPECS, Session
+from spikeview.session.model import SPECS, Session
 from spikeview.gui.widgets import (
     ImagePane,
     ParamCombo,
@@ -290,7 +290,7 @@ class GuidedPanel(QtWidgets.QWidget):
             self.progress.setValue(0)
 
     def show_update(self, u: Any) -> None:
-        """Show a :class:`~spikeview.gui.jobs.GuidedUpdate` (plan text or a step).
+        """Show a :class:`~spikeview.session.jobs.GuidedUpdate` (plan text or a step).
 
         Steps are drawn at most every :data:`DRAW_INTERVAL_MS` (the latest preview, every metric
         point), so a fast sampler cannot keep the window busy redrawing.

@@ -17,23 +17,8 @@ import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
 from spikeview.gui.widgets import ImagePane
-
-
-def pooling_unavailable(pool: Any, knobs: dict[str, str | None] | None = None) -> str | None:
-    """Why this window has no pooling map (a sentence), or None when it has one.
-
-    ``knobs`` is :func:`spikeview.guided.knobs.knob_status` of the window's plan: its
-    ``guided.temporal_radius`` sentence is used where the capture holds no neighbouring window.
-    """
-    if pool is None:
-        return "no window has been planned yet"
-    if pool.radius <= 0 or pool.kind == "off":
-        return ("temporal_radius is 0: the window alone, as in the paper; raise Neighbours ± to pool the aligned "
-                "neighbouring windows")
-    if pool.dtau is None or not pool.offsets:
-        why = (knobs or {}).get("guided.temporal_radius")
-        return why or pool.reason
-    return None
+from spikeview.session import core
+from spikeview.session.core import pooling_image, pooling_unavailable  # noqa: F401 (the panel's names)
 
 
 def palette(n: int) -> np.ndarray:
@@ -42,21 +27,8 @@ def palette(n: int) -> np.ndarray:
     return np.asarray(lut[:, :3], dtype=np.uint8)[: n + 1]
 
 
-def pooling_image(dtau: np.ndarray, window: int, n: int) -> np.ndarray:
-    """``(H, W, 3)`` uint8: each photosite coloured by its number of pooled neighbours ``Δτ_eff/Δτ − 1`` (0 … n)."""
-    idx = np.clip(np.rint(np.asarray(dtau, dtype=np.float32) / float(window) - 1.0), 0, n).astype(np.intp)
-    return palette(n)[idx]
-
-
-def pooling_display(pool: Any) -> np.ndarray | None:
-    """The map's image of ``pool`` (:func:`pooling_image`), or None where there is no map.
-
-    Called by the jobs that report a pooling (the degradation preview, a guided run's plan), in their
-    worker: at 1000×1000 the colour mapping took 45 ms of the GUI thread (issue 15).
-    """
-    if pooling_unavailable(pool) is not None:
-        return None
-    return pooling_image(pool.dtau, pool.window, len(pool.offsets))
+# the session's jobs colour the map in their worker with the app's palette (spikeview.session.core.pooling_display)
+core.POOLING_PALETTE = palette
 
 
 class PoolingMap(QtWidgets.QWidget):

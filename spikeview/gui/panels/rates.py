@@ -8,7 +8,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtWidgets
 
-from spikeview.gui.model import Session
+from spikeview.session.model import Session
 from spikeview.gui.widgets import subscribe
 
 SITE_PENS = {"R": (230, 60, 60), "Gr": (60, 200, 60), "Gb": (20, 130, 90), "B": (70, 110, 255), "all": (220, 220, 220)}
@@ -87,7 +87,7 @@ class RatesPanel(QtWidgets.QWidget):
             self.tick_line.setValue(tick)
 
     def show_rates(self, r: Any) -> None:
-        """Show a :class:`~spikeview.gui.core.RatesResult`."""
+        """Show a :class:`~spikeview.session.core.RatesResult`."""
         self.last = r
         self.tick_line.setValue(r.tick)
         for name, hist in r.hists.items():

@@ -7,7 +7,7 @@ from typing import Any
 import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from spikeview.gui.model import Session, format_us
+from spikeview.session.model import Session, format_us
 from spikeview.gui.widgets import (
     ImagePane,
     ParamCheck,
@@ -220,7 +220,7 @@ class StreamPanel(QtWidgets.QWidget):
             self.display_factor_changed.emit(f)
 
     def show_frames(self, f: Any) -> None:
-        """Show a :class:`~spikeview.gui.core.StreamFrames` (from the controller)."""
+        """Show a :class:`~spikeview.session.core.StreamFrames` (from the controller)."""
         self.raw.set_image(f.raw, f.shape)
         self.tfp.set_image(f.tfp, f.shape)
         if f.tfi is not None:

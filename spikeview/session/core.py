@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from spikeview.cfa import flip_cfa, parse_cfa, site_offsets
+from spikeview.cfa import flip_cfa, parse_cfa
 from spikeview.errors import ParameterError
-from spikeview.gui.model import OpenedStream
+from spikeview.session.model import OpenedStream
 from spikeview.io.source import ArraySource, SpikeSource, StreamInfo
 from spikeview.io.views import LockedSource, ViewSource
 
@@ -31,7 +31,7 @@ from spikeview.io.views import LockedSource, ViewSource
 #: modules the workers import lazily; :func:`preload` imports them on one thread first
 WORKER_MODULES = (
     "spikeview.classical", "spikeview.classical.tfi", "spikeview.classical.reconstruct", "spikeview.classical.display",
-    "spikeview.classical.demosaic", "spikeview.classical.colour_cast", "spikeview.gui._kernels", "torch",
+    "spikeview.classical.demosaic", "spikeview.classical.colour_cast", "spikeview.session._kernels", "torch",
     "spikeview.ops", "spikeview.guided.observation", "spikeview.guided.plan", "spikeview.guided.sampler",
     "spikeview.guided.baseline", "spikeview.export", "spikeview.pipeline", "spikeview.metrics",
     # the writers' extension modules: a worker importing them holds the interpreter lock through their
@@ -136,29 +136,11 @@ def _file_ground_truth(path: Path, info: Any, kwargs: dict[str, Any]) -> Callabl
     """``ground_truth(tick)`` from the ``FILE.gt.npz`` beside a capture (``spikeview simulate`` writes it),
     or ``None`` without one. Only for the orientation it was written in (its sidecar's: no flip or CFA
     given), and only at ticks within :data:`GT_TICK_TOLERANCE` of a stored frame (else ``None``)."""
-    from spikeview.errors import SpikeviewError
-    from spikeview.sim.write import ground_truth_path, load_ground_truth
+    from spikeview.sim.write import ground_truth_reader
 
-    gt_file = ground_truth_path(path)
-    if not gt_file.is_file() or "flip_vertical" in kwargs or "flip_horizontal" in kwargs or not info.extra.get("sidecar"):
+    if "flip_vertical" in kwargs or "flip_horizontal" in kwargs or not info.extra.get("sidecar"):
         return None
-    cache: dict[str, Any] = {}
-
-    def gt(tick: int) -> np.ndarray | None:
-        if "gt" not in cache:
-            try:
-                cache["gt"] = load_ground_truth(gt_file)
-            except SpikeviewError:
-                cache["gt"] = None
-        g = cache["gt"]
-        if g is None or not len(g):
-            return None
-        stored, frame = g.nearest(tick)
-        if abs(stored - tick) > GT_TICK_TOLERANCE or frame.shape[:2] != (info.height, info.width):
-            return None
-        return np.asarray(frame, dtype=np.float32)
-
-    return gt
+    return ground_truth_reader(path, (info.height, info.width), GT_TICK_TOLERANCE)
 
 
 def has_sidecar(path: str | Path) -> bool:
@@ -269,7 +251,7 @@ def downsample(img: np.ndarray, factor: int) -> np.ndarray:
     f = int(factor)
     if f <= 1 or img.shape[0] < f or img.shape[1] < f:
         return img
-    from spikeview.gui._kernels import block_mean_u8
+    from spikeview.session._kernels import block_mean_u8
 
     arr = np.ascontiguousarray(img)
     out = block_mean_u8(arr if arr.ndim == 3 else arr[..., None], f)
@@ -305,6 +287,7 @@ def stream_frames(source: SpikeSource, tick: int, params: dict[str, Any], alpha:
     """
     from spikeview.classical.reconstruct import preview_rgb
     from spikeview.classical.tfi import tfi_array
+    from spikeview.classical.tfp import counts_to_sfr
 
     n = source.n_frames
     window = int(min(params["window"], n))
@@ -320,7 +303,7 @@ def stream_frames(source: SpikeSource, tick: int, params: dict[str, Any], alpha:
     if use_cast and alpha is None:
         alpha = alpha_note(_channel_means(block[a - lo:b - lo], cfa))[0]
     levels = {"black": params["black"], "white": max(params["white"], params["black"] + 1e-3), "gamma": display_gamma(params)}
-    sfr = block[a - lo:b - lo].sum(axis=0, dtype=np.uint16).astype(np.float32) * np.float32(1.0 / (b - a))
+    sfr = counts_to_sfr(block[a - lo:b - lo].sum(axis=0, dtype=np.uint16), b - a)  # the classical TFP (same numbers)
     method = demosaic_for(sfr, cfa, params["demosaic"])
     tfp_img = preview_rgb(sub, tick - lo, window, alpha=alpha, colour_cast=use_cast, eta=params["eta"],
                           demosaic_method=method, **levels)
@@ -389,34 +372,11 @@ class RatesResult:
 
 def site_rates(sfr: np.ndarray, cfa: str | None, window: int, roi: tuple[int, int, int, int] | None = None,
                tick: int = 0) -> RatesResult:
-    """Histograms of the SFR per Bayer site (``R``, ``Gr``, ``Gb``, ``B``; ``all`` for mono).
+    """The Rates panel's histograms of the SFR per Bayer site (:func:`spikeview.classical.colour_cast.site_histograms`)
+    and the window's gray-world α."""
+    from spikeview.classical.colour_cast import site_histograms
 
-    One bin per TFP level ``{0, 1/Δτ, …, 1}`` (for Δτ ≤ 64; longer windows use 65 bins), so the
-    histogram shows the quantisation exactly. The ROI is cut from the full frame and sites keep
-    their full-frame parity (the CFA phase does not depend on the ROI).
-    """
-    n = int(min(max(window, 1), 64))
-    edges = np.linspace(-0.5 / n, 1 + 0.5 / n, n + 2)
-    x0 = y0 = 0
-    sub = sfr
-    if roi is not None:
-        x0, y0, w, h = roi
-        sub = sfr[y0:y0 + h, x0:x0 + w]
-    planes = {"all": sub} if cfa is None else {
-        name: sub[(py - y0) % 2::2, (px - x0) % 2::2] for name, (py, px) in site_offsets(parse_cfa(cfa)).items()}
-    hists, means, sizes = {}, {}, {}
-    for name, plane in planes.items():
-        idx = np.rint(plane * np.float32(n)).astype(np.intp).ravel()
-        np.clip(idx, 0, n, out=idx)
-        sizes[name] = idx.size
-        hists[name] = np.bincount(idx, minlength=n + 1).astype(np.float64) / max(idx.size, 1)
-        means[name] = float(plane.mean(dtype=np.float64)) if plane.size else 0.0
-    if cfa is None:
-        ch = np.array([means["all"]])
-    else:
-        ngr, ngb = sizes["Gr"], sizes["Gb"]
-        g = (means["Gr"] * ngr + means["Gb"] * ngb) / max(ngr + ngb, 1)
-        ch = np.array([means["R"], g, means["B"]])
+    edges, hists, means, ch = site_histograms(sfr, cfa, window, roi)
     return RatesResult(tick=tick, edges=edges, hists=hists, means=means, alpha=alpha_note(ch)[0])
 
 
@@ -477,4 +437,50 @@ def stage_images(x_img: np.ndarray, stages: dict[str, Any], display: dict[str, A
     if show_pyramid and len(stages["bands"]) > 1:
         bands = [signed_display(-arr(b), RESIDUAL_RANGE / 2) for b in stages["bands"]]
     return DegradationResult(images=images, bands=bands, rmse=rmse, residual_scale=RESIDUAL_RANGE)
+
+
+
+# ------------------------------------------------------------------------------------ the pooling map
+#: ``palette(n) -> (n + 1, 3)`` uint8 colours of 0 … n pooled windows; the app registers its own (viridis,
+#: spikeview.gui.panels.pooling) so that the jobs colour the map in their worker without importing Qt here
+POOLING_PALETTE: Callable[[int], np.ndarray] | None = None
+
+
+def pooling_unavailable(pool: Any, knobs: dict[str, str | None] | None = None) -> str | None:
+    """Why this window has no pooling map (a sentence), or None when it has one.
+
+    ``knobs`` is :func:`spikeview.guided.knobs.knob_status` of the window's plan: its
+    ``guided.temporal_radius`` sentence is used where the capture holds no neighbouring window.
+    """
+    if pool is None:
+        return "no window has been planned yet"
+    if pool.radius <= 0 or pool.kind == "off":
+        return ("temporal_radius is 0: the window alone, as in the paper; raise Neighbours ± to pool the aligned "
+                "neighbouring windows")
+    if pool.dtau is None or not pool.offsets:
+        why = (knobs or {}).get("guided.temporal_radius")
+        return why or pool.reason
+    return None
+
+
+def pooling_image(dtau: np.ndarray, window: int, n: int) -> np.ndarray:
+    """``(H, W, 3)`` uint8: each photosite coloured by its number of pooled neighbours ``Δτ_eff/Δτ − 1`` (0 … n)."""
+    idx = np.clip(np.rint(np.asarray(dtau, dtype=np.float32) / float(window) - 1.0), 0, n).astype(np.intp)
+    if POOLING_PALETTE is None:
+        raise RuntimeError("no pooling palette registered (spikeview.gui.panels.pooling registers the app's)")
+    return POOLING_PALETTE(n)[idx]
+
+
+def pooling_display(pool: Any) -> np.ndarray | None:
+    """The map's image of ``pool`` (:func:`pooling_image`), or None where there is no map.
+
+    Called by the jobs that report a pooling (the degradation preview, a guided run's plan), in their
+    worker: at 1000×1000 the colour mapping took 45 ms of the GUI thread (issue 15).
+    """
+    if pooling_unavailable(pool) is not None:
+        return None
+    if POOLING_PALETTE is None:  # no app registered its palette: the app colours the map itself
+        return None
+    return pooling_image(pool.dtau, pool.window, len(pool.offsets))
+
 

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from spikeview.io import FORMATS
-from spikeview.gui.model import Session
+from spikeview.session.model import Session
 from spikeview.recipe import Recipe, StreamTable
 
 

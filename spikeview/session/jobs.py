@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from spikeview.gui import core
+from spikeview.session import core
 from spikeview.recipe import Recipe
 
 # ------------------------------------------------------------------------------------ previews
@@ -85,7 +85,7 @@ def sequence_state(source: Any, recipe: Recipe, alpha: np.ndarray | None, ctx: A
 
 @dataclass
 class DegradationView:
-    """A :class:`~spikeview.gui.core.DegradationResult` with what it was computed from.
+    """A :class:`~spikeview.session.core.DegradationResult` with what it was computed from.
 
     ``plan`` is the window's scene plan and ``knobs`` :func:`spikeview.guided.knobs.knob_status` of it:
     the guided panel disables a control whose knob cannot act, with the reason as its tooltip.
@@ -148,9 +148,7 @@ def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
 
 def pooling_display(pool: Any) -> np.ndarray | None:
     """The guided panel's pooling-map image of ``pool`` (uint8), made in the worker, not on the GUI thread."""
-    from spikeview.gui.panels.pooling import pooling_display as image
-
-    return image(pool)
+    return core.pooling_display(pool)
 
 
 # ---------------------------------------------------------------------------------- guided

@@ -494,7 +494,7 @@ class Session:
     # --- the recipe ---------------------------------------------------------------------------
     def recipe(self) -> Recipe:
         """The session's reconstruction settings as a :class:`~spikeview.recipe.Recipe`
-        (``[run]`` and ``[stream]`` as last loaded; :func:`spikeview.gui.presets.session_recipe`
+        (``[run]`` and ``[stream]`` as last loaded; :func:`spikeview.session.presets.session_recipe`
         fills them from the open stream and the current tick)."""
         # Built once per set of values: building checks every field (≈15 ms), and the window asks for it
         # several times per change on the GUI thread (previews, export panel, guided run; issue 15: 130 ms
