@@ -7,10 +7,10 @@ What it measures (the real :class:`spikeview.gui.main_window.MainWindow`, ``QT_Q
   (opened through :func:`spikeview.io.open_source`, sidecar present) in "every window" mode
   (Δτ = 10 ticks), the firing-rate histograms throttled as in the app (≤ 4 per second). With the
   TFI preview on and off. Baseline in the same process: the same frames computed in a plain loop
-  with no window (``spikeview.gui.core.stream_frames``) — the ceiling the display can reach.
+  with no window (``spikeview.session.core.stream_frames``) — the ceiling the display can reach.
 * **k → preview latency** — from ``session.set("k", …)`` (what a k-slider move does) to the
   degradation panel having shown *and painted* the new Q(C M X) of a 512×512 window. Baseline: the
-  degradation job alone (``spikeview.gui.jobs.degradation_job``), same process.
+  degradation job alone (``spikeview.session.jobs.degradation_job``), same process.
 
 * **event-loop stalls** (``--stall``) — the largest gap and the 99th percentile of a 10 ms QTimer's
   intervals during a full-frame guided run, playback and an MP4 export, at 256×256 and 1000×1000.
@@ -124,7 +124,7 @@ def display_rate(app, w, seconds: float, tfi: bool) -> dict[str, float]:
 
 
 def compute_only_rate(source, params: dict, alpha, seconds: float, tfi: bool) -> float:
-    from spikeview.gui import core
+    from spikeview.session import core
 
     n = source.n_frames
     t = 5
@@ -164,7 +164,7 @@ def k_latency(app, w, repeats: int) -> list[float]:
 
 
 def job_only_latency(w, repeats: int) -> list[float]:
-    from spikeview.gui import jobs
+    from spikeview.session import jobs
 
     out = []
     for i in range(repeats):
