@@ -169,7 +169,10 @@ def open_source(path: str | os.PathLike[str], *, format: str | None = None, widt
         src.info.extra.update(side.tables)
         src.info.extra.setdefault("sidecar", str(side.path))
         # a sidecar says how its rates map to display; spikeview's own (simulator, recorder) without the key: linear light
-        src.info.extra[DISPLAY_KEY] = (st.transfer if st is not None and st.transfer else "srgb")
+        from spikeview.transfer import TRANSFERS
+
+        shown = side.tables.get("display", {}).get("transfer") if isinstance(side.tables.get("display"), dict) else None
+        src.info.extra[DISPLAY_KEY] = shown if shown in TRANSFERS else "srgb"
     else:
         src.info.extra[DISPLAY_KEY] = "linear"  # a file of the ecosystem's: its tools show rates linearly
     return src

@@ -45,8 +45,9 @@ class StreamSettings(Config):
         cfa: top-left 2×2 of the decoded frame after the flips (``"RGGB"`` …) or ``"none"``.
         flip_vertical, flip_horizontal: flips applied after decoding.
         tick_rate: readouts per second (Hz).
-        transfer: the display curve the rates want (``srgb`` for linear light, ``linear`` for rates made from
-            display-referred frames); omitted: sRGB (spikeview's own captures).
+
+    How the rates map to display is a table of its own, ``[display] transfer = "srgb" | "linear" | "gamma"``
+    (:func:`spikeview.transfer.source_transfer`; older readers ignore a table they do not know).
     """
 
     format: str
@@ -56,14 +57,8 @@ class StreamSettings(Config):
     flip_vertical: bool = False
     flip_horizontal: bool = False
     tick_rate: float = DEFAULT_TICK_RATE
-    #: how the rates map to display (:func:`spikeview.transfer.source_transfer`); ``None``: not recorded
-    transfer: str | None = None
 
     def __post_init__(self) -> None:
-        from spikeview.transfer import TRANSFERS
-
-        if self.transfer is not None and self.transfer not in TRANSFERS:
-            raise ParameterError(f"transfer {self.transfer!r} is unknown: use one of {', '.join(TRANSFERS)}.")
         if self.format not in FORMATS:
             raise ParameterError(f"format {self.format!r} is unknown: use one of {', '.join(FORMATS)}.")
         if self.width < 1 or self.height < 1:
@@ -74,11 +69,9 @@ class StreamSettings(Config):
     @classmethod
     def from_info(cls, info: StreamInfo) -> StreamSettings:
         """The settings that reproduce ``info`` when the file is opened again."""
-        from spikeview.transfer import DISPLAY_KEY
-
         return cls(format=info.format, width=int(info.width), height=int(info.height), cfa=cfa_to_str(info.cfa),
                    flip_vertical=bool(info.flip_vertical), flip_horizontal=bool(info.flip_horizontal),
-                   tick_rate=float(info.tick_rate), transfer=(info.extra or {}).get(DISPLAY_KEY))
+                   tick_rate=float(info.tick_rate))
 
 
 @dataclasses.dataclass
@@ -154,8 +147,13 @@ def write_sidecar(path: str | os.PathLike[str], info: StreamInfo | StreamSetting
     """
     import tomli_w
 
+    from spikeview.transfer import DISPLAY_KEY
+
     settings = info if isinstance(info, StreamSettings) else StreamSettings.from_info(info)
     doc: dict[str, Any] = {"stream": settings.to_dict()}
+    display = None if isinstance(info, StreamSettings) else (info.extra or {}).get(DISPLAY_KEY)
+    if display is not None and "display" not in (extra_tables or {}):
+        doc["display"] = {"transfer": display}  # how the rates map to display (spikeview.transfer.source_transfer)
     for name, table in (extra_tables or {}).items():
         if name == "stream":
             raise ParameterError("extra_tables cannot contain a [stream] table; it is written from the stream info.")
