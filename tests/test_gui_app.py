@@ -868,3 +868,13 @@ def test_an_export_after_knob_changes_a_restart_a_file_switch_and_reset_equals_t
         return np.asarray(oiio.ImageBuf(str(p)).get_pixels(oiio.UINT8))
 
     assert np.array_equal(pixels(app_out), pixels(tmp_path / "cli.png"))
+
+
+def test_an_export_into_a_missing_folder_is_refused_before_it_starts(opened, tmp_path):
+    """Issue 27: the export once started (and ran its reconstruction) before failing at its first write."""
+    w, s = opened, opened.session
+    s.set("export_format", "png")
+    s.set("export_range", "frame")
+    assert w.controller.start_export(str(tmp_path / "missing" / "frame.png")) is False
+    assert not w.controller.exporter.is_active() and w.notice.kind == "error"
+    assert "missing does not exist" in w.export_panel.status.text() and not (tmp_path / "missing").exists()

@@ -413,6 +413,12 @@ class Controller(QtCore.QObject):
         except Exception as e:
             self._error(str(e))
             return False
+        folder = Path(out).parent
+        if not folder.is_dir():  # said before any work (the export once started and failed at its first write)
+            msg = f"The folder {folder} does not exist: choose another output or create the folder first."
+            self._error(msg)
+            self.export_state.emit("failed", msg)
+            return False
         name = str(s.stream.path) if s.stream.path is not None else s.stream.label
         roi = s.roi if recipe.run.method == "guided" else None
         req = jobs.ExportRequest(s.source, name, ticks, recipe, self.alpha, Path(out), roi, overwrite, cluster)
