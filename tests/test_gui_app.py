@@ -456,7 +456,7 @@ def test_cancel_an_export_and_a_failed_export(opened, qtbot, tmp_path):
     w.export_panel.path.setText(str(tmp_path / "missing" / "f_%04d.png"))
     w.export_panel.export_btn.click()
     qtbot.waitUntil(lambda: w.notice.kind == "error", timeout=WAIT_MS)
-    assert "Export failed" in w.notice.text() and "missing" in w.notice.text()
+    assert "Export not started" in w.notice.text() and "missing does not exist" in w.notice.text()  # before any work
 
 
 # ------------------------------------------------------------------------------------ comfort

@@ -415,7 +415,7 @@ class Controller(QtCore.QObject):
             return False
         folder = Path(out).parent
         if not folder.is_dir():  # said before any work (the export once started and failed at its first write)
-            msg = f"The folder {folder} does not exist: choose another output or create the folder first."
+            msg = f"Export not started: the folder {folder} does not exist; choose another output or create the folder first."
             self._error(msg)
             self.export_state.emit("failed", msg)
             return False
