@@ -259,14 +259,11 @@ def timing(size: int = 256, repeats: int = 5, name: str = "coffee/fast", radius:
 
 
 def _cpu_model() -> str:
-    try:
-        text = Path("/proc/cpuinfo").read_text(encoding="utf-8", errors="replace")
-    except OSError:
-        return platform.processor()
-    model = next((ln.split(":", 1)[1].strip() for ln in text.splitlines() if ln.startswith("model name")), "")
-    flags = next((ln.split(":", 1)[1].split() for ln in text.splitlines() if ln.startswith("flags")), [])
-    have = [f for f in ("avx2", "avx512f", "avx512_bf16", "amx_bf16") if f in flags]
-    return f"{model} ({', '.join(have) or 'no avx2'})"
+    from spikeview.guided.device import cpu_model
+    from spikeview.guided.precision import cpu_flags
+
+    have = [f for f in ("avx2", "avx512f", "avx512_bf16", "amx_bf16") if f in cpu_flags()]
+    return f"{cpu_model()} ({', '.join(have) or 'no avx2'})"
 
 
 def report(res: dict, default_radius: int | None = None) -> str:

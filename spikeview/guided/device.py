@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import platform
+from pathlib import Path
 from typing import Any
 
 from spikeview.errors import ParameterError
@@ -88,14 +89,25 @@ def device_name(device: str) -> str:
     dev = torch.device(device)
     if dev.type == "cuda":
         return str(torch.cuda.get_device_name(dev))
+    return cpu_model()
+
+
+@functools.lru_cache(maxsize=4)
+def cpuinfo_field(name: str) -> str:
+    """The first ``name : value`` of ``/proc/cpuinfo`` (``""`` where it cannot be read, e.g. not Linux)."""
     try:
-        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
+        text = Path("/proc/cpuinfo").read_text(encoding="ascii", errors="replace")
     except OSError:
-        pass
-    return platform.processor() or platform.machine() or "CPU"
+        return ""
+    for line in text.splitlines():
+        if line.startswith(name):
+            return line.split(":", 1)[1].strip()
+    return ""
+
+
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``; the platform's words, or ``"CPU"``, elsewhere)."""
+    return cpuinfo_field("model name") or platform.processor() or platform.machine() or "CPU"
 
 
 def device_label(device: Any) -> str:

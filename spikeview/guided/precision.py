@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import functools
 import os
-from pathlib import Path
 
 from spikeview.guided.config import PRECISIONS  # the values of ``guided.precision`` (one list: the config's)
 
@@ -60,17 +59,11 @@ AUTO_BF16 = True
 BF16_MIN_SPEEDUP = 1.2
 
 
-@functools.lru_cache(maxsize=1)
 def cpu_flags() -> frozenset[str]:
     """The CPU feature flags of ``/proc/cpuinfo`` (empty where it cannot be read, e.g. not Linux)."""
-    try:
-        text = Path("/proc/cpuinfo").read_text(encoding="ascii", errors="replace")
-    except OSError:
-        return frozenset()
-    for line in text.splitlines():
-        if line.startswith("flags"):
-            return frozenset(line.split(":", 1)[1].split())
-    return frozenset()
+    from spikeview.guided.device import cpuinfo_field
+
+    return frozenset(cpuinfo_field("flags").split())
 
 
 def max_isa(environ=None) -> str:

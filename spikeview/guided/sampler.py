@@ -48,7 +48,7 @@ from spikeview.guided.observation import Observation
 from spikeview.guided import precision as prec
 from spikeview.guided.plan import Plan, make_plan
 from spikeview.guided.priors.base import DenoiserPrior
-from spikeview.guided.schedule import VESchedule
+from spikeview.guided.schedule import ve_ladder
 from spikeview.ops.forward import ForwardModel
 
 SD_NEEDS_DPS = ('the sd prior is guided by gradients through the model: set guidance = "dps" '
@@ -354,11 +354,8 @@ class PixelSpace(SampleSpace):
         return plan.precision or prec.resolve_precision(p.precision, device=self.dev)[0]
 
     def setup(self, data, start, shape, channels, p, t_s, sigma_obs, sigma_add):
-        sigma_first = np.minimum(np.sqrt(sigma_obs ** 2 + sigma_add ** 2), getattr(self.prior, "sigma_max", math.inf))
-        sigma_first = np.maximum(sigma_first, 1e-4)
-        self.sigma_start = sigma_first.tolist()
-        schedule = VESchedule(tuple(sigma_first), p.sigma_end)
-        schedule.set_timesteps(p.steps)
+        schedule = ve_ladder(sigma_obs, sigma_add, getattr(self.prior, "sigma_max", math.inf), p.sigma_end, p.steps)
+        self.sigma_start = schedule.sigmas[0].tolist()
         self.add = torch.as_tensor(sigma_add, dtype=start.dtype, device=self.dev).view(1, -1, 1, 1)
         return schedule
 

@@ -118,3 +118,12 @@ class VESchedule:
             fresh = randn(sample.shape, generator, sample.dtype, sample.device)
             noise = (1 - zeta) ** 0.5 * eps_hat + zeta ** 0.5 * fresh
         return StepOutput(x0_hat + s_prev * noise, x0_hat)
+
+
+def ve_ladder(sigma_obs: np.ndarray, sigma_add: np.ndarray, sigma_max: float, sigma_end: float, steps: int) -> VESchedule:
+    """The sampler's σ ladder: from ``sqrt(σ_obs² + σ_add²)`` per channel (capped at the prior's ``sigma_max``,
+    at least 1e-4) down to ``sigma_end`` in ``steps`` steps (the untiled sampler and the tiles alike)."""
+    first = np.maximum(np.minimum(np.sqrt(sigma_obs ** 2 + sigma_add ** 2), sigma_max), 1e-4)
+    sched = VESchedule(tuple(first), sigma_end)
+    sched.set_timesteps(steps)
+    return sched

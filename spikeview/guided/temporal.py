@@ -375,7 +375,7 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     ty_of, tx_of = np.arange(h) // TILE, np.arange(w) // TILE
     counts = {k: cache.counts(source, a + k * window, b + k * window) for k in offsets}
     guides = {k: gaussian_filter(_guide_raw(counts[k], cfa), SMOOTH, mode="reflect") for k in offsets}
-    if (device is not None and getattr(device, "type", str(device).split(":")[0]) not in ("cpu", "auto")) or TORCH_ON_CPU:
+    if getattr(device, "type", "cpu") != "cpu" or TORCH_ON_CPU:  # a resolved torch.device (Observation.from_source)
         total, pooled, shifts, accepted = _align_torch(n0, raw0, g0, counts, guides, cfa, window, radius, kappa,
                                                        kernel_energy, device if device is not None else "cpu")
         dtau = (window * (1.0 + pooled)).astype(np.float32)

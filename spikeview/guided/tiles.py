@@ -160,17 +160,14 @@ def tile_spans(n: int, size: int, overlap: int = 0) -> list[tuple[int, int]]:
 def frame_ladder(plan: Any, p: Any, channels: int, sigma_max: float) -> tuple[Any, np.ndarray, np.ndarray]:
     """``(schedule, sigma_obs (C,), sigma_add (C,))``: the untiled run's σ ladder (``schedule.sigmas``,
     ``(steps + 1, C)``) and start noise (as :meth:`GuidedSampler._sample` computes them)."""
-    from spikeview.guided.schedule import VESchedule
+    from spikeview.guided.schedule import ve_ladder
 
     sigma_obs = np.asarray(plan.sigma, dtype=np.float64) * p.sigma_scale
     if sigma_obs.size != channels:
         sigma_obs = np.full(channels, float(np.sqrt(np.mean(sigma_obs ** 2))))
     t_s = p.t_start
     sigma_add = np.sqrt(np.maximum(t_s ** 2 - sigma_obs ** 2, 0.0)) if p.top_up else np.full(channels, t_s)
-    first = np.maximum(np.minimum(np.sqrt(sigma_obs ** 2 + sigma_add ** 2), sigma_max), 1e-4)
-    sched = VESchedule(tuple(first), p.sigma_end)
-    sched.set_timesteps(p.steps)
-    return sched, sigma_obs, sigma_add
+    return ve_ladder(sigma_obs, sigma_add, sigma_max, p.sigma_end, p.steps), sigma_obs, sigma_add
 
 
 def plan_tiles(obs: Any, plan: Any, p: Any, size: int | None = None,
