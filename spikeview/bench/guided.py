@@ -250,7 +250,12 @@ def run_benchmark(out_dir: str | os.PathLike[str] | None = "benchmarks/results",
     zoo = []
     if spikezoo:
         zoo = run_spikezoo(spikezoo, load_prior(GuidedConfig(), 1), quick)
-    info = dict(machine=f"{platform.machine()}, {os.cpu_count()} CPU cores visible, torch threads 2, Python {platform.python_version()}",
+    from spikeview.guided.device import cpu_model
+    from spikeview.guided.precision import cpu_flags
+
+    flags = " ".join(f for f in ("avx2", "avx512f", "avx512_bf16", "amx_bf16") if f in cpu_flags()) or "no avx2"
+    info = dict(machine=f"{cpu_model()} ({flags}), {os.cpu_count()} CPU cores visible, torch threads 2, Python "
+                        f"{platform.python_version()}",
                 load_end=os.getloadavg()[0], size=size, frames=frames, minutes=(time.time() - t_start) / 60,
                 scenes={n: seqs[n].white for n in seqs}, alpha={n: (None if seqs[n].alpha is None else seqs[n].alpha.tolist()) for n in seqs})
     res = dict(info=info, rows=results, spikezoo=zoo)
