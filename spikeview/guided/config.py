@@ -215,7 +215,7 @@ class GuidedConfig(Config):
                                       "used only where they match (0 = the window alone).")
     device: str = param("auto", key="", label="Device",
                         help="Where the guided reconstruction runs (prior, data term, tiles, temporal alignment): auto (the "
-                             "first CUDA GPU torch sees, else the CPU), cpu, cuda or cuda:N.")
+                             "first CUDA GPU torch sees, else the CPU), cpu, cuda or cuda:N; the app runs on auto (no control).")
     dtype: str = "float32"
 
     def __post_init__(self) -> None:
