@@ -54,6 +54,8 @@ class SequenceState:
     white: float | None = None
     #: the sentence when a channel had no spikes and its gain was filled in (the app shows it)
     note: str | None = None
+    #: which white balance gave α and why (:func:`spikeview.classical.colour_cast.sequence_white_balance`)
+    white_balance: str | None = None
 
     def attrs(self) -> dict[str, Any]:
         """Plain values for metadata (Zarr attributes, logs)."""
@@ -100,13 +102,13 @@ def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> Seque
     the white point. A channel without spikes gets the others' mean gain: a
     :class:`~spikeview.classical.colour_cast.ColourCastWarning` says so (``warn=False``: only
     :attr:`SequenceState.note`, for the app's worker threads, where warnings are unreliable)."""
-    from spikeview.classical.colour_cast import estimate_white, sequence_alpha
+    from spikeview.classical.colour_cast import estimate_white, sequence_white_balance
 
     c = recipe.classical
-    a, note = sequence_alpha(source, c, warn=warn)
+    a, note, why = sequence_white_balance(source, c, warn=warn)
     # the exposure, once per sequence, on the windows the frames are made of
     white = estimate_white(source, a, window=min(c.window, source.n_frames), max_windows=c.alpha_max_windows, eta=c.eta)
-    return SequenceState(a, white, note)
+    return SequenceState(a, white, note, why)
 
 
 def recipe_for_state(recipe: Recipe, state: SequenceState, source: Any = None) -> Recipe:
@@ -158,6 +160,16 @@ def white_point_line(recipe: Recipe, state: SequenceState, how: str) -> str:
     unit = "spikes per tick" if state.alpha is None else "Y·α/η, rates corrected for the colour cast"
     return (f"white point {output_white(recipe, state):.4g} ({unit}; {how}): EXR keeps values above it, "
             "npy/PNG/MP4 map it to full scale.")
+
+
+def white_balance_line(state: SequenceState) -> str | None:
+    """The one line a run prints about its colour cast: which white balance and why, and the gains (relative to G);
+    ``None`` without gains (monochrome, colour cast off)."""
+    if state.alpha is None:
+        return None
+    a = np.asarray(state.alpha, dtype=np.float64)
+    rel = a / a[1] if a[1] > 0 else a
+    return f"{state.white_balance or 'white balance'}; gains R {rel[0]:.3g}, G 1, B {rel[2]:.3g} (relative to G)."
 
 
 def exposure_mapping(recipe: Recipe, state: SequenceState, out: str | Path) -> tuple[Any, Callable[[np.ndarray], np.ndarray]]:

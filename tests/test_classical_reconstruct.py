@@ -78,7 +78,7 @@ def test_sequence_uses_one_alpha(monkeypatch):
         return sequence_alpha(*args, **kwargs)
 
     monkeypatch.setattr(rec, "sequence_alpha", counting_estimate)
-    cfg = ClassicalConfig(window=8)
+    cfg = ClassicalConfig(window=8, white_balance="gray-world")  # the gray-world estimate below
     frames = list(reconstruct_frames(src, [5, 20, 40, 59], cfg))
     assert len(calls) == 1 and len(frames) == 4
     alpha = estimate_alpha(src, window=10)  # window 10 x 64 windows cover all 60 ticks: exact

@@ -237,22 +237,57 @@ def sequence_channel_means(source: SpikeSource, window: int = 10, max_windows: i
 def sequence_alpha(source: SpikeSource, config: Any, *, warn: bool = True) -> tuple[np.ndarray | None, str | None]:
     """The sequence's gains α by the one rule, and the note for a channel without spikes (else ``None``).
 
-    ``config`` is a :class:`~spikeview.classical.config.ClassicalConfig` (its ``colour_cast``, ``alpha``,
-    ``alpha_window`` and ``alpha_max_windows``). No α (``None``) for a monochrome stream or with the
-    colour cast off; ``config.alpha`` when set; else one gray-world estimate of the stream from
-    ``alpha_window``-tick windows (:func:`sequence_channel_means`, :func:`alpha_with_note`). α is
-    float64 ``(3,)``. A channel without spikes gets the others' mean gain; with ``warn`` the note is
-    also issued as a :class:`ColourCastWarning`.
+    ``(gains, note)`` of :func:`sequence_white_balance` (which also says which estimator and why).
     """
+    a, note, _ = sequence_white_balance(source, config, warn=warn)
+    return a, note
+
+
+def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = True
+                           ) -> tuple[np.ndarray | None, str | None, str | None]:
+    """The sequence's gains α, the note for a channel without spikes, and which white balance gave them and why.
+
+    ``config`` is a :class:`~spikeview.classical.config.ClassicalConfig` (its ``colour_cast``, ``alpha``,
+    ``white_balance``, ``alpha_window`` and ``alpha_max_windows``). No α (``None``) for a monochrome stream or with
+    the colour cast off; ``config.alpha`` when set (the gains a run recorded); else by ``config.white_balance``
+    (:mod:`spikeview.classical.white_balance`): fixed gains ``R,G,B``, the camera profile's colour response
+    (``profile``: ``source.info.camera``), gray-world (one estimate of the stream from ``alpha_window``-tick windows,
+    :func:`sequence_channel_means`, :func:`alpha_with_note`), another estimator, or ``auto``. A profile's dark and
+    flat correction applies to the rates every estimator sees. α is float64 ``(3,)``. A channel without spikes gets
+    the others' mean gain; with ``warn`` the note is also issued as a :class:`ColourCastWarning`.
+    """
+    from spikeview.classical import white_balance as wb
+
     if source.cfa is None or not config.colour_cast:
-        return None, None
+        return None, None, None
     if config.alpha is not None:
-        return np.asarray(config.alpha, dtype=np.float64), None
-    means = sequence_channel_means(source, window=min(config.alpha_window, source.n_frames), max_windows=config.alpha_max_windows)
-    gains, note = alpha_with_note(means)
+        return np.asarray(config.alpha, dtype=np.float64), None, "white balance: the recorded gains classical.alpha"
+    choice = wb.parse_white_balance(getattr(config, "white_balance", "gray-world"), "classical.white_balance")
+    if not isinstance(choice, str):
+        return np.asarray(choice, dtype=np.float64), None, "white balance: the fixed gains R,G,B given"
+    camera = getattr(source.info, "camera", None)
+    if choice == "profile":
+        if camera is None or camera.colour_response is None:
+            raise ParameterError("--white-balance profile needs a camera profile with a colour response: pass --camera "
+                                 "PROFILE.toml made by `spikeview calibrate --flat FLAT` (or choose auto).")
+        return (np.asarray(camera.colour_gains(), dtype=np.float64), None,
+                f"white balance profile: the colour response of {camera.name} (measured on a flat capture)")
+    window = min(config.alpha_window, source.n_frames)
+    if choice == "gray-world" and camera is None:  # the paper's rule from the counts (exactly as before)
+        means = sequence_channel_means(source, window=window, max_windows=config.alpha_max_windows)
+        how = wb.WhiteBalance("gray-world", means, "white balance gray-world (as asked)")
+    else:
+        img, halves = wb.sequence_images(source, window, config.alpha_max_windows,
+                                         None if camera is None else camera.correct)
+        means = img.reshape(-1, 3).mean(axis=0)
+        how = wb.choose(img, choice, halves)
+    if how.method == "gray-world":
+        gains, note = alpha_with_note(means)
+    else:
+        gains, note = wb.gains_from_illuminant(how.illuminant, means), None
     if note is not None and warn:
         warnings.warn(note, ColourCastWarning, stacklevel=3)
-    return np.asarray(gains, dtype=np.float64), note
+    return np.asarray(gains, dtype=np.float64), note, how.reason
 
 
 def estimate_alpha(source: SpikeSource, window: int = 10, max_windows: int = DEFAULT_ALPHA_WINDOWS) -> np.ndarray:

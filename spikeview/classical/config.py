@@ -45,6 +45,11 @@ class ClassicalConfig(Config):
         eta: range parameter η: after correction each channel's sequence mean is ``1/η``.
         alpha: fixed gray-world gains ``[α_R, α_G, α_B]``; ``None`` estimates them once per
             sequence with :func:`estimate_alpha`.
+        white_balance: how the gains are estimated when ``alpha`` is unset: ``auto`` (gray-world where the scene
+            averages to gray, else an estimator that does not assume it, with the reason printed), ``gray-world``,
+            ``gray-edge``, ``gray-edge-2``, ``shades-of-gray``, ``white-patch``, ``combined``, ``profile`` (the
+            camera profile's colour response) or fixed gains ``"R,G,B"``
+            (:mod:`spikeview.classical.white_balance`).
         alpha_window, alpha_max_windows: how :func:`estimate_alpha` samples the sequence.
         clip: clip frames to ``[0, 1]``; off (default), frames keep scene-linear values above 1
             (highlights brighter than 1/η's scale, Malvar/Menon overshoot): the exports map them by the
@@ -68,6 +73,11 @@ class ClassicalConfig(Config):
     eta: float = param(DEFAULT_ETA, label="Colour range η", lo=0.0, lo_open=True, hi=8.0, step=0.05,
                        help="Range parameter η of the colour cast: after correction each channel's sequence mean is 1/η "
                             "(2 → 0.5).")
+    white_balance: str = param("auto", key="", label="White balance",
+                               help="How the colour-cast gains are estimated once per sequence: auto (gray-world where the "
+                                    "scene averages to gray, else combined; the reason is printed), gray-world, gray-edge, "
+                                    "gray-edge-2, shades-of-gray, white-patch, combined, profile (the --camera profile's "
+                                    "colour response) or fixed gains R,G,B.")
     alpha: list[float] | None = None
     alpha_window: int = 10
     alpha_max_windows: int = DEFAULT_ALPHA_WINDOWS
@@ -83,6 +93,10 @@ class ClassicalConfig(Config):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ParameterError(f"{name} must be a whole number >= 1, got {value!r}; fix the setting.")
         self.alpha = check_gains("classical.alpha", self.alpha)
+        from spikeview.classical.white_balance import parse_white_balance
+
+        wb = parse_white_balance(self.white_balance, "classical.white_balance")
+        self.white_balance = wb if isinstance(wb, str) else ",".join(f"{v:g}" for v in wb)
 
 
 def check_gains(name: str, alpha: list[float] | None) -> list[float] | None:

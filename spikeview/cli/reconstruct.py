@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     if batch.wants_zarr(args):  # a .zarr output: the chunked, resumable batch path
         return batch.run_zarr(args)
     from spikeview.export import describe_slow_motion, slow_motion_factor
-    from spikeview.pipeline import prepare_sequence, recipe_for_state, white_point_line, window_centres, write_sequence
+    from spikeview.pipeline import prepare_sequence, recipe_for_state, white_balance_line, white_point_line, window_centres, write_sequence
     from spikeview.pipeline import WriteOptions
 
     recipe = recipe if recipe is not None else recipe_from_args(args)
@@ -147,6 +147,9 @@ def run(args: argparse.Namespace) -> int:
             "from the preset" if getattr(args, "preset", None) and state.white is not None and
             recipe.export.white != state.white else "the 99.9th percentile of the sequence's rates")
         print(white_point_line(recipe, state, how), file=sys.stderr)
+        line = white_balance_line(state)
+        if line is not None:
+            print(line, file=sys.stderr)
         line = display_curve_line(out, asked_transfer, src)
         if line is not None:
             print(line, file=sys.stderr)

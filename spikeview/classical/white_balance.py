@@ -1,0 +1,246 @@
+"""White balance: the colour-cast gains α of a sequence by gray-world or by estimators that do not assume a gray average.
+
+Every estimator here returns the illuminant ``e`` (the raw RGB rate of a neutral surface, up to scale) of a
+**sequence** (one estimate per sequence, so colours stay stable from frame to frame) and the gains are
+``α_c ∝ 1 / e_c``, scaled so that ``Σ_c α_c · mean_c = 3`` (the overall level gray-world gives: the exposure is set
+afterwards by the white point). The estimators see the sequence image: the mean rate of each 2×2 Bayer cell
+``(R, (Gr + Gb) / 2, B)`` over the sampled windows (:func:`sequence_rgb`, half resolution, no demosaicking).
+
+* ``gray-world`` — the mean of each channel (the paper's rule): right when the scene averages to gray.
+* ``shades-of-gray`` — the Minkowski ``p = 6`` mean of each channel (Finlayson & Trezzi 2004).
+* ``gray-edge`` — the Minkowski ``p = 6`` mean of the gradient magnitude of each channel after a Gaussian of σ = 1 cell
+  (van de Weijer, Gevers & Gijsenij 2007, first order); ``gray-edge-2`` uses the second derivatives. Edges
+  average to gray far more often than surfaces do: a colourful scene's large coloured areas weigh in only at their
+  borders.
+* ``white-patch`` — the mean of the brightest 1 % of the cells that are not saturated (bright pixels).
+* ``combined`` — the geometric mean of the gray-edge, white-patch and shades-of-gray illuminants (each of unit
+  length): three different assumptions, so one scene rarely fools all three the same way.
+* ``auto`` — gray-world unless it disagrees with ``combined`` by more than :data:`AGREE_DEG` degrees **and** by more
+  than twice the estimators' own uncertainty (the angle between ``combined`` on the even and on the odd sampled
+  windows: a dark or fast-changing scene's edges and highlights are noisy); then ``combined``. Gray-world is the
+  paper's rule and the least noisy where the scene averages to gray. The choice and its reason are one sentence.
+* ``profile`` — the colour response measured by ``spikeview calibrate`` from a flat capture
+  (:mod:`spikeview.calibration`): the only choice that is right for a scene that is itself tinted.
+
+No estimator that sees only the capture can tell a tinted scene from a tinted sensor: every one of them is
+equivariant to per-channel gains (``est(D·I) = D·est(I)``), so a scene whose colours are all shifted by ``D``
+(a green-dominated crop, a scene under a coloured light) is corrected as if ``D`` were the sensor's. Only a
+reference measured with a known neutral (the calibration's flat capture) separates the two.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from spikeview.cfa import CHANNEL_INDEX, site_offsets
+from spikeview.errors import ParameterError
+
+#: the estimators (``auto`` picks one of the first two; ``profile`` needs a camera profile)
+ESTIMATORS = ("gray-world", "gray-edge", "gray-edge-2", "shades-of-gray", "white-patch", "combined")
+CHOICES = ("auto",) + ESTIMATORS + ("profile",)
+#: Minkowski norm of shades-of-gray and gray-edge
+MINKOWSKI_P = 6.0
+#: Gaussian σ (in 2×2 cells) before the derivatives of gray-edge
+EDGE_SIGMA = 1.0
+#: fraction of the cells white-patch averages
+BRIGHT_FRACTION = 0.01
+#: auto: gray-world is kept when it and ``combined`` agree within this angle (degrees)
+AGREE_DEG = 3.0
+#: auto: ... or when their disagreement is within this many times ``combined``'s split-half uncertainty
+NOISE_FACTOR = 2.0
+
+
+def parse_white_balance(text: str, name: str = "--white-balance") -> str | list[float]:
+    """``text`` as a method name of :data:`CHOICES` or as three fixed gains ``R,G,B`` (finite, positive).
+
+    Raises:
+        ParameterError: neither (one sentence naming ``name`` and the choices).
+    """
+    t = str(text).strip().lower()
+    if t in CHOICES:
+        return t
+    parts = [p for p in t.replace(";", ",").split(",")]
+    if len(parts) == 3:
+        try:
+            gains = [float(p) for p in parts]
+        except ValueError:
+            gains = []
+        if len(gains) == 3 and all(np.isfinite(g) and g > 0 for g in gains):
+            return gains
+    raise ParameterError(f"{name} {text!r} is not one of {', '.join(CHOICES)} nor three positive gains R,G,B "
+                         "(e.g. 1.6,1,2.1).")
+
+
+def cells_rgb(rates: np.ndarray, cfa: str) -> np.ndarray:
+    """``(H, W)`` mosaicked rates → ``(H//2, W//2, 3)`` float64: each 2×2 cell's R, mean of its two G, B."""
+    h, w = (rates.shape[0] // 2) * 2, (rates.shape[1] // 2) * 2
+    r = np.asarray(rates, dtype=np.float64)[:h, :w]
+    out = np.zeros((h // 2, w // 2, 3))
+    for name, (py, px) in site_offsets(cfa).items():
+        c = CHANNEL_INDEX[name[0]]
+        out[..., c] += r[py::2, px::2] * (0.5 if c == 1 else 1.0)
+    return out
+
+
+def _blur(img: np.ndarray, sigma: float) -> np.ndarray:
+    """Separable Gaussian of ``(h, w, 3)`` with reflected borders."""
+    rad = max(1, int(np.ceil(3 * sigma)))
+    k = np.exp(-0.5 * (np.arange(-rad, rad + 1) / sigma) ** 2)
+    k /= k.sum()
+    out = img
+    for axis in (0, 1):
+        pad = [(0, 0)] * img.ndim
+        pad[axis] = (rad, rad)
+        p = np.pad(out, pad, mode="reflect") if out.shape[axis] > rad else np.pad(out, pad, mode="edge")
+        acc = np.zeros_like(out)
+        for i, kv in enumerate(k):
+            acc += kv * np.take(p, np.arange(i, i + out.shape[axis]), axis=axis)
+        out = acc
+    return out
+
+
+def _minkowski(v: np.ndarray, p: float) -> np.ndarray:
+    v = np.abs(v.reshape(-1, v.shape[-1]))
+    scale = v.max(axis=0)
+    scale[scale <= 0] = 1.0
+    return scale * np.mean((v / scale) ** p, axis=0) ** (1.0 / p)
+
+
+def illuminant(img: np.ndarray, method: str, saturated: float = 0.95) -> np.ndarray:
+    """The illuminant ``e`` (3,) of a sequence image ``img`` ``(h, w, 3)`` (mean rates) by ``method`` (:data:`ESTIMATORS`).
+
+    ``saturated``: cells with a channel at or above this rate (spikes per tick) are left out of white-patch (a
+    clipped channel has no colour). May hold zeros (a channel without spikes): the caller fills those in.
+    """
+    img = np.asarray(img, dtype=np.float64)
+    if method == "gray-world":
+        return img.reshape(-1, 3).mean(axis=0)
+    if method == "shades-of-gray":
+        return _minkowski(img, MINKOWSKI_P)
+    if method in ("gray-edge", "gray-edge-2"):
+        if min(img.shape[:2]) < 4:  # too small for derivatives
+            return img.reshape(-1, 3).mean(axis=0)
+        b = _blur(img, EDGE_SIGMA)
+        gy, gx = np.gradient(b, axis=(0, 1))
+        if method == "gray-edge":
+            mag = np.sqrt(gx * gx + gy * gy)
+        else:
+            gyy = np.gradient(gy, axis=0)
+            gxx = np.gradient(gx, axis=1)
+            gxy = np.gradient(gx, axis=0)
+            mag = np.sqrt(gxx * gxx + gyy * gyy + 2 * gxy * gxy)
+        return _minkowski(mag[1:-1, 1:-1], MINKOWSKI_P)
+    if method == "combined":
+        parts = [illuminant(img, m, saturated) for m in ("gray-edge", "white-patch", "shades-of-gray")]
+        parts = [p / n for p in parts if (n := float(np.linalg.norm(p))) > 0 and np.isfinite(n)]
+        if not parts:
+            return img.reshape(-1, 3).mean(axis=0)
+        return np.exp(np.mean([np.log(np.maximum(p, 1e-12)) for p in parts], axis=0))
+    if method == "white-patch":
+        flat = img.reshape(-1, 3)
+        ok = flat.max(axis=1) < saturated
+        pool = flat[ok] if ok.sum() >= 16 else flat
+        s = pool.sum(axis=1)
+        n = max(1, int(round(BRIGHT_FRACTION * s.size)))
+        return pool[np.argsort(s)[-n:]].mean(axis=0)
+    raise ParameterError(f"unknown white-balance estimator {method!r}; use one of {', '.join(ESTIMATORS)}.")
+
+
+def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle in degrees between two RGB vectors (0 when either is zero)."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
+    if na <= 0 or nb <= 0:
+        return 0.0
+    return float(np.degrees(np.arccos(np.clip(a @ b / (na * nb), -1.0, 1.0))))
+
+
+@dataclass
+class WhiteBalance:
+    """A sequence's white balance: which estimator gave the gains and why.
+
+    Attributes:
+        method: the estimator used (:data:`ESTIMATORS`, ``"profile"`` or ``"fixed"``).
+        illuminant: ``(3,)`` raw R, G, B rate of a neutral surface (up to scale), or ``None`` for fixed gains.
+        reason: one sentence (the plan and the CLI print it).
+    """
+
+    method: str
+    illuminant: np.ndarray | None
+    reason: str
+
+
+def gains_from_illuminant(e: np.ndarray, means: np.ndarray) -> np.ndarray:
+    """Gains ``α_c ∝ 1/e_c`` scaled so that ``Σ α_c · mean_c = 3`` (gray-world's level); float64 (3,).
+
+    A channel whose illuminant is zero or not finite gets the mean gain of the others (as gray-world does).
+    """
+    e = np.asarray(e, dtype=np.float64).reshape(3)
+    ok = np.isfinite(e) & (e > 0)
+    a = np.ones(3)
+    a[ok] = 1.0 / e[ok]
+    if not ok.all():
+        a[~ok] = a[ok].mean() if ok.any() else 1.0
+    level = float(a @ np.asarray(means, dtype=np.float64))
+    return a * (3.0 / level) if level > 0 and np.isfinite(level) else a
+
+
+def choose(img: np.ndarray, method: str, halves: tuple[np.ndarray, np.ndarray] | None = None) -> WhiteBalance:
+    """The white balance of a sequence image by ``method`` (an estimator or ``auto``), with its reason.
+
+    ``halves``: the sequence image of the even and of the odd sampled windows (``auto``'s uncertainty; ``None``: no
+    uncertainty is known, 0).
+    """
+    if method != "auto":
+        return WhiteBalance(method, illuminant(img, method), f"white balance {method} (as asked)")
+    gw = illuminant(img, "gray-world")
+    co = illuminant(img, "combined")
+    ok = gw > 0
+    d = angle_deg(co[ok] / gw[ok], np.ones(int(ok.sum()))) if ok.sum() >= 2 else 0.0
+    u = 0.0
+    if halves is not None:
+        a, b = (illuminant(h, "combined") for h in halves)
+        okh = (a > 0) & (b > 0)
+        u = angle_deg(a[okh] / b[okh], np.ones(int(okh.sum()))) if okh.sum() >= 2 else 0.0
+    if d <= AGREE_DEG:
+        return WhiteBalance("gray-world", gw, f"white balance auto → gray-world: edges, highlights and the scene's mean "
+                                             f"agree within {d:.1f}° (≤ {AGREE_DEG:g}°), the scene averages to gray")
+    if d <= NOISE_FACTOR * u:
+        return WhiteBalance("gray-world", gw, f"white balance auto → gray-world: edges and highlights are {d:.1f}° off "
+                                             f"the scene's mean, but they vary by {u:.1f}° between halves of the "
+                                             "sequence (too noisy to trust)")
+    return WhiteBalance("combined", co, f"white balance auto → combined (gray-edge, white-patch, shades-of-gray): the "
+                                        f"scene's mean is {d:.1f}° off its edges and highlights (> {AGREE_DEG:g}°, "
+                                        f"uncertainty {u:.1f}°), a colourful scene")
+
+
+def sequence_images(source, window: int = 10, max_windows: int = 64, correct=None
+                    ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """The sequence image the estimators see, and the same of the even and of the odd sampled windows.
+
+    Mean rate (spikes per tick) of each 2×2 cell's R, G, B over the windows
+    :func:`~spikeview.classical.colour_cast.sample_starts` picks (the gray-world estimate's windows), each
+    ``(H//2, W//2, 3)`` float64. ``correct``: a function ``(rates (H, W) float64) → rates`` (a camera profile's dark
+    and flat correction, :meth:`spikeview.calibration.CameraProfile.correct`) or ``None``.
+    """
+    from spikeview.classical.colour_cast import sample_starts
+    from spikeview.classical.tfp import window_counts
+
+    window = min(int(window), source.n_frames)
+    totals = [np.zeros((source.height, source.width), dtype=np.float64) for _ in (0, 1)]
+    ticks = [0, 0]
+    for i, s in enumerate(sample_starts(source.n_frames, window, max_windows)):
+        e = min(s + window, source.n_frames)
+        totals[i % 2] += window_counts(source, s, e)
+        ticks[i % 2] += e - s
+
+    def image(total: np.ndarray, n: int) -> np.ndarray:
+        rates = total / max(n, 1)
+        return cells_rgb(rates if correct is None else correct(rates), source.cfa)
+
+    whole = image(totals[0] + totals[1], ticks[0] + ticks[1])
+    if ticks[1] == 0:
+        return whole, (whole, whole)
+    return whole, (image(totals[0], ticks[0]), image(totals[1], ticks[1]))
