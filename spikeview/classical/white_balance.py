@@ -12,7 +12,8 @@ afterwards by the white point). The estimators see the sequence image: the mean 
   (van de Weijer, Gevers & Gijsenij 2007, first order); ``gray-edge-2`` uses the second derivatives. Edges
   average to gray far more often than surfaces do: a colourful scene's large coloured areas weigh in only at their
   borders.
-* ``white-patch`` — the mean of the brightest 1 % of the cells that are not saturated (bright pixels).
+* ``white-patch`` — the mean of the brightest 1 % of the cells that are not saturated (bright pixels; brightness
+  is the sum of the channels each divided by its mean, so that no channel's response favours its colour).
 * ``combined`` — the geometric mean of the gray-edge, white-patch and shades-of-gray illuminants (each of unit
   length): three different assumptions, so one scene rarely fools all three the same way.
 * ``auto`` — gray-world unless it disagrees with ``combined`` by more than :data:`AGREE_DEG` degrees **and** by more
@@ -142,7 +143,8 @@ def illuminant(img: np.ndarray, method: str, saturated: float = 0.95) -> np.ndar
         flat = img.reshape(-1, 3)
         ok = flat.max(axis=1) < saturated
         pool = flat[ok] if ok.sum() >= 16 else flat
-        s = pool.sum(axis=1)
+        m = pool.mean(axis=0)
+        s = (pool / np.where(m > 0, m, 1.0)).sum(axis=1)  # brightness relative to each channel's mean: no channel favoured
         n = max(1, int(round(BRIGHT_FRACTION * s.size)))
         return pool[np.argsort(s)[-n:]].mean(axis=0)
     raise ParameterError(f"unknown white-balance estimator {method!r}; use one of {', '.join(ESTIMATORS)}.")

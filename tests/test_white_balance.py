@@ -1,0 +1,151 @@
+"""White balance beyond gray-world (spikeview.classical.white_balance, ``--white-balance``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from spikeview.classical import white_balance as wb
+from spikeview.classical.colour_cast import sequence_white_balance
+from spikeview.classical.config import ClassicalConfig
+from spikeview.errors import ParameterError
+from spikeview.io.source import ArraySource
+
+TINT = np.array([0.55, 1.0, 0.45])  # a sensor response (issue 26)
+
+
+def _colourful(seed: int = 0, n: int = 64) -> np.ndarray:
+    """A scene whose mean is green but whose edges are gray: a flat green field (no edges) beside a gray texture."""
+    rng = np.random.default_rng(seed)
+    img = np.empty((n, n, 3))
+    img[:, : n // 2] = [0.1, 0.6, 0.1]  # flat: no edges, no highlights
+    tex = 0.2 + 0.6 * (rng.random((n // 8, n // 2 // 8)) > 0.5)
+    img[:, n // 2:] = np.kron(tex, np.ones((8, 8)))[..., None]
+    img[0, -1] = 0.95  # one white highlight cell: the white-patch estimate's patch
+    return img
+
+
+def _mosaic(rgb: np.ndarray, cfa: str) -> np.ndarray:
+    """(h, w, 3) cell colours → (2h, 2w) mosaic with ``cfa``."""
+    h, w, _ = rgb.shape
+    out = np.zeros((2 * h, 2 * w))
+    idx = {"R": 0, "G": 1, "B": 2}
+    for k, ch in enumerate(cfa):
+        out[k // 2::2, k % 2::2] = rgb[..., idx[ch]]
+    return out
+
+
+@pytest.mark.parametrize("method", wb.ESTIMATORS)
+def test_every_estimator_is_equivariant_to_channel_gains(method):
+    # est(D·I) = D·est(I): why no estimator can tell a tinted scene from a tinted sensor (module docstring)
+    img = np.random.default_rng(1).random((24, 24, 3)) * 0.8
+    d = np.array([0.5, 1.0, 0.3])
+    a, b = wb.illuminant(img, method), wb.illuminant(img * d, method)
+    assert wb.angle_deg(a * d, b) < 1e-4
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", "GBRG"])
+def test_edges_find_the_sensor_tint_where_gray_world_takes_the_scene_for_it(cfa):
+    scene = _colourful()
+    raw = _mosaic(scene * TINT * 0.5, cfa)
+    img = wb.cells_rgb(raw, cfa)
+    np.testing.assert_allclose(img, scene * TINT * 0.5)
+    gw, ge, co = (wb.illuminant(img, m) for m in ("gray-world", "gray-edge", "combined"))
+    assert wb.angle_deg(ge, TINT) < 4  # the edges are mostly gray (the field's border is not)
+    assert wb.angle_deg(co, TINT) < 4
+    assert wb.angle_deg(gw, TINT) > 10  # the green field pulls the mean
+    choice = wb.choose(img, "auto")
+    assert choice.method == "combined" and "colourful" in choice.reason
+    gray = wb.choose(wb.cells_rgb(_mosaic(np.repeat(scene.mean(axis=-1, keepdims=True), 3, -1) * TINT, cfa), cfa), "auto")
+    assert gray.method == "gray-world" and "averages to gray" in gray.reason
+
+
+def test_auto_keeps_gray_world_when_the_estimate_is_too_noisy():
+    img = _colourful() * TINT
+    noisy = [img * (1 + 0.3 * np.random.default_rng(s).standard_normal(img.shape)) ** 2 for s in (1, 2)]
+    quiet = wb.choose(img, "auto", (img, img))
+    assert quiet.method == "combined"
+    assert wb.choose(img, "auto", tuple(noisy)).method in ("gray-world", "combined")  # decided by the numbers
+    far = (img, img * np.array([3.0, 1.0, 0.2]))  # halves that disagree by far more than the estimates do
+    loud = wb.choose(img, "auto", far)
+    assert loud.method == "gray-world" and "too noisy" in loud.reason
+
+
+@pytest.mark.parametrize("text, expected", [("auto", "auto"), (" Gray-Edge ", "gray-edge"), ("1.5,1,2", [1.5, 1.0, 2.0])])
+def test_parse(text, expected):
+    assert wb.parse_white_balance(text) == expected
+
+
+@pytest.mark.parametrize("text", ["purple", "1,2", "1,0,2", "1,nan,2", "a,b,c", ""])
+def test_parse_refuses_in_one_sentence(text):
+    with pytest.raises(ParameterError, match="--white-balance") as e:
+        wb.parse_white_balance(text)
+    assert str(e.value).endswith(").") and "\n" not in str(e.value)
+    with pytest.raises(ParameterError, match="classical.white_balance"):
+        ClassicalConfig(white_balance=text)
+
+
+def _source(scene: np.ndarray, cfa: str | None, ticks: int = 64, seed: int = 0) -> ArraySource:
+    """Integrate-and-fire spikes of a static mosaic (rates = ``scene`` per tick)."""
+    rates = _mosaic(scene, cfa) if cfa else scene.mean(axis=-1).repeat(2, 0).repeat(2, 1)
+    v = np.random.default_rng(seed).random(rates.shape)
+    out = np.zeros((ticks,) + rates.shape, dtype=np.uint8)
+    for t in range(ticks):
+        v += rates
+        out[t] = v >= 1
+        v -= out[t]
+    return ArraySource(out, cfa=cfa)
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", "BGGR"])
+def test_sequence_white_balance_on_spikes(cfa):
+    src = _source(_colourful() * TINT * 0.8, cfa)
+    means = {m: sequence_white_balance(src, ClassicalConfig(white_balance=m), warn=False) for m in ("gray-world", "auto")}
+    a_gw, _, why_gw = means["gray-world"]
+    a_auto, _, why_auto = means["auto"]
+    assert "gray-world" in why_gw and "combined" in why_auto
+    # the gains undo the tint: α·tint is gray for auto, not for gray-world
+    assert wb.angle_deg(a_auto * TINT, np.ones(3)) < 2.0
+    assert wb.angle_deg(a_gw * TINT, np.ones(3)) > 10
+    fixed = sequence_white_balance(src, ClassicalConfig(white_balance="2,1,3"), warn=False)
+    np.testing.assert_array_equal(fixed[0], [2.0, 1.0, 3.0])
+    with pytest.raises(ParameterError, match="--camera"):
+        sequence_white_balance(src, ClassicalConfig(white_balance="profile"))
+
+
+def test_mono_has_no_white_balance():
+    src = _source(_colourful(), None)
+    for m in ("auto", "gray-edge", "1,2,3"):
+        assert sequence_white_balance(src, ClassicalConfig(white_balance=m)) == (None, None, None)
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", "none"])
+def test_cli_white_balance_flag_prints_the_choice_and_records_it(tmp_path, capsys, cfa):
+    from spikeview.cli.main import main
+    from spikeview.io.plain import write_plain
+    from spikeview.recipe import Recipe
+
+    src = _source(_colourful() * TINT * 0.8, None if cfa == "none" else cfa)
+    path = tmp_path / "cap.dat"
+    write_plain(path, src.read(0, src.n_frames))
+    geom = ["--width", "64", "--height", "64", "--cfa", cfa]
+    outs = {}
+    for m in ("gray-world", "auto"):
+        out = tmp_path / f"{m}.npy"
+        assert main(["reconstruct", str(path), *geom, "--white-balance", m, "--out", str(out)]) == 0
+        err = capsys.readouterr().err
+        rec = Recipe.load(str(out) + ".preset.toml")
+        assert rec.classical.white_balance == m
+        outs[m] = np.load(out)
+        if cfa == "none":
+            assert "white balance" not in err and rec.classical.alpha is None
+        else:
+            assert ("white balance auto → combined" if m == "auto" else "white balance gray-world") in err
+            assert rec.classical.alpha is not None
+    if cfa == "none":
+        np.testing.assert_array_equal(outs["gray-world"], outs["auto"])
+    else:
+        assert not np.allclose(outs["gray-world"], outs["auto"])
+    assert main(["reconstruct", str(path), *geom, "--white-balance", "teal", "--out", str(tmp_path / "x.npy")]) != 0
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("spikeview: error:") and "--white-balance" in err and "Traceback" not in err
