@@ -73,6 +73,14 @@ ADJACENT_DISPERSION = 1.4
 #: a tile's match is accepted when the SSD of its unsmoothed super-pixel counts is at most this many
 #: times the noise-only SSD (64 super-pixels per tile: a static tile exceeds 1.5 with probability ~0.5 %)
 TILE_CHI = 1.5
+#: a tile with fewer spikes per photosite in its own window than this stays at rest whenever zero shift matches
+#: within :data:`TILE_CHI`: at that light the search's velocity is mostly noise (a real dark capture at 0.31
+#: spikes: a static scene's tiles otherwise moved on 13 %, blurring it)
+DIM_COUNT = 1.0
+#: a dim tile at rest (:data:`DIM_COUNT`) takes each neighbour whose raw match at zero shift is within this (at 1.5
+#: one 64-value test of six failed by chance on 2–6 % of a dark static scene's tiles: low counts' tails are heavier
+#: than χ²'s); the windows beyond ±radius (:data:`LOW_LIGHT_RADIUS`) are tested with it too
+REST_CHI = 2.0
 #: per-photosite test: 3×3 same-colour sums must agree within this many standard deviations
 PIXEL_Z = 2.5
 #: largest displacement (photosites, either axis) at which a neighbour is still pooled: farther, a
@@ -105,6 +113,8 @@ class Pooling:
     accepted: dict[int, np.ndarray] = field(default_factory=dict)
     kind: str = "off"
     reason: str = ""
+    #: windows pooled beyond ``radius`` at rest on static low-light tiles (:data:`LOW_LIGHT_RADIUS`), nearest first
+    extended: tuple[int, ...] = ()
 
     @property
     def active(self) -> bool:
@@ -114,7 +124,8 @@ class Pooling:
     def crop(self, y0: int, y1: int, x0: int, x1: int) -> "Pooling":
         """The same pooling on the photosites ``[y0:y1, x0:x1]`` (tile maps kept whole)."""
         d = None if self.dtau is None else self.dtau[y0:y1, x0:x1]
-        return Pooling(self.radius, self.window, self.offsets, d, self.shifts, self.accepted, self.kind, self.reason)
+        return Pooling(self.radius, self.window, self.offsets, d, self.shifts, self.accepted, self.kind, self.reason,
+                       self.extended)
 
 
 #: run the torch alignment (:func:`_align_torch`) on the CPU too (tests hold the GPU path to the numpy one with it)
@@ -183,21 +194,53 @@ def count_dispersion(raw: np.ndarray, cap: float, keep: float = 0.9) -> float:
     variance and is nearly blind to smooth content; ``κ = Σ HH² / Σ m (1 − m/cap)`` over the blocks
     (``m`` their mean), leaving out the ``1 − keep`` of blocks with the largest ratio (edges) and
     corrected for that trimming as in :func:`spikeview.guided.observation.haar_noise_variance`.
+    One κ for the whole frame: :func:`dispersion_curve` gives κ as a function of the level.
+    """
+    curve = dispersion_curve(raw, cap, keep, bins=1)
+    return float(curve[1][0])
+
+
+#: levels of :func:`dispersion_curve` (quantile bins of the super-pixel level)
+DISPERSION_BINS = 6
+
+
+def dispersion_curve(raw: np.ndarray, cap: float, keep: float = 0.9, bins: int = DISPERSION_BINS) -> tuple[np.ndarray, np.ndarray]:
+    """κ as a function of the level: ``(levels, kappas)``, float64, for :func:`_countvar` (linear between the levels).
+
+    A dark photosite of an integrate-and-fire sensor fires far less regularly than a bright one (its
+    count is closer to Poisson): one κ for the frame, measured mostly on the bright majority, made a
+    static scene's dark tiles fail the match test (a static 256² camera scene pooled 75 % of its
+    photosites). Here the blocks of :func:`count_dispersion` are split into ``bins`` quantile bins of
+    their level ``m``, each with its own trimmed estimate (at least 64 blocks a bin).
     """
     from spikeview.classical.noise import trim_factor as _trim_factor
 
     h2, w2 = (raw.shape[0] // 2) * 2, (raw.shape[1] // 2) * 2
     if h2 < 2 or w2 < 2:
-        return 1.0
+        return np.array([0.0]), np.array([1.0])
     p = raw[:h2, :w2].astype(np.float64)
     a, b, c, d = p[0::2, 0::2], p[0::2, 1::2], p[1::2, 0::2], p[1::2, 1::2]
     hh2 = (((a - b - c + d) / 2.0) ** 2).ravel()
-    v = _binvar((a + b + c + d).ravel() / 4.0, cap)
-    ratio = hh2 / (v + 1.0)
-    kept = ratio <= np.quantile(ratio, keep)
-    if float(v[kept].sum()) <= 0:
-        return 1.0
-    return float(np.clip(hh2[kept].sum() / v[kept].sum() / (_trim_factor(keep) / keep), 0.05, 4.0))
+    m = (a + b + c + d).ravel() / 4.0
+    v = _binvar(m, cap)
+    nb = int(max(1, min(bins, m.size // 64)))
+    order = np.argsort(m, kind="stable")
+    levels, kappas = [], []
+    for part in np.array_split(order, nb):
+        hp, vp = hh2[part], v[part]
+        ratio = hp / (vp + 1.0)
+        kept = ratio <= np.quantile(ratio, keep)
+        k = 1.0 if float(vp[kept].sum()) <= 0 else float(hp[kept].sum() / vp[kept].sum() / (_trim_factor(keep) / keep))
+        levels.append(float(np.mean(m[part])))
+        kappas.append(float(np.clip(k, 0.05, 4.0)))
+    return np.asarray(levels), np.asarray(kappas)
+
+
+def _countvar(g: np.ndarray, cap: float, curve: tuple[np.ndarray, np.ndarray], scale: float = 1.0) -> np.ndarray:
+    """Variance ``κ(g·scale) · g (1 − g/cap)`` of counts ``g`` (``scale`` maps ``g`` to the curve's super-pixel
+    units), float32: κ interpolated linearly in float64 between the curve's levels (constant beyond them)."""
+    kap = np.interp(np.asarray(g, dtype=np.float64) * scale, curve[0], curve[1])
+    return (kap * _binvar(np.asarray(g, dtype=np.float64), cap)).astype(np.float32)
 
 
 def _tile_sum(x: np.ndarray, t: int) -> np.ndarray:
@@ -215,8 +258,8 @@ def _tile_sum(x: np.ndarray, t: int) -> np.ndarray:
 def _tile_chi(g0: np.ndarray, gk: np.ndarray, pad: int, dy: int, dx: int, tile: int, noise: float,
               cap: float, v0: np.ndarray | None = None, vk: np.ndarray | None = None) -> np.ndarray:
     """Per tile: SSD between ``g0`` and the edge-padded ``gk`` read at ``(y + dy, x + dx)``, over the
-    noise-only SSD ``Σ noise·(v(g₀) + v(g_k))`` with ``v`` = :func:`_binvar` (``v0``: ``v(g₀)``, ``vk``:
-    ``v`` of the padded ``gk``, precomputed by callers that read many shifts: the same numbers).
+    noise-only SSD ``Σ noise·(v₀ + v_k)`` (``v0``: the variance of ``g0``, ``vk``: of the padded ``gk``, both
+    from :func:`_countvar`, κ included; without them :func:`_binvar`, and ``noise`` carries κ).
     Each call checks the job's Cancel (the motion search and the match test are hundreds of calls: seconds at 1000×1000)."""
     from spikeview.errors import check_cancelled
 
@@ -229,16 +272,25 @@ def _tile_chi(g0: np.ndarray, gk: np.ndarray, pad: int, dy: int, dx: int, tile: 
     return _tile_sum(d * d, tile) / (noise * _tile_sum(v0 + vs, tile) + 1e-6)
 
 
-def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, kappa: float,
-                    kernel_energy: float, radius: int, max_speed: float = MAX_SPEED, cap: float = np.inf) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+def _velocity_grid(radius: int, max_speed: float) -> list[tuple[float, float]]:
+    """Candidate velocities ``(vy, vx)`` (guide pixels per window), ``vy`` outer, on a grid of step ``1/radius``."""
+    step = 1.0 / max(1, radius)
+    n = int(np.floor(max_speed / step + 1e-9))
+    return [(i * step, j * step) for i in range(-n, n + 1) for j in range(-n, n + 1)]
+
+
+def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, curve: tuple[np.ndarray, np.ndarray],
+                    kernel_energy: float, radius: int, max_speed: float = MAX_SPEED, cap: float = np.inf,
+                    factors: dict[int, float] | None = None) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
     """Per tile, one constant velocity ``v`` (guide pixels per window) for all neighbours, by exhaustive search.
 
     Candidates: ``v`` on a grid of step ``1/radius`` within ``±max_speed`` guide pixels per window;
     the neighbour ``k`` windows away is read at the integer shift ``round(k·v)``. The cost of ``v`` is
-    the mean over neighbours of the tile's SSD over its noise-only SSD (:func:`_tile_chi`), plus
-    :data:`SHIFT_PENALTY` per guide pixel per window of speed, so that a static or flat tile keeps
-    ``v = 0`` unless motion explains the data clearly better. Using every neighbour for one velocity
-    gives a robust estimate where one pair of 10-tick windows would be dominated by noise.
+    the mean over neighbours of the tile's SSD over its noise-only SSD (:func:`_tile_chi`, the variances
+    from the level-dependent κ of ``curve`` times ``kernel_energy``: the guides are smoothed; times ``factors[k]``,
+    the measured scale of neighbour ``k``'s differences, :func:`_noise_scale`), plus
+    :data:`SHIFT_PENALTY` per guide pixel per window of speed, plus the noise-scaled cost of moving at all
+    (:func:`_move_cost`), so that a static or flat tile keeps ``v = 0`` unless motion explains the data clearly better.
 
     Returns:
         ``(shifts, chi)``: per offset ``k``, ``(ty, tx, 2)`` int ``(dy, dx)`` in guide pixels (content
@@ -246,35 +298,32 @@ def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, ka
         normalised SSD of that shift.
     """
     ks = sorted(guides)
-    step = 1.0 / max(1, radius)
-    n = int(np.floor(max_speed / step + 1e-9))
-    grid = [i * step for i in range(-n, n + 1)]
+    grid = _velocity_grid(radius, max_speed)
     pad = int(np.ceil(max_speed * max(abs(k) for k in ks))) + 1
     padded = {k: np.pad(guides[k], pad, mode="edge") for k in ks}
-    vpad = {k: _binvar(padded[k], cap) for k in ks}  # elementwise, so slicing it equals v of the slice
+    vpad = {k: _countvar(padded[k], cap, curve) for k in ks}  # elementwise, so slicing it equals v of the slice
     memo: dict[tuple[int, int, int], np.ndarray] = {}
-    v0 = _binvar(g0, cap)
+    v0 = _countvar(g0, cap, curve)
 
     def chi(k: int, dy: int, dx: int) -> np.ndarray:
         key = (k, dy, dx)
         if key not in memo:
-            factor = ADJACENT_DISPERSION if abs(k) == 1 else 1.0
-            memo[key] = _tile_chi(g0, padded[k], pad, dy, dx, tile, factor * kappa * kernel_energy, cap, v0, vpad[k])
+            factor = factors[k] if factors is not None else ADJACENT_DISPERSION if abs(k) == 1 else 1.0
+            memo[key] = _tile_chi(g0, padded[k], pad, dy, dx, tile, factor * kernel_energy, cap, v0, vpad[k])
         return memo[key]
 
     best_cost = best_v = None
-    for vy in grid:
-        for vx in grid:
-            cost = sum(chi(k, int(round(k * vy)), int(round(k * vx))) for k in ks) / len(ks)
-            cost = cost + SHIFT_PENALTY * float(np.hypot(vy, vx))
-            if best_cost is None:
-                best_cost = cost
-                best_v = np.zeros(cost.shape + (2,))
-                best_v[..., 0], best_v[..., 1] = vy, vx
-                continue
-            better = cost < best_cost
-            best_cost = np.where(better, cost, best_cost)
-            best_v[better] = (vy, vx)
+    for vy, vx in grid:
+        cost = sum(chi(k, int(round(k * vy)), int(round(k * vx))) for k in ks) / len(ks)
+        cost = cost + SHIFT_PENALTY * float(np.hypot(vy, vx))
+        if best_cost is None:
+            best_cost = cost
+            best_v = np.zeros(cost.shape + (2,))
+            best_v[..., 0], best_v[..., 1] = vy, vx
+            continue
+        better = cost < best_cost
+        best_cost = np.where(better, cost, best_cost)
+        best_v[better] = (vy, vx)
     assert best_v is not None
     shifts, chis = {}, {}
     for k in ks:
@@ -287,16 +336,21 @@ def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, ka
     return shifts, chis
 
 
-def match_quality(raw0: np.ndarray, rawk: np.ndarray, shifts: np.ndarray, tile: int, noise: float, cap: float) -> np.ndarray:
+def match_quality(raw0: np.ndarray, rawk: np.ndarray, shifts: np.ndarray, tile: int, noise: float, cap: float,
+                  curve: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Per tile, the SSD of the unsmoothed super-pixel counts at the tile's shift over its noise-only SSD.
 
     The search ran on smoothed guides (robust, but a tile then has only ~5 independent values); the
     acceptance uses the raw counts, whose 64 independent values per tile make the test both sharper
-    and less often wrong on a static tile.
+    and less often wrong on a static tile. ``curve``: κ by level (:func:`dispersion_curve`; ``noise`` is
+    then the factor of adjacent windows only); without it ``noise`` carries one κ.
     """
     pad = int(np.abs(shifts).max(initial=0)) + 1
     padded = np.pad(rawk, pad, mode="edge")
-    v0, vk = _binvar(raw0, cap), _binvar(padded, cap)
+    if curve is None:
+        v0, vk = _binvar(raw0, cap), _binvar(padded, cap)
+    else:
+        v0, vk = _countvar(raw0, cap, curve), _countvar(padded, cap, curve)
     out = np.empty(shifts.shape[:2])
     for dy, dx in {tuple(v) for v in shifts.reshape(-1, 2).tolist()}:
         sel = (shifts[..., 0] == dy) & (shifts[..., 1] == dx)
@@ -324,14 +378,45 @@ def _box_same_colour(c: np.ndarray, cfa: str | None) -> np.ndarray:
     return out
 
 
+#: bounds of the measured scale of a neighbour's differences over the model's (:func:`_noise_scale`)
+NOISE_SCALE_RANGE = (1.0, 2.0)
+#: fewest tiles from which :func:`_noise_scale` measures (fewer: the model's factor as it is)
+NOISE_SCALE_TILES = 16
+
+
+def _noise_scale(chi_at_rest: np.ndarray, model: float, tile_g: int) -> float:
+    """The noise factor of one neighbour's differences: ``model`` (1, or :data:`ADJACENT_DISPERSION`) unless the
+    tiles say otherwise. ``chi_at_rest``: the tiles' SSD at zero shift over the model's noise without the factor.
+    On static tiles it follows χ²ₙ/n (n = the tile's super-pixels); its lower quartile over the tiles, divided by
+    that of χ²ₙ/n, measures the factor (moving tiles only raise the upper quantiles), within :data:`NOISE_SCALE_RANGE`
+    of ``model``."""
+    from scipy.special import chdtri
+
+    if chi_at_rest.size < NOISE_SCALE_TILES:
+        return float(model)
+    n = tile_g * tile_g
+    measured = float(np.quantile(chi_at_rest, 0.25)) / (float(chdtri(n, 0.75)) / n)
+    lo, hi = NOISE_SCALE_RANGE
+    return float(np.clip(measured, lo * model, hi * model))
+
+
+#: low light: a static tile pools windows beyond ``temporal_radius`` (at rest, each window tested as the nearer
+#: ones) until its pooled count reaches :data:`LOW_LIGHT_COUNT` spikes per photosite, up to this many windows on
+#: each side (±16 windows of 10 ticks = 33 windows, 16.5 ms at 20 kHz)
+LOW_LIGHT_RADIUS = 16
+#: spikes per photosite a static tile's pooled count should reach before the pooling stops growing (10 spikes:
+#: a relative noise of ~0.3/√10 ≈ 0.1 at the dispersion of a dark real pixel, κ ≈ 0.5–0.7)
+LOW_LIGHT_COUNT = 10.0
+
+
 # ---------------------------------------------------------------------------------------- pooling
 def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
                 cache: WindowCache | None = None, device: Any = None) -> tuple[np.ndarray, Pooling]:
     """Pooled counts of the window ``[a, b)`` with its aligned neighbours (see the module docstring).
 
-    ``device``: where the alignment runs (``guided.device``; ``None``/CPU: numpy, as always). On a CUDA
-    device the motion search, the match test and the per-photosite decisions run in torch there
-    (:func:`_align_torch`: the same rules, sums in float64; counting and the smoothed guides stay on the CPU).
+    ``device``: where the motion search runs (``guided.device``; ``None``/CPU: numpy, as always). On a CUDA
+    device the velocity search and the match test run in torch there (:func:`_search_torch`: the same
+    rules, sums in float64); the decisions per photosite are this function's, on the CPU.
 
     Returns:
         ``(counts, pooling)``: ``(H, W)`` float32 pooled spike counts (``counts / pooling.dtau`` is
@@ -361,7 +446,7 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     tile_g = max(1, TILE // f)
     raw0 = _guide_raw(n0, cfa)
     cap = 4.0 * window  # a super-pixel holds at most 4 photosites × window spikes
-    kappa = count_dispersion(raw0, cap)
+    curve = dispersion_curve(raw0, cap)
     # variance of a Gaussian-smoothed white-noise image: Σ k² = 1 / (4πσ²) (σ >= ~0.7)
     kernel_energy = 1.0 / (4.0 * np.pi * SMOOTH ** 2)
     g0 = gaussian_filter(raw0, SMOOTH, mode="reflect")
@@ -374,28 +459,49 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     th, tw = -(-h // TILE), -(-w // TILE)
     ty_of, tx_of = np.arange(h) // TILE, np.arange(w) // TILE
     counts = {k: cache.counts(source, a + k * window, b + k * window) for k in offsets}
-    guides = {k: gaussian_filter(_guide_raw(counts[k], cfa), SMOOTH, mode="reflect") for k in offsets}
+    raws = {k: _guide_raw(counts[k], cfa) for k in offsets}
+    guides = {k: gaussian_filter(raws[k], SMOOTH, mode="reflect") for k in offsets}
+    # the noise of a window-to-window difference, measured: the model's variance (κ by level, measured on the
+    # centre window's finest spatial detail; adjacent windows anti-correlate) times a scale per neighbour, fitted
+    # on the lower quartile of the tiles' match at rest (a real dark capture's windows two apart differ 1.28×
+    # more than the spatial detail says; a quarter of the tiles at rest is enough to measure it)
+    zero_g = np.zeros((-(-raw0.shape[0] // tile_g), -(-raw0.shape[1] // tile_g), 2), np.int64)
+    chi0 = {k: match_quality(raw0, raws[k], zero_g, tile_g, 1.0, cap, curve) for k in offsets}
+    factors = {k: _noise_scale(chi0[k], ADJACENT_DISPERSION if abs(k) == 1 else 1.0, tile_g) for k in offsets}
     if getattr(device, "type", "cpu") != "cpu" or TORCH_ON_CPU:  # a resolved torch.device (Observation.from_source)
-        total, pooled, shifts, accepted = _align_torch(n0, raw0, g0, counts, guides, cfa, window, radius, kappa,
-                                                       kernel_energy, device if device is not None else "cpu")
-        dtau = (window * (1.0 + pooled)).astype(np.float32)
-        pool = Pooling(radius, window, offsets, dtau, shifts, accepted)
-        pool.kind, pool.reason = describe(pool)
-        return total, pool
-    motion, _ = estimate_motion(g0, guides, tile_g, kappa, kernel_energy, radius, MAX_SPEED / f, cap)
-    chis = {k: match_quality(raw0, _guide_raw(counts[k], cfa), motion[k], tile_g,
-                             (ADJACENT_DISPERSION if abs(k) == 1 else 1.0) * kappa, cap) for k in offsets}
+        motion, chis = _search_torch(raw0, g0, raws, guides, window, radius, curve, kernel_energy, factors,
+                                     device if device is not None else "cpu")
+    else:
+        motion, _ = estimate_motion(g0, guides, tile_g, curve, kernel_energy, radius, MAX_SPEED / f, cap, factors)
+        chis = {k: match_quality(raw0, raws[k], motion[k], tile_g, factors[k], cap, curve) for k in offsets}
+    # at rest: where the search found no motion, and on a dim tile (DIM_COUNT) wherever the raw counts' mean match
+    # at zero shift is within TILE_CHI; a dim tile at rest takes each neighbour whose match is within REST_CHI
+    chi0 = {k: chi0[k] / factors[k] for k in offsets}
+    rest_cost = np.mean([chi0[k] for k in offsets], axis=0)
+    dim = _tile_sum(raw0, tile_g) / (4.0 * tile_g * tile_g) < DIM_COUNT  # spikes per photosite in the own window
+    searched = np.logical_and.reduce([np.all(motion[k] == 0, axis=-1) for k in offsets])
+    at_rest = searched | ((rest_cost <= TILE_CHI) & dim)
+    for k in offsets:
+        motion[k] = np.where(at_rest[..., None], 0, motion[k])
+        chis[k] = np.where(at_rest, chi0[k], chis[k])
+    cap9 = 9.0 * window  # a 3×3 same-colour sum holds at most 9 × window spikes per window
+    lv = 4.0 / 9.0  # a 3×3 same-colour sum's level in the curve's super-pixel (2×2) units
+
+    def pixel_ok(nk_aligned_box: np.ndarray, factor: float) -> np.ndarray:
+        """The per-photosite test: the 3×3 same-colour sum of the aligned neighbour against the pooled reference."""
+        box_total = _box_same_colour(total, cfa)
+        box_n = _box_same_colour(1.0 + pooled, cfa)
+        ref = 9.0 * box_total / box_n  # 3×3 same-colour sum per window of the reference
+        var = _countvar(ref, cap9, curve, lv) * 9.0 / box_n + _countvar(nk_aligned_box, cap9, curve, lv)
+        return (ref - nk_aligned_box) ** 2 / (factor * var + 1.0) <= PIXEL_Z ** 2
+
     # nearest windows first; a photosite takes window k only if it took every window between k and the
     # centre (motion grows with the distance), and window k is compared with what was pooled so far
     # (the centre and the accepted nearer windows: a less noisy reference than the centre alone)
     chain = {-1: np.ones((h, w), dtype=bool), 1: np.ones((h, w), dtype=bool)}
     for d in sorted({abs(k) for k in offsets}):
-        box_total = _box_same_colour(total, cfa)
-        box_n = _box_same_colour(1.0 + pooled, cfa)
-        ref = 9.0 * box_total / box_n  # 3×3 same-colour sum per window of the reference
-        factor = ADJACENT_DISPERSION if d == 1 else 1.0
-        new_total, new_pooled = np.zeros((h, w), np.float32), np.zeros((h, w), np.float32)
-        for k in (-d, d):
+        oks = {}
+        for k in (-d, d):  # both sides against the same reference (what the nearer windows pooled)
             if k not in counts:
                 continue
             check_cancelled("while pooling the neighbouring windows")  # each window's pooling: ~0.1 s at 1000×1000
@@ -403,7 +509,8 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
             # tiles of the guide are tiles of TILE photosites (an odd last row/column of a Bayer frame
             # has no super-pixel: it takes its neighbour tile's match)
             best, chi = _fit_tiles(motion[k], th, tw), _fit_tiles(chis[k], th, tw)
-            ok_tile = (chi <= TILE_CHI) & (np.abs(best * f).max(axis=-1) <= MAX_SHIFT)
+            rest = _fit_tiles(at_rest & dim, th, tw)
+            ok_tile = (chi <= np.where(rest, REST_CHI, TILE_CHI)) & (np.abs(best * f).max(axis=-1) <= MAX_SHIFT)
             shifts[k] = best * f
             accepted[k] = ok_tile
             # every photosite reads the neighbour at its tile's shift (the 3×3 same-colour sums shift with it)
@@ -419,29 +526,88 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
             # the centre window's photosite sees: such photosites are left out unless the shift is zero
             margin = (ys >= 2) & (ys < h - 2) & (xs >= 2) & (xs < w - 2)
             zero = (best_px[..., 0] == 0) & (best_px[..., 1] == 0)
-            cap9 = 9.0 * window  # a 3×3 same-colour sum holds at most 9 × window spikes per window
-            z2 = (ref - boxk) ** 2 / (factor * kappa * (_binvar(ref, cap9) * 9.0 / box_n + _binvar(boxk, cap9)) + 1.0)
-            weight = chain[1 if k > 0 else -1] & tile_ok_px & inside & (margin | zero) & (z2 <= PIXEL_Z ** 2)
+            weight = chain[1 if k > 0 else -1] & tile_ok_px & inside & (margin | zero) & pixel_ok(boxk, factors[k])
             chain[1 if k > 0 else -1] = weight
-            new_total += np.where(weight, aligned, 0.0).astype(np.float32)
-            new_pooled += weight
-        total += new_total
-        pooled += new_pooled
-    dtau = (window * (1.0 + pooled)).astype(np.float32)
-    pool = Pooling(radius, window, offsets, dtau, shifts, accepted)
+            oks[k] = (weight, aligned)
+        for k, (weight, aligned) in oks.items():
+            total += np.where(weight, aligned, 0.0).astype(np.float32)
+            pooled += weight
+    # low light: static tiles go on pooling at rest beyond ±radius while their pooled count is low
+    far = max(abs(k) for k in offsets)
+    ext = _extend_at_rest(source, a, b, cfa, cache, total, pooled, chain, at_rest, curve, cap, tile_g, pixel_ok,
+                          far, radius, accepted, max(factors[k] for k in offsets if abs(k) == far))
+    for k in ext:
+        shifts[k] = np.zeros((th, tw, 2), np.int64)
+    pool = Pooling(radius, window, offsets, (window * (1.0 + pooled)).astype(np.float32), shifts, accepted, extended=ext)
     pool.kind, pool.reason = describe(pool)
     return total, pool
 
 
-def _align_torch(n0: np.ndarray, raw0: np.ndarray, g0: np.ndarray, counts: dict[int, np.ndarray],
-                 guides: dict[int, np.ndarray], cfa: str | None, window: int, radius: int, kappa: float,
-                 kernel_energy: float, device: Any) -> tuple[np.ndarray, np.ndarray, dict[int, np.ndarray], dict[int, np.ndarray]]:
-    """:func:`pool_counts`'s alignment and merge in torch on ``device`` (a GPU; tests run it on the CPU).
+def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowCache, total: np.ndarray,
+                    pooled: np.ndarray, chain: dict[int, np.ndarray], at_rest: np.ndarray,
+                    curve: tuple[np.ndarray, np.ndarray], cap: float, tile_g: int, pixel_ok: Any, reached: int,
+                    radius: int, accepted: dict[int, np.ndarray], factor: float) -> tuple[int, ...]:
+    """Pool windows ``reached + 1 …`` at zero shift on static tiles whose pooled count is below
+    :data:`LOW_LIGHT_COUNT` per photosite (in place on ``total``, ``pooled``, ``chain``), up to
+    :data:`LOW_LIGHT_RADIUS` windows a side. A tile takes window ``k`` when it was at rest and matched every
+    nearer window, and its raw counts match what it pooled so far (:data:`TILE_CHI`); a photosite, when it
+    took every nearer window on that side and passes the 3×3 test (``accepted[k]``: the tiles that took some of
+    window ``k``; ``factor``: the measured noise scale of the farthest ±radius neighbour). Returns the offsets pooled from."""
+    from spikeview.errors import check_cancelled
 
-    The rules of the numpy path, computed for every candidate shift at once: the per-tile normalised SSD of
-    every shift of every neighbour (:func:`_tile_chi`, float64 tile sums), the velocity search with its
-    speed penalty (the first minimum in the same grid order), the match test on the unsmoothed counts, then
-    the per-photosite chain and 3×3 same-colour test. Returns ``(total, pooled, shifts, accepted)`` as numpy.
+    window = b - a
+    h, w = total.shape
+    th, tw = -(-h // TILE), -(-w // TILE)
+    ty_of, tx_of = np.arange(h) // TILE, np.arange(w) // TILE
+    rest_px = _fit_tiles(at_rest, th, tw)[ty_of][:, tx_of]
+    out: list[int] = []
+    if reached < radius:  # the capture's edge already cut the ±radius windows: nothing beyond them either
+        return ()
+    for d in range(reached + 1, LOW_LIGHT_RADIUS + 1):
+        need_tile = _tile_sum(total, TILE) < LOW_LIGHT_COUNT * _tile_sum(np.ones_like(total), TILE)
+        need = need_tile[ty_of][:, tx_of] & rest_px
+        ks = [k for k in (-d, d) if a + k * window >= 0 and b + k * window <= int(source.n_frames)]
+        if not ks or not (need & (chain[-1] | chain[1])).any():
+            break
+        oks = {}
+        for k in ks:
+            side = 1 if k > 0 else -1
+            cand = need & chain[side]
+            if not cand.any():
+                continue
+            check_cancelled("while pooling the neighbouring windows")
+            nk = cache.counts(source, a + k * window, b + k * window)
+            # the tile test against what was pooled so far (a mean per window: its variance shrinks with the windows)
+            pt, pn = _guide_raw(total, cfa), _guide_raw(1.0 + pooled, cfa)
+            ref = 4.0 * pt / np.maximum(pn, 1.0)
+            rk = _guide_raw(nk, cfa)
+            var = _countvar(ref, cap, curve) * 4.0 / np.maximum(pn, 1.0) + _countvar(rk, cap, curve)
+            dd = ref - rk
+            chi = _tile_sum(dd * dd, tile_g) / (factor * _tile_sum(var, tile_g) + 1e-6)
+            ok_tile = _fit_tiles(chi <= REST_CHI, th, tw)[ty_of][:, tx_of]
+            weight = cand & ok_tile & pixel_ok(_box_same_colour(nk, cfa), factor)
+            chain[side] = weight
+            if weight.any():
+                oks[k] = (weight, nk)
+                accepted[k] = _tile_sum(weight.astype(np.float32), TILE) > 0
+        for k, (weight, nk) in oks.items():
+            total += np.where(weight, nk, 0.0).astype(np.float32)
+            pooled += weight
+            out.append(k)
+        if not oks:
+            break
+    return tuple(out)
+
+
+def _search_torch(raw0: np.ndarray, g0: np.ndarray, raws: dict[int, np.ndarray], guides: dict[int, np.ndarray],
+                  window: int, radius: int, curve: tuple[np.ndarray, np.ndarray], kernel_energy: float,
+                  factors: dict[int, float], device: Any) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+    """:func:`estimate_motion` and :func:`match_quality` in torch on ``device`` (a GPU; tests run it on the CPU).
+
+    The per-tile normalised SSD of every candidate shift of every neighbour at once (float64 tile sums; the
+    variances are :func:`_countvar`'s, computed on the CPU), the velocity search with its speed penalty (the
+    first minimum in the same grid order), then the match test on the unsmoothed counts at the chosen shifts.
+    Returns ``(shifts, chis)`` as numpy, as the numpy pair does.
     """
     import torch
     import torch.nn.functional as F
@@ -453,15 +619,10 @@ def _align_torch(n0: np.ndarray, raw0: np.ndarray, g0: np.ndarray, counts: dict[
     tile = max(1, TILE // f)
     cap = 4.0 * window
     ks = sorted(guides)
-    step = 1.0 / max(1, radius)
-    n = int(np.floor((MAX_SPEED / f) / step + 1e-9))
-    grid = [(i * step, j * step) for i in range(-n, n + 1) for j in range(-n, n + 1)]  # vy outer, vx inner
+    grid = _velocity_grid(radius, MAX_SPEED / f)
 
     def up(x: np.ndarray) -> Any:
         return torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32)).to(dev, non_blocking=True)
-
-    def binvar(g: Any, c: float) -> Any:
-        return torch.clamp(g * (1.0 - g / c), min=0.0)
 
     def tile_sums(x: Any) -> Any:  # (S, h, w) float32 -> (S, th, tw) float64 sums over tile × tile blocks
         s_, h_, w_ = x.shape
@@ -469,120 +630,48 @@ def _align_torch(n0: np.ndarray, raw0: np.ndarray, g0: np.ndarray, counts: dict[
         x = F.pad(x, (0, tw_ * tile - w_, 0, th_ * tile - h_)).double()
         return x.view(s_, th_, tile, tw_, tile).sum(dim=(2, 4))
 
-    def chi_all(ref: Any, other: Any, shifts: list[tuple[int, int]], noise: float) -> Any:
+    def chi_all(ref: np.ndarray, other: np.ndarray, shifts: list[tuple[int, int]], noise: float) -> Any:
         """(S, th, tw) normalised SSD of ``ref`` against the edge-padded ``other`` at each shift."""
         pad = max(max(abs(dy), abs(dx)) for dy, dx in shifts) + 1
-        padded = F.pad(other[None, None], (pad, pad, pad, pad), mode="replicate")[0, 0]
+        o_pad = np.pad(other, pad, mode="edge")
+        padded, vpad = up(o_pad), up(_countvar(o_pad, cap, curve))
+        ref_t, v0 = up(ref), up(_countvar(ref, cap, curve))
         h_, w_ = ref.shape
-        v0 = binvar(ref, cap)
         out = []
         for i in range(0, len(shifts), 32):  # bounded memory: 32 shifted copies at a time
             check_cancelled("while aligning the neighbouring windows")
-            sl = torch.stack([padded[pad + dy:pad + dy + h_, pad + dx:pad + dx + w_] for dy, dx in shifts[i:i + 32]])
-            d = ref[None] - sl
-            out.append(tile_sums(d * d) / (noise * tile_sums(v0[None] + binvar(sl, cap)) + 1e-6))
+            part = shifts[i:i + 32]
+            sl = torch.stack([padded[pad + dy:pad + dy + h_, pad + dx:pad + dx + w_] for dy, dx in part])
+            vs = torch.stack([vpad[pad + dy:pad + dy + h_, pad + dx:pad + dx + w_] for dy, dx in part])
+            d = ref_t[None] - sl
+            out.append(tile_sums(d * d) / (noise * tile_sums(v0[None] + vs) + 1e-6))
         return torch.cat(out)
 
-    g0_t = up(g0)
-    raw0_t = up(raw0)
-    # --- the velocity search (estimate_motion): cost of every grid velocity, mean over neighbours
     cost = None
     cand: dict[int, list[tuple[int, int]]] = {}
-    index: dict[int, Any] = {}
-    chis_sm: dict[int, Any] = {}
     for k in ks:
         sh = [(int(round(k * vy)), int(round(k * vx))) for vy, vx in grid]
         uniq = sorted(set(sh))
         cand[k] = uniq
         pos = {s_: i for i, s_ in enumerate(uniq)}
-        index[k] = torch.tensor([pos[s_] for s_ in sh], device=dev)
-        factor = ADJACENT_DISPERSION if abs(k) == 1 else 1.0
-        chis_sm[k] = chi_all(g0_t, up(guides[k]), uniq, factor * kappa * kernel_energy)
-        term = chis_sm[k][index[k]]  # (V, th, tw)
+        index = torch.tensor([pos[s_] for s_ in sh], device=dev)
+        term = chi_all(g0, guides[k], uniq, factors[k] * kernel_energy)[index]  # (V, th, tw)
         cost = term if cost is None else cost + term
     assert cost is not None
     pen = torch.tensor([SHIFT_PENALTY * float(np.hypot(vy, vx)) for vy, vx in grid], dtype=torch.float64, device=dev)
     cost = cost / len(ks) + pen[:, None, None]
     best = torch.argmin(cost, dim=0)  # the first minimum, as the numpy search's strict "<" keeps
     vel = torch.tensor(grid, dtype=torch.float64, device=dev)[best]  # (th, tw, 2)
-    h, w = n0.shape
-    th, tw = -(-h // TILE), -(-w // TILE)
-    ty_of, tx_of = torch.arange(h, device=dev) // TILE, torch.arange(w, device=dev) // TILE
-
-    def fit(a_: Any) -> Any:  # _fit_tiles: cut or edge-extend the first two axes to th × tw
-        a_ = a_[:th, :tw]
-        if a_.shape[0] < th:
-            a_ = torch.cat([a_, a_[-1:].expand(th - a_.shape[0], *a_.shape[1:])], 0)
-        if a_.shape[1] < tw:
-            a_ = torch.cat([a_, a_[:, -1:].expand(a_.shape[0], tw - a_.shape[1], *a_.shape[2:])], 1)
-        return a_
-
-    def box3(c: Any) -> Any:  # _box_same_colour: 3×3 sums within each Bayer plane (edges repeated)
-        def one(p_: Any) -> Any:
-            q = F.pad(p_[None, None], (1, 1, 1, 1), mode="replicate")
-            return F.avg_pool2d(q, 3, stride=1)[0, 0] * 9.0
-        if cfa is None:
-            return one(c)
-        out_ = torch.empty_like(c)
-        for i in (0, 1):
-            for j in (0, 1):
-                out_[i::2, j::2] = one(c[i::2, j::2])
-        return out_
-
-    total = up(n0).clone()
-    pooled = torch.zeros((h, w), dtype=torch.float32, device=dev)
-    cnt = {k: up(v) for k, v in counts.items()}
-    motion: dict[int, Any] = {}
-    chis: dict[int, Any] = {}
+    motion: dict[int, np.ndarray] = {}
+    chis: dict[int, np.ndarray] = {}
     for k in ks:
-        sh = torch.round(k * vel).long()  # (th_g, tw_g, 2): np.rint, half to even, as torch.round
-        motion[k] = sh
+        sh = torch.round(k * vel).long()  # np.rint, half to even, as torch.round
         lut = {s_: i for i, s_ in enumerate(cand[k])}
-        keys = sh.view(-1, 2).tolist()
-        sel = torch.tensor([lut[(dy, dx)] for dy, dx in keys], device=dev).view(sh.shape[:2])
-        factor = ADJACENT_DISPERSION if abs(k) == 1 else 1.0
-        raw_chi = chi_all(raw0_t, up(_guide_raw(counts[k], cfa)), cand[k], factor * kappa)
-        chis[k] = torch.gather(raw_chi, 0, sel[None]).squeeze(0)
-    shifts_out: dict[int, np.ndarray] = {}
-    accepted_out: dict[int, np.ndarray] = {}
-    chain = {-1: torch.ones((h, w), dtype=torch.bool, device=dev), 1: torch.ones((h, w), dtype=torch.bool, device=dev)}
-    yy = torch.arange(h, device=dev)[:, None]
-    xx = torch.arange(w, device=dev)[None, :]
-    cap9 = 9.0 * window
-    for d in sorted({abs(k) for k in ks}):
-        box_total = box3(total)
-        box_n = box3(1.0 + pooled)
-        ref = 9.0 * box_total / box_n
-        factor = ADJACENT_DISPERSION if d == 1 else 1.0
-        new_total = torch.zeros((h, w), dtype=torch.float32, device=dev)
-        new_pooled = torch.zeros((h, w), dtype=torch.float32, device=dev)
-        for k in (-d, d):
-            if k not in cnt:
-                continue
-            check_cancelled("while pooling the neighbouring windows")
-            nk = cnt[k]
-            best_k, chi_k = fit(motion[k]), fit(chis[k])
-            ok_tile = (chi_k <= TILE_CHI) & ((best_k * f).abs().amax(dim=-1) <= MAX_SHIFT)
-            shifts_out[k] = (best_k * f).cpu().numpy().astype(np.int64)
-            accepted_out[k] = ok_tile.cpu().numpy()
-            tile_ok_px = ok_tile[ty_of][:, tx_of]
-            best_px = best_k[ty_of][:, tx_of] * f
-            ys = yy + best_px[..., 0]
-            xs = xx + best_px[..., 1]
-            inside = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
-            ys, xs = ys.clamp(0, h - 1), xs.clamp(0, w - 1)
-            aligned = nk[ys, xs]
-            boxk = box3(nk)[ys, xs]
-            margin = (ys >= 2) & (ys < h - 2) & (xs >= 2) & (xs < w - 2)
-            zero = (best_px[..., 0] == 0) & (best_px[..., 1] == 0)
-            z2 = (ref - boxk) ** 2 / (factor * kappa * (binvar(ref, cap9) * 9.0 / box_n + binvar(boxk, cap9)) + 1.0)
-            weight = chain[1 if k > 0 else -1] & tile_ok_px & inside & (margin | zero) & (z2 <= PIXEL_Z ** 2)
-            chain[1 if k > 0 else -1] = weight
-            new_total += torch.where(weight, aligned, torch.zeros_like(aligned))
-            new_pooled += weight
-        total += new_total
-        pooled += new_pooled
-    return total.cpu().numpy(), pooled.cpu().numpy(), shifts_out, accepted_out
+        sel = torch.tensor([lut[(dy, dx)] for dy, dx in sh.view(-1, 2).tolist()], device=dev).view(sh.shape[:2])
+        raw_chi = chi_all(raw0, raws[k], cand[k], factors[k])
+        motion[k] = sh.cpu().numpy().astype(np.int64)
+        chis[k] = torch.gather(raw_chi, 0, sel[None]).squeeze(0).cpu().numpy()
+    return motion, chis
 
 
 def describe(pool: Pooling) -> tuple[str, str]:
@@ -595,15 +684,26 @@ def describe(pool: Pooling) -> tuple[str, str]:
     own = float((nb <= 1e-6).mean())
     moved = [np.abs(pool.shifts[k][pool.accepted[k]]).max(initial=0) for k in pool.offsets]
     smax = int(max(moved, default=0))
+    # tiles that took a neighbour at a shift, of those that took one at all (a few edge tiles of a static scene may)
+    took = [pool.accepted[k] for k in pool.offsets]
+    shifted = [pool.accepted[k] & (np.abs(pool.shifts[k]).max(axis=-1) > 0) for k in pool.offsets]
+    moving = float(np.sum([s_.sum() for s_ in shifted])) / max(1.0, float(np.sum([t.sum() for t in took])))
     span = (f"±{pool.radius} windows" if len(set(abs(k) for k in pool.offsets)) == pool.radius and m == 2 * pool.radius
             else f"{m} neighbouring windows (the capture's edge cuts the rest)")
     eff = f"Δτ_eff {float(pool.dtau.mean()):.0f} of {pool.window * (m + 1)} ticks on average"
-    if full >= 0.9 and smax == 0:
-        return "static", f"static: {span} pooled on {100 * full:.0f}% of photosites ({eff})"
+    if pool.extended:
+        far = max(abs(k) for k in pool.extended)
+        more = float((nb > m + 1e-6).mean())
+        eff = (f"Δτ_eff {float(pool.dtau.mean()):.0f} ticks on average, up to {float(pool.dtau.max()):.0f}: low light, "
+               f"{100 * more:.0f}% of photosites (static tiles under {LOW_LIGHT_COUNT:g} spikes) went on at rest "
+               f"to ±{far} windows, the bound is ±{LOW_LIGHT_RADIUS}")
+    if full >= 0.9 and moving <= 0.05:
+        still = "" if smax == 0 else f"; {100 * moving:.0f}% of the tiles aligned, shifts up to {smax} px"
+        return "static", f"static: {span} pooled on {100 * full:.0f}% of photosites ({eff}{still})"
     if own >= 0.75:
         return "fast motion", (f"fast motion: own window only on {100 * own:.0f}% of photosites (the neighbours do not match "
                                f"within their noise; {eff})")
-    if mean_nb >= 0.75 * m:
+    if min(mean_nb, m) >= 0.75 * m:
         return "aligned", f"moving: {span} aligned (shifts up to {smax} px) and pooled on {100 * full:.0f}% of photosites ({eff})"
-    return "mixed", (f"mixed motion: {mean_nb:.1f} of {m} neighbouring windows pooled on average, own window only on "
+    return "mixed", (f"mixed motion: {min(mean_nb, m):.1f} of {m} neighbouring windows pooled on average, own window only on "
                      f"{100 * own:.0f}% of photosites (shifts up to {smax} px; {eff})")
