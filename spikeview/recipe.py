@@ -95,17 +95,23 @@ class StreamTable(Config):
     flip_horizontal: bool | None = _stream("columns are stored mirrored")
     tick_rate: float | None = _stream("readouts per second (default 20000)")
     layout: str | None = _stream("axis order of .npy/.npz arrays", choices=("thw", "hwt"))
+    camera: str | None = _stream("camera profile from spikeview calibrate: its dark, flat-field and hot-pixel corrections "
+                                 "apply to the rates (and --white-balance profile uses its colour response)",
+                                 metavar="PROFILE.toml")
 
     @classmethod
     def from_info(cls, info: Any, layout: str | None = None) -> StreamTable:
         from spikeview.cfa import cfa_to_str
 
+        cam = getattr(info, "camera", None)
         return cls(info.format, info.width, info.height, cfa_to_str(info.cfa), info.flip_vertical,
-                   info.flip_horizontal, info.tick_rate, layout if info.format == "npz" else None)
+                   info.flip_horizontal, info.tick_rate, layout if info.format == "npz" else None,
+                   str(cam.path.absolute()) if cam is not None and cam.path is not None else None)
 
     def open_kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of :func:`spikeview.io.open_source` (unset entries left out)."""
-        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+        """Keyword arguments of :func:`spikeview.io.open_source` (unset entries left out; the camera profile is
+        attached after opening: :func:`spikeview.classical.calibration.attach`)."""
+        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None and k != "camera"}
 
 
 # ------------------------------------------------------------------------------- the view table

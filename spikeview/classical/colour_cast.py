@@ -234,6 +234,35 @@ def sequence_channel_means(source: SpikeSource, window: int = 10, max_windows: i
     return _channel_means_from_sums(sums, cfa)
 
 
+def sequence_images(source, window: int = 10, max_windows: int = 64, correct=None
+                    ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray], int]:
+    """The sequence image the estimators see, the same of the even and of the odd sampled windows, and the ticks.
+
+    Mean rate (spikes per tick) of each 2×2 cell's R, G, B over the windows
+    :func:`~spikeview.classical.colour_cast.sample_starts` picks (the gray-world estimate's windows), each
+    ``(H//2, W//2, 3)`` float64. ``correct``: a function ``(rates (H, W) float64) → rates`` (a camera profile's dark
+    and flat correction, :meth:`spikeview.classical.calibration.CameraProfile.correct`) or ``None``.
+    """
+    from spikeview.classical import white_balance as wb
+
+    window = min(int(window), source.n_frames)
+    totals = [np.zeros((source.height, source.width), dtype=np.float64) for _ in (0, 1)]
+    ticks = [0, 0]
+    for i, s in enumerate(sample_starts(source.n_frames, window, max_windows)):
+        e = min(s + window, source.n_frames)
+        totals[i % 2] += window_counts(source, s, e)
+        ticks[i % 2] += e - s
+
+    def image(total: np.ndarray, n: int) -> np.ndarray:
+        rates = total / max(n, 1)
+        return wb.cells_rgb(rates if correct is None else correct(rates), source.cfa)
+
+    whole = image(totals[0] + totals[1], ticks[0] + ticks[1])
+    if ticks[1] == 0:
+        return whole, (whole, whole), ticks[0]
+    return whole, (image(totals[0], ticks[0]), image(totals[1], ticks[1])), ticks[0] + ticks[1]
+
+
 def sequence_alpha(source: SpikeSource, config: Any, *, warn: bool = True) -> tuple[np.ndarray | None, str | None]:
     """The sequence's gains α by the one rule, and the note for a channel without spikes (else ``None``).
 
@@ -266,21 +295,23 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
     if not isinstance(choice, str):
         return np.asarray(choice, dtype=np.float64), None, "white balance: the fixed gains R,G,B given"
     camera = getattr(source.info, "camera", None)
-    if choice == "profile":
-        if camera is None or camera.colour_response is None:
-            raise ParameterError("--white-balance profile needs a camera profile with a colour response: pass --camera "
-                                 "PROFILE.toml made by `spikeview calibrate --flat FLAT` (or choose auto).")
-        return (np.asarray(camera.colour_gains(), dtype=np.float64), None,
-                f"white balance profile: the colour response of {camera.name} (measured on a flat capture)")
+    if choice == "profile" and (camera is None or camera.colour_response is None):
+        raise ParameterError("--white-balance profile needs a camera profile with a colour response: pass --camera "
+                             "PROFILE.toml made by `spikeview calibrate --flat FLAT` (or choose auto).")
     window = min(config.alpha_window, source.n_frames)
     if choice == "gray-world" and camera is None:  # the paper's rule from the counts (exactly as before)
         means = sequence_channel_means(source, window=window, max_windows=config.alpha_max_windows)
         how = wb.WhiteBalance("gray-world", means, "white balance gray-world (as asked)")
     else:
-        img, halves = wb.sequence_images(source, window, config.alpha_max_windows,
-                                         None if camera is None else camera.correct)
+        img, halves, ticks = sequence_images(source, window, config.alpha_max_windows,
+                                                None if camera is None else camera.correct)
         means = img.reshape(-1, 3).mean(axis=0)
-        how = wb.choose(img, choice, halves)
+        how = wb.choose(img, choice, halves, ticks) if choice != "profile" else wb.WhiteBalance(
+            "profile", camera.colour_response, f"white balance profile: the colour response of {camera.name} "
+                                               "(measured on a flat capture)")
+    empty = not (np.isfinite(means) & (means > 0)).all()
+    if how.method not in ("gray-world", "profile") and empty:  # a channel without spikes: gray-world's rule, its note
+        how = wb.WhiteBalance("gray-world", means, f"white balance {choice} → gray-world: a channel has no spikes")
     if how.method == "gray-world":
         gains, note = alpha_with_note(means)
     else:
@@ -444,6 +475,8 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
         # plain rates Y (reconstruct_frame applies neither α nor η to them), and so is the white point
         eta = 1.0
     n_ticks = min(int(window), source.n_frames)
+    if getattr(source.info, "camera", None) is not None:
+        return _white_corrected(source, gains, n_ticks, max_windows, eta, percentile)
     # a histogram per distinct gain: counts take only n_ticks + 1 values per photosite class
     hist: dict[float, np.ndarray] = {}
     for s in sample_starts(source.n_frames, n_ticks, max_windows):
@@ -479,4 +512,31 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
         else:
             b = mid
     white = b
+    return white if white > 0 else 1.0 / eta
+
+
+def _white_corrected(source: SpikeSource, gains: np.ndarray | None, n_ticks: int, max_windows: int, eta: float,
+                     percentile: float) -> float:
+    """:func:`estimate_white` of a source with a camera profile: the percentile of its corrected TFP values.
+
+    The profile's correction moves every photosite off the ``1/Δτ`` grid by its own gain, so the values are no longer
+    quantised and a plain percentile of them is used (the windows and the gains are those of the histogram rule).
+    """
+    from spikeview.classical.calibration import correct_rates
+
+    g = np.ones((2, 2)) if gains is None else gains
+    vals = []
+    for s in sample_starts(source.n_frames, n_ticks, max_windows):
+        if s + n_ticks > source.n_frames:
+            continue
+        y = correct_rates(source, window_counts(source, s, s + n_ticks) / np.float32(n_ticks))
+        h, w = y.shape
+        tile = np.tile(g, (h // 2 + 1, w // 2 + 1))[:h, :w].astype(np.float32)
+        vals.append((y * tile / np.float32(eta)).ravel())
+    if not vals:
+        return 1.0 / eta
+    allv = np.concatenate(vals)
+    if not (allv > 0).any():
+        return 1.0 / eta
+    white = float(np.percentile(allv, percentile))
     return white if white > 0 else 1.0 / eta

@@ -17,6 +17,7 @@ from collections.abc import Iterable, Iterator
 import numba
 import numpy as np
 
+from spikeview.classical.calibration import correct_rates
 from spikeview.classical.colour_cast import DEFAULT_ETA, apply_colour_cast_mosaic, colour_gains, sequence_alpha
 from spikeview.classical.demosaic import DEMOSAIC_METHODS, check_method, demosaic
 from spikeview.classical.demosaic._common import quad_codes
@@ -68,6 +69,7 @@ def _reconstruct(source: SpikeSource, center: int, config: ClassicalConfig, alph
         y = tfp(source, center, config.window)
     else:
         y = tfi(source, center, config.tfi_half_window)
+    y = correct_rates(source, y)  # the camera profile's dark, flat and hot-pixel correction (none without one)
     if source.cfa is not None:
         if alpha is not None:
             y = apply_colour_cast_mosaic(y, source.cfa, alpha, config.eta)

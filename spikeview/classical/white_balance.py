@@ -4,9 +4,13 @@ Every estimator here returns the illuminant ``e`` (the raw RGB rate of a neutral
 **sequence** (one estimate per sequence, so colours stay stable from frame to frame) and the gains are
 ``α_c ∝ 1 / e_c``, scaled so that ``Σ_c α_c · mean_c = 3`` (the overall level gray-world gives: the exposure is set
 afterwards by the white point). The estimators see the sequence image: the mean rate of each 2×2 Bayer cell
-``(R, (Gr + Gb) / 2, B)`` over the sampled windows (:func:`sequence_rgb`, half resolution, no demosaicking).
+``(R, (Gr + Gb) / 2, B)`` over the sampled windows
+(:func:`spikeview.classical.colour_cast.sequence_images`, half resolution, no demosaicking).
 
 * ``gray-world`` — the mean of each channel (the paper's rule): right when the scene averages to gray.
+
+The other estimators see the sequence image after a 3×3 median (cells): a hot pixel would otherwise be the
+brightest patch and the strongest edge of the frame.
 * ``shades-of-gray`` — the Minkowski ``p = 6`` mean of each channel (Finlayson & Trezzi 2004).
 * ``gray-edge`` — the Minkowski ``p = 6`` mean of the gradient magnitude of each channel after a Gaussian of σ = 1 cell
   (van de Weijer, Gevers & Gijsenij 2007, first order); ``gray-edge-2`` uses the second derivatives. Edges
@@ -18,10 +22,11 @@ afterwards by the white point). The estimators see the sequence image: the mean 
   length): three different assumptions, so one scene rarely fools all three the same way.
 * ``auto`` — gray-world unless it disagrees with ``combined`` by more than :data:`AGREE_DEG` degrees **and** by more
   than twice the estimators' own uncertainty (the angle between ``combined`` on the even and on the odd sampled
-  windows: a dark or fast-changing scene's edges and highlights are noisy); then ``combined``. Gray-world is the
+  windows: a dark or fast-changing scene's edges and highlights are noisy) and the sampled windows hold at least
+  :data:`MIN_SPIKES` spikes per photosite (fewer: a dark scene, whose edges are noise); then ``combined``. Gray-world is the
   paper's rule and the least noisy where the scene averages to gray. The choice and its reason are one sentence.
 * ``profile`` — the colour response measured by ``spikeview calibrate`` from a flat capture
-  (:mod:`spikeview.calibration`): the only choice that is right for a scene that is itself tinted.
+  (:mod:`spikeview.classical.calibration`): the only choice that is right for a scene that is itself tinted.
 
 No estimator that sees only the capture can tell a tinted scene from a tinted sensor: every one of them is
 equivariant to per-channel gains (``est(D·I) = D·est(I)``), so a scene whose colours are all shifted by ``D``
@@ -51,6 +56,9 @@ BRIGHT_FRACTION = 0.01
 AGREE_DEG = 3.0
 #: auto: ... or when their disagreement is within this many times ``combined``'s split-half uncertainty
 NOISE_FACTOR = 2.0
+#: auto: ... or when the sampled windows hold fewer spikes than this per photosite on average (a dark scene: its
+#: edges and highlights are shot noise and dark current, biased the same way in both halves)
+MIN_SPIKES = 5.0
 
 
 def parse_white_balance(text: str, name: str = "--white-balance") -> str | list[float]:
@@ -102,6 +110,13 @@ def _blur(img: np.ndarray, sigma: float) -> np.ndarray:
     return out
 
 
+def median3(img: np.ndarray) -> np.ndarray:
+    """3×3 median of each channel of ``(h, w, 3)`` (edges replicated): isolated outliers (hot pixels) removed."""
+    h, w = img.shape[:2]
+    p = np.pad(img, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    return np.median(np.stack([p[i:i + h, j:j + w] for i in range(3) for j in range(3)]), axis=0)
+
+
 def _minkowski(v: np.ndarray, p: float) -> np.ndarray:
     v = np.abs(v.reshape(-1, v.shape[-1]))
     scale = v.max(axis=0)
@@ -118,6 +133,8 @@ def illuminant(img: np.ndarray, method: str, saturated: float = 0.95) -> np.ndar
     img = np.asarray(img, dtype=np.float64)
     if method == "gray-world":
         return img.reshape(-1, 3).mean(axis=0)
+    if method != "combined" and min(img.shape[:2]) >= 3:
+        img = median3(img)  # hot pixels: an isolated bright cell would be the brightest patch and the strongest edge
     if method == "shades-of-gray":
         return _minkowski(img, MINKOWSKI_P)
     if method in ("gray-edge", "gray-edge-2"):
@@ -189,15 +206,23 @@ def gains_from_illuminant(e: np.ndarray, means: np.ndarray) -> np.ndarray:
     return a * (3.0 / level) if level > 0 and np.isfinite(level) else a
 
 
-def choose(img: np.ndarray, method: str, halves: tuple[np.ndarray, np.ndarray] | None = None) -> WhiteBalance:
+def choose(img: np.ndarray, method: str, halves: tuple[np.ndarray, np.ndarray] | None = None,
+           ticks: int | None = None) -> WhiteBalance:
     """The white balance of a sequence image by ``method`` (an estimator or ``auto``), with its reason.
 
     ``halves``: the sequence image of the even and of the odd sampled windows (``auto``'s uncertainty; ``None``: no
-    uncertainty is known, 0).
+    uncertainty is known, 0). ``ticks``: how many ticks ``img`` averages (``auto``'s spike count; ``None``: not
+    checked).
     """
     if method != "auto":
         return WhiteBalance(method, illuminant(img, method), f"white balance {method} (as asked)")
     gw = illuminant(img, "gray-world")
+    if ticks is not None:
+        spikes = float(np.asarray(img, dtype=np.float64).mean()) * ticks
+        if spikes < MIN_SPIKES:
+            return WhiteBalance("gray-world", gw, f"white balance auto → gray-world: the sampled windows hold "
+                                                 f"{spikes:.1f} spikes per photosite (< {MIN_SPIKES:g}), too few for "
+                                                 "edges and highlights")
     co = illuminant(img, "combined")
     ok = gw > 0
     d = angle_deg(co[ok] / gw[ok], np.ones(int(ok.sum()))) if ok.sum() >= 2 else 0.0
@@ -216,33 +241,3 @@ def choose(img: np.ndarray, method: str, halves: tuple[np.ndarray, np.ndarray] |
     return WhiteBalance("combined", co, f"white balance auto → combined (gray-edge, white-patch, shades-of-gray): the "
                                         f"scene's mean is {d:.1f}° off its edges and highlights (> {AGREE_DEG:g}°, "
                                         f"uncertainty {u:.1f}°), a colourful scene")
-
-
-def sequence_images(source, window: int = 10, max_windows: int = 64, correct=None
-                    ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
-    """The sequence image the estimators see, and the same of the even and of the odd sampled windows.
-
-    Mean rate (spikes per tick) of each 2×2 cell's R, G, B over the windows
-    :func:`~spikeview.classical.colour_cast.sample_starts` picks (the gray-world estimate's windows), each
-    ``(H//2, W//2, 3)`` float64. ``correct``: a function ``(rates (H, W) float64) → rates`` (a camera profile's dark
-    and flat correction, :meth:`spikeview.calibration.CameraProfile.correct`) or ``None``.
-    """
-    from spikeview.classical.colour_cast import sample_starts
-    from spikeview.classical.tfp import window_counts
-
-    window = min(int(window), source.n_frames)
-    totals = [np.zeros((source.height, source.width), dtype=np.float64) for _ in (0, 1)]
-    ticks = [0, 0]
-    for i, s in enumerate(sample_starts(source.n_frames, window, max_windows)):
-        e = min(s + window, source.n_frames)
-        totals[i % 2] += window_counts(source, s, e)
-        ticks[i % 2] += e - s
-
-    def image(total: np.ndarray, n: int) -> np.ndarray:
-        rates = total / max(n, 1)
-        return cells_rgb(rates if correct is None else correct(rates), source.cfa)
-
-    whole = image(totals[0] + totals[1], ticks[0] + ticks[1])
-    if ticks[1] == 0:
-        return whole, (whole, whole)
-    return whole, (image(totals[0], ticks[0]), image(totals[1], ticks[1]))

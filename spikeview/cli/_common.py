@@ -59,11 +59,20 @@ def open_source_from_args(args: argparse.Namespace, recipe: Any = None, *, show_
     from spikeview.io import open_source
     from spikeview.recipe import StreamTable
 
-    names = [f.name for f in dataclasses.fields(StreamTable)]
+    names = [f.name for f in dataclasses.fields(StreamTable) if f.name != "camera"]
     given = ({k: getattr(args, k, None) for k in names} if recipe is None else recipe.stream.open_kwargs())
     kwargs = {k: v for k, v in given.items() if v is not None or k != "cfa"}
     kwargs["tag_check"] = getattr(args, "tag_check", None)
     src = open_source(args.input, **kwargs)
+    camera = getattr(args, "camera", None) if recipe is None else recipe.stream.camera
+    if camera is not None:  # the profile's corrections travel with the source (spikeview.classical.calibration)
+        from spikeview.classical.calibration import attach
+
+        try:
+            attach(src, camera)
+        except BaseException:
+            src.close()
+            raise
     if show_warnings:
         for note in src.info.warnings:
             print(f"spikeview: warning: {src.info.path.name if src.info.path else args.input}: {note}", file=sys.stderr)

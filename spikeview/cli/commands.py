@@ -25,6 +25,8 @@ COMMANDS: dict[str, Command] = {
     "reconstruct": Command("reconstruct frames from spikes and export them (.npy, .exr, .png, .mp4)",
                            "spikeview.cli.reconstruct"),
     "export": Command("export a .zarr store of a long capture to .mp4, .npy, .exr or .png", "spikeview.cli.export_cmd"),
+    "calibrate": Command("measure a camera profile (dark rate, hot pixels, flat field, colour response) from dark and "
+                         "flat captures, for --camera", "spikeview.cli.calibrate"),
     "bench": Command("error against run time of TFP, TFI, the strong baseline and the guided sampler "
                      "(PSNR/SSIM vs. ground truth)", "spikeview.cli.bench"),
 }

@@ -76,6 +76,9 @@ def describe(src: SpikeSource, sample_windows: int = 64) -> str:
             summary = ", ".join(f"{k}={v}" for k, v in list(value.items())[:8])
             more = " ..." if len(value) > 8 else ""
             lines.append(f"{key + ':':<12} {summary}{more}")
+    cam = getattr(info, "camera", None)
+    if cam is not None:
+        lines.append(f"camera:      {cam.describe()}")
     for w in info.warnings:
         lines.append(f"warning:     {w}")
     return "\n".join(lines)

@@ -131,6 +131,9 @@ def worker_resources(path: str, open_kwargs: dict[str, Any], recipe: dict[str, A
     from spikeview.io import open_source
 
     source = open_source(path, **open_kwargs)
+    from spikeview.classical.calibration import attach
+
+    attach(source, (recipe.get("stream") or {}).get("camera"))  # the camera profile's corrections, as in-process
     OPENS[path] = OPENS.get(path, 0) + 1
     sampler = None
     if method_of(recipe) == "guided":

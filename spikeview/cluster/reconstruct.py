@@ -190,7 +190,9 @@ def _run_store(input_path, recipe, out: Path, chunk: int, attrs, client, progres
     from spikeview.pipeline import prepare_sequence, recipe_for_state, white_point_line, window_centres
     from spikeview.recipe import StreamTable
 
-    with open_source(input_path, **kwargs) as src:
+    from spikeview.classical.calibration import attach
+
+    with attach(open_source(input_path, **kwargs), recipe.stream.camera) as src:
         stream = StreamTable.from_info(src.info, layout).to_dict()
         recipe = recipe.with_values({f"stream.{k}": v for k, v in stream.items()})
         settings = recipe.to_dict()

@@ -73,6 +73,9 @@ def observe_window(source: Any, centre: int, params: GuidedConfig, alpha: np.nda
                              "use --method tfp (or tfi) for it.")
     whole = Observation.from_source(source, int(centre), params.window, alpha=alpha, eta=params.eta,
                                     radius=params.temporal_radius, previous=previous, cache=cache, device=params.device)
+    from spikeview.classical.calibration import correct_observation
+
+    correct_observation(source, whole)  # the camera profile's rate correction, as the classical frames get it
     obs = whole if roi is None else crop_to_roi(whole, roi)
     if not plan:
         return Window(whole, obs, None)

@@ -57,6 +57,8 @@ class StreamInfo:
         warnings: things the reader noticed and the user should hear about (trailing partial
             frame, skipped corrupt blocks…), one sentence each.
         extra: free-form metadata carried from the sidecar (simulator parameters, drop counters).
+        camera: the camera profile whose dark, flat and colour corrections apply to this stream
+            (:class:`spikeview.classical.calibration.CameraProfile`, set by :func:`spikeview.classical.calibration.attach`), or ``None``.
     """
 
     width: int
@@ -70,6 +72,7 @@ class StreamInfo:
     path: Path | None = None
     warnings: list[str] = field(default_factory=list)
     extra: dict[str, Any] = field(default_factory=dict)
+    camera: Any = None
 
     def __post_init__(self) -> None:
         self.cfa = parse_cfa(self.cfa)

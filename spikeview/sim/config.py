@@ -92,7 +92,9 @@ class SimConfig(Config):
     their constants ``threshold_v`` (V), ``capacitance_mean_ff``/``capacitance_std_ff`` (fF),
     ``threshold_offset_mean_v``/``threshold_offset_std_v`` (V), ``dark_current_mean_pa``/
     ``dark_current_std_pa`` (pA), ``prnu_std`` (relative), ``jitter_std_v`` (V) and
-    ``reset_factor``.
+    ``reset_factor``. ``hot_pixels``: the fraction of photosites whose dark current is ``hot_pixel_factor`` times
+    their drawn value (hot pixels; needs ``dark_current``; 0 by default, drawn from a stream of their own so that
+    every other draw is unchanged).
 
     Output:
         seed: seed of every random draw (fixed patterns, initial voltages, temporal noise); the
@@ -134,6 +136,8 @@ class SimConfig(Config):
     prnu_std: float = 0.058
     jitter_std_v: float = 0.0064
     reset_factor: float = 0.998
+    hot_pixels: float = 0.0
+    hot_pixel_factor: float = 100.0
 
     seed: int = 0
     gt_every: int = 50
@@ -164,6 +168,9 @@ class SimConfig(Config):
             _check(math.isfinite(getattr(self, name)), name, getattr(self, name), "a finite number")
         _check(math.isfinite(self.reset_factor) and 0 < self.reset_factor <= 1, "reset_factor", self.reset_factor,
                "a factor in (0, 1]")
+        _check(math.isfinite(self.hot_pixels) and 0 <= self.hot_pixels <= 1, "hot_pixels", self.hot_pixels,
+               "a fraction of the photosites in [0, 1]")
+        _check(_pos(self.hot_pixel_factor), "hot_pixel_factor", self.hot_pixel_factor, "a positive factor")
         _check(self.seed >= 0, "seed", self.seed, "an integer ≥ 0")
         _check(self.gt_every >= 1, "gt_every", self.gt_every, "at least 1 tick")
 

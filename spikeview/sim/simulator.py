@@ -39,7 +39,7 @@ ProgressCallback = Callable[[int, int], None]
 CancelCheck = Callable[[], bool]
 
 # streams of numpy.random.default_rng([seed, stream]) for the fixed patterns
-_STREAM_DARK, _STREAM_PRNU, _STREAM_CAP, _STREAM_OFFSET, _STREAM_V0 = 1, 2, 3, 4, 5
+_STREAM_DARK, _STREAM_PRNU, _STREAM_CAP, _STREAM_OFFSET, _STREAM_V0, _STREAM_HOT = 1, 2, 3, 4, 5, 6
 # streams of the counter-based temporal noise
 _STREAM_NOISE, _STREAM_KNUTH = 101, 102
 _MASK64 = (1 << 64) - 1
@@ -110,6 +110,8 @@ class SensorPattern:
 
         if config.dark_current:
             amps = np.maximum(rng(_STREAM_DARK).normal(config.dark_current_mean_pa, config.dark_current_std_pa, shape), 0.0)
+            if config.hot_pixels > 0:  # hot pixels: a stream of their own, every other draw unchanged
+                amps = np.where(rng(_STREAM_HOT).random(shape) < config.hot_pixels, amps * config.hot_pixel_factor, amps)
             # pA → electrons per tick → threshold units
             per_pa = 1e-12 / ELEMENTARY_CHARGE / config.tick_rate / config.electrons_per_threshold
             dark = (amps * per_pa).astype(np.float32)
