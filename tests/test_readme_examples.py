@@ -87,6 +87,9 @@ def make_inputs(folder: Path) -> list[Path]:
     rate = (0.1 + 0.4 * (np.sin(6 * xx) * np.cos(4 * yy) + 1) / 2).astype(np.float32)
     inputs = [write_plain(folder / "capture.dat", rng.random((100, 64, 64), dtype=np.float32) < rate, cfa="BGGR")]
     inputs.append(folder / "capture.dat.toml")
+    for name, level in (("dark", 0.005), ("flat", 0.4)):  # the camera's calibration captures (README: calibrate)
+        inputs.append(write_plain(folder / f"{name}.dat", rng.random((100, 64, 64), dtype=np.float32) < level, cfa="BGGR"))
+        inputs.append(folder / f"{name}.dat.toml")
     inputs.append(write_raw1m(folder / "recording.raw", rng.random((2, 1000, 1000)) < 0.2, sidecar=False))
     inputs.append(write_array(folder / "spikes.npz", (rng.random((40, 16, 24)) < 0.3).transpose(1, 2, 0),
                               sidecar=False))
