@@ -220,8 +220,9 @@ def test_q_reason_says_what_the_count_counts_when_windows_are_pooled(cfa):
 
 
 def test_sparse_demosaic_reason_names_the_pooled_count():
-    src = ArraySource(spikes_from_rates(np.full((32, 32), 0.005), 120, seed=3), cfa="RGGB")
-    pooled = Observation.from_source(src, 60, 10, alpha=CAST, eta=1.0, radius=3)
+    # 70 ticks: ±3 windows and no more (a longer dark capture pools further at rest: temporal.LOW_LIGHT_RADIUS)
+    src = ArraySource(spikes_from_rates(np.full((32, 32), 0.003), 70, seed=3), cfa="RGGB")
+    pooled = Observation.from_source(src, 35, 10, alpha=CAST, eta=1.0, radius=3)
     plan = make_plan(pooled, GuidedConfig(diffusion="always"))
     assert plan.demosaic == "bilinear" and "pooled over the aligned windows" in plan.reasons["demosaic"]
 

@@ -195,3 +195,86 @@ def test_the_reuse_test_compares_the_own_windows_of_a_pooled_observation(cfa):
     assert np.array_equal(changed, changed_blocks(own, p.reuse_alpha))
     pooled_alone = dataclasses.replace(obs, own=None)
     assert not np.array_equal(changed, changed_blocks(pooled_alone, p.reuse_alpha))
+
+
+# ------------------------------------------------------------------ static scenes at low light (issue 25, items 1–2)
+def _sim_static(cfa: str | None, rate: float, ticks: int = 400, size: int = 96):
+    """The project's integrate-and-fire simulator (dispersion, dark pixels firing less regularly than bright ones) on
+    a static camera crop: a dark scene (``rate`` = mean spikes per tick) and a bright one."""
+    import skimage.data
+
+    from spikeview.sim import SimConfig, StaticScene, simulate
+
+    img = skimage.data.camera()[100:100 + size, 180:180 + size].astype(np.float32) / 255.0
+    if cfa is not None:
+        img = np.repeat(img[..., None], 3, axis=-1)
+    return simulate(StaticScene(img), SimConfig(n_ticks=ticks, cfa=cfa or "none", rate=rate, seed=5))
+
+
+@CFAS
+@pytest.mark.parametrize("rate", [0.03, 0.3], ids=["dark", "bright"])
+def test_a_static_scene_pools_every_neighbour_at_every_light(cfa, rate):
+    """≥ 95 % of a static scene's photosites take all ±3 windows at rest (a single κ for the frame once failed the
+    dark tiles of a bright scene, and the velocity search picked noise in the dark: 75 % and 50 %)."""
+    cap = _sim_static(cfa, rate)
+    _, pool = temporal.pool_counts(cap, 195, 205, 3, cap.cfa)
+    nb = pool.dtau / WINDOW - 1
+    assert (nb >= 6).mean() >= 0.95, (nb >= 6).mean()
+    assert pool.kind == "static", pool.reason
+    moved = [np.abs(pool.shifts[k][pool.accepted[k]]).max(axis=-1) > 0 for k in pool.offsets]
+    assert np.mean([m.mean() for m in moved]) <= 0.05
+
+
+@CFAS
+def test_low_light_static_tiles_grow_their_support_at_rest_to_the_bound(cfa, monkeypatch):
+    """In the dark (0.3 spikes per photosite per window) a static tile goes on pooling beyond ±3 windows up to
+    LOW_LIGHT_RADIUS; in bright light it stops at ±3 (its count already reaches LOW_LIGHT_COUNT)."""
+    dark = _sim_static(cfa, 0.03)
+    _, pool = temporal.pool_counts(dark, 195, 205, 3, dark.cfa)
+    assert pool.extended and max(abs(k) for k in pool.extended) == temporal.LOW_LIGHT_RADIUS
+    assert float(np.median(pool.dtau)) > 20 * WINDOW and "low light" in pool.reason
+    monkeypatch.setattr(temporal, "LOW_LIGHT_RADIUS", 5)
+    _, pool5 = temporal.pool_counts(dark, 195, 205, 3, dark.cfa)
+    assert pool5.dtau.max() <= 11 * WINDOW and max(abs(k) for k in pool5.extended) == 5
+    assert (pool.dtau > 7 * WINDOW).mean() > 0.9
+    bright = _sim_static(cfa, 0.6)  # only its darkest tiles (under LOW_LIGHT_COUNT spikes over ±3 windows) go on
+    _, pool_b = temporal.pool_counts(bright, 195, 205, 3, bright.cfa)
+    assert (pool_b.dtau > 7 * WINDOW).mean() < 0.5
+
+
+@CFAS
+def test_a_moving_scene_in_the_dark_is_not_pooled_at_rest_beyond_radius(cfa):
+    """The extension pools only at rest: content moving 4 photosites a window is never pooled from beyond ±3."""
+    src = _capture(cfa, 0, 4, windows=12)
+    _, pool = temporal.pool_counts(src, 60, 70, 3, src.cfa)
+    nb = pool.dtau / WINDOW - 1
+    assert nb[8:-8, 8:-8].max() <= 6
+
+
+@CFAS
+def test_the_fallback_denoises_each_photosite_at_its_own_noise(cfa):
+    """The plan's one-pass fallback takes the prior's σ per pixel: the half that pooled nothing (16× the variance)
+    is denoised harder than at the frame's RMS σ, the pooled half less hard (the RMS, set by the noisy half,
+    over-smooths it: in a real scene that is its detail)."""
+    from scipy.ndimage import gaussian_filter
+
+    from spikeview.guided.baseline import baseline
+    from spikeview.guided.priors.ffdnet import FFDNetDenoiser
+    from spikeview.guided.observation import Observation
+
+    rng = np.random.default_rng(3)
+    h, w = 64, 128
+    left = np.arange(w)[None, :] < w // 2
+    dtau = np.where(left, 160.0, 10.0).astype(np.float32) * np.ones((h, 1), np.float32)
+    y = (rng.binomial(dtau.astype(int), 0.3) / dtau).astype(np.float32)
+    obs = Observation(y, cfa, 10, None if cfa is None else np.ones(3), 1.0, (0, 10), 5, None, dtau)
+    prior = FFDNetDenoiser(color=cfa is not None)
+    flat = baseline(obs, prior, use_mosaic=cfa is not None, use_cast=False)
+    mapped = baseline(obs, prior, use_mosaic=cfa is not None, use_cast=False, sigma_map=True)
+
+    def rough(x, sel):
+        g = x if x.ndim == 2 else x.mean(axis=-1)
+        return float(np.std((g - gaussian_filter(g, 2.0))[4:-4][:, sel]))
+
+    assert rough(mapped, ~left[0]) < 0.9 * rough(flat, ~left[0])
+    assert rough(mapped, left[0]) > 1.5 * rough(flat, left[0])

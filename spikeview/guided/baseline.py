@@ -56,12 +56,16 @@ def to_image(x: torch.Tensor) -> np.ndarray:
 
 
 def one_pass(prior: DenoiserPrior, y0: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """One prior pass over ``y0`` with per-channel σ (fractions of 1)."""
+    """One prior pass over ``y0`` with per-channel σ (fractions of 1), or a ``(1, C, H, W)`` per-pixel σ map."""
     from spikeview.guided.device import module_device
 
     dev = module_device(prior)  # the prior's device (guided.device)
     x = to_tensor(y0).to(dev, non_blocking=True)
-    s = torch.as_tensor(np.asarray(sigma, dtype=np.float32).reshape(1, -1), device=dev)
+    sig = np.asarray(sigma, dtype=np.float32)
+    if sig.ndim == 4:  # a per-pixel map (1, C, H, W)
+        with torch.no_grad():
+            return to_image(prior.denoise(x, torch.as_tensor(sig, device=dev)))
+    s = torch.as_tensor(sig.reshape(1, -1), device=dev)
     if s.shape[1] != x.shape[1]:
         s = s.mean(dim=1, keepdim=True).expand(1, x.shape[1])
     with torch.no_grad():
@@ -69,7 +73,7 @@ def one_pass(prior: DenoiserPrior, y0: np.ndarray, sigma: np.ndarray) -> np.ndar
 
 
 def baseline(obs: Observation, prior: DenoiserPrior, *, sigma_scale: float = 1.0, use_mosaic: bool = True,
-             use_cast: bool = True, demosaic: str = "bilinear") -> np.ndarray:
+             use_cast: bool = True, demosaic: str = "bilinear", sigma_map: bool = False) -> np.ndarray:
     """TFP → demosaic → colour cast → one prior pass at ``sigma_scale`` × the data-derived σ.
 
     Args:
@@ -78,13 +82,22 @@ def baseline(obs: Observation, prior: DenoiserPrior, *, sigma_scale: float = 1.0
         sigma_scale: factor on the data-derived noise level.
         use_mosaic, use_cast: as the plan's ``mosaic`` and ``cast``.
         demosaic: ``"bilinear"`` or ``"malvar2004"``.
+        sigma_map: the prior's σ per pixel (:func:`~spikeview.guided.observation.start_variance`: the
+            observation's own noise where it is, so a photosite that pooled fewer windows is denoised harder), not
+            the frame's RMS. The plan's fallback uses it (a real dark capture otherwise kept 16×16 blocks of raw
+            noise where its pooling could not borrow).
 
     Returns:
         ``(H, W, 3)`` (or ``(H, W)``) float32 in [0, 1].
     """
-    from spikeview.guided.observation import estimate_sigma
+    from spikeview.guided.observation import estimate_sigma, start_variance
 
     y0 = start_estimate(obs, use_mosaic, use_cast, demosaic)
-    sigma = estimate_sigma(obs, use_mosaic, use_cast) * float(sigma_scale)
-    sigma = np.minimum(sigma, getattr(prior, "sigma_max", np.inf))
+    if sigma_map:
+        var, gain = start_variance(obs, use_mosaic, use_cast)
+        sigma = np.sqrt(np.maximum(var, 0.0)) * np.asarray(gain, dtype=np.float64).reshape(-1, 1, 1) * float(sigma_scale)
+        sigma = np.minimum(sigma, getattr(prior, "sigma_max", np.inf)).astype(np.float32)[None]
+    else:
+        sigma = estimate_sigma(obs, use_mosaic, use_cast) * float(sigma_scale)
+        sigma = np.minimum(sigma, getattr(prior, "sigma_max", np.inf))
     return one_pass(prior, y0, sigma)

@@ -247,7 +247,7 @@ class GuidedSampler:
                 latent = p.prior == "sd" or is_latent(self._prior)
                 denoiser = load_prior(p.replace(prior="ffdnet", model_path=None), channels) if latent else self.prior_for(channels, p)
                 out = baseline(observation, denoiser, sigma_scale=p.sigma_scale,
-                               use_mosaic=plan.mosaic, use_cast=plan.cast, demosaic=p.demosaic)
+                               use_mosaic=plan.mosaic, use_cast=plan.cast, demosaic=p.demosaic, sigma_map=True)
             info.mode, info.seconds = plan.fallback, time.perf_counter() - t0
             info.precision = "float32" if plan.fallback == "baseline" else ""
             if callback is not None:

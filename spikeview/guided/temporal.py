@@ -73,6 +73,9 @@ ADJACENT_DISPERSION = 1.4
 #: a tile's match is accepted when the SSD of its unsmoothed super-pixel counts is at most this many
 #: times the noise-only SSD (64 super-pixels per tile: a static tile exceeds 1.5 with probability ~0.5 %)
 TILE_CHI = 1.5
+#: in a tile's match, one value's squared difference counts at most this many times its noise variance (a hot or
+#: blinking photosite alone cannot fail a tile of 64: it adds at most 16/64 = 0.25 to the normalised SSD)
+CHI_CLIP = 16.0
 #: a tile with fewer spikes per photosite in its own window than this stays at rest whenever zero shift matches
 #: within :data:`TILE_CHI`: at that light the search's velocity is mostly noise (a real dark capture at 0.31
 #: spikes: a static scene's tiles otherwise moved on 13 %, blurring it)
@@ -269,7 +272,10 @@ def _tile_chi(g0: np.ndarray, gk: np.ndarray, pad: int, dy: int, dx: int, tile: 
     d = g0 - s
     v0 = _binvar(g0, cap) if v0 is None else v0
     vs = _binvar(s, cap) if vk is None else vk[pad + dy:pad + dy + h, pad + dx:pad + dx + w]
-    return _tile_sum(d * d, tile) / (noise * _tile_sum(v0 + vs, tile) + 1e-6)
+    v = v0 + vs
+    # one value counts at most CHI_CLIP times its noise: a single defective photosite (hot, blinking) no longer
+    # fails its whole tile (a real dark capture kept 16×16 blocks of raw noise there)
+    return _tile_sum(np.minimum(d * d, CHI_CLIP * noise * v + 1e-6), tile) / (noise * _tile_sum(v, tile) + 1e-6)
 
 
 def _velocity_grid(radius: int, max_speed: float) -> list[tuple[float, float]]:
@@ -644,7 +650,8 @@ def _search_torch(raw0: np.ndarray, g0: np.ndarray, raws: dict[int, np.ndarray],
             sl = torch.stack([padded[pad + dy:pad + dy + h_, pad + dx:pad + dx + w_] for dy, dx in part])
             vs = torch.stack([vpad[pad + dy:pad + dy + h_, pad + dx:pad + dx + w_] for dy, dx in part])
             d = ref_t[None] - sl
-            out.append(tile_sums(d * d) / (noise * tile_sums(v0[None] + vs) + 1e-6))
+            v = v0[None] + vs
+            out.append(tile_sums(torch.minimum(d * d, CHI_CLIP * noise * v + 1e-6)) / (noise * tile_sums(v) + 1e-6))
         return torch.cat(out)
 
     cost = None

@@ -373,7 +373,7 @@ def run_tiled(sampler: Any, obs: Any, p: Any, plan: Any, callback: Any = None, c
             cy0, cy1, cx0, cx1 = crop(t.y0, t.y1, t.x0, t.x1)
             sub = _FrameNoise.of(obs.crop(cy0, cy1, cx0, cx1), kappa)
             one = on(to_tensor(baseline(sub, prior, sigma_scale=p.sigma_scale, use_mosaic=plan.mosaic, use_cast=plan.cast,
-                                     demosaic=p.demosaic)))
+                                        demosaic=p.demosaic, sigma_map=True)))
             fallback[..., t.y0:t.y1, t.x0:t.x1] = one[..., t.y0 - cy0:t.y1 - cy0, t.x0 - cx0:t.x1 - cx0]
 
     # per-pixel start noise: full tiles exactly as untiled; a short tile (and a skipped tile's cross-fade
