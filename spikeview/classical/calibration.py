@@ -16,8 +16,10 @@ focus, not saturated) measures ``F_p = (k_p · s_c · I_f + d_p) / θ_p``. The p
 * the captures' fingerprints and the statistics measured.
 
 **The correction** (:meth:`CameraProfile.correct`) maps a mosaicked rate frame ``r`` (TFP ``count / Δτ``, TFI
-``1 / interval``) to ``(r − D) / G``, clipped at 0, each hot photosite replaced by the mean of its non-hot
-neighbours of the same channel. It is applied to the rates in one place per consumer of rates: the classical frames
+``1 / interval``) to ``(r − D) / G``, each hot photosite replaced by the mean of its non-hot neighbours of the same
+channel. It is not clipped at 0: a dark photosite's rate minus its dark rate is noise around 0, and clipping it would
+brighten the dark parts of the frame by a gray raw offset that the white balance turns into a colour (exports clip as
+always; the guided observation clips to [0, 1] as every observation). It is applied to the rates in one place per consumer of rates: the classical frames
 (:func:`spikeview.classical.reconstruct.reconstruct_frame`), the guided observation
 (:func:`spikeview.guided.window.observe_window`) and the sequence's statistics (white balance, white point), all
 through :func:`correct_rates`. The profile travels with the source (``source.info.camera``, set by :func:`attach`),
@@ -162,20 +164,20 @@ class CameraProfile:
         return self._fill
 
     def correct(self, rates: np.ndarray) -> np.ndarray:
-        """``(r − dark) / gain`` per photosite, clipped at 0, hot photosites filled from their channel's neighbours.
+        """``(r − dark) / gain`` per photosite (not clipped), hot photosites filled from their channel's neighbours.
 
         Args:
             rates: ``(..., H, W)`` mosaicked rates in spikes per tick (flips applied, the profile's geometry).
 
         Returns:
-            float32 of the same shape (values may exceed 1 where a low-gain photosite saturates).
+            float32 of the same shape (values may be slightly negative where the dark rate exceeds a dark
+            window's count, and exceed 1 where a low-gain photosite saturates).
         """
         r = np.asarray(rates)
         if r.shape[-2:] != (self.height, self.width):
             raise ParameterError(f"{self.name} is for {self.width}x{self.height} frames, not "
                                  f"{r.shape[-1]}x{r.shape[-2]}; use the profile of the camera that made the capture.")
         out = (r.astype(np.float32) - self.dark) / self.gain
-        np.maximum(out, 0.0, out=out)
         ys, xs, ny, nx, w, n = self._fill_plan()
         if ys.size:
             vals = out[..., ny, nx]  # (..., n_hot, 4)
