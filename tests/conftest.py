@@ -47,6 +47,7 @@ def window(qtbot, settings):
     w = MainWindow(settings=settings)
     qtbot.addWidget(w)
     w.resize(1400, 900)
+    w.tile_panels()  # every panel in sight (the default layout tabs them): their previews are computed
     w.show()
     yield w
     w.close()

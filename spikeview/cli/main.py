@@ -145,6 +145,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if inp and not Path(str(inp)).exists():  # the file first: a display would not help a missing file
             _print_error(f"{inp}: file not found; check the path.")
             return 1
+        if getattr(args, "screenshot", None):  # a screenshot renders off-screen: no display needed
+            os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
         problem = display_problem()
         if problem is not None:
             _print_error(problem)

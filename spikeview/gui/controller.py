@@ -45,6 +45,8 @@ RATES_INTERVAL_MS = 250
 TFI_INTERVAL_MS = 200
 #: guided parameter changes restart a running job after this quiet time (ms)
 GUIDED_DEBOUNCE_MS = 400
+#: the comparison's scores are recomputed after this quiet time (ms) when the tick, ROI or a parameter changes
+COMPARE_DEBOUNCE_MS = 300
 #: playback timer period (ms): the display asks for a frame at most this often
 PLAY_INTERVAL_MS = 10
 #: the display rate playback never exceeds: a screen shows at most 60 frames a second, and painting
@@ -85,6 +87,8 @@ class Controller(QtCore.QObject):
     error = QtCore.Signal(str)  # a sentence for the user (status bar or dialog)
     fps_changed = QtCore.Signal(float)
     alpha_ready = QtCore.Signal(object)
+    guided_started = QtCore.Signal(int, object)  # run, the ROI it runs on (None: the whole frame)
+    compare_ready = QtCore.Signal(object)  # jobs.CompareView
 
     def __init__(self, session: Session, parent: QtCore.QObject | None = None):
         super().__init__(parent)
@@ -107,7 +111,8 @@ class Controller(QtCore.QObject):
         self.alpha: np.ndarray | None = None
         self.alpha_note: str | None = None
         # "pooling": the guided panel's pooling map is shown (it comes with the degradation job's plan)
-        self.enabled = {"tfi": True, "rates": True, "degradation": True, "pooling": False}
+        # "compare": the classical methods are scored against the ground truth (the canvas or the Compare panel asks)
+        self.enabled = {"tfi": True, "rates": True, "degradation": True, "pooling": False, "compare": False}
         self.display_factor = 1  # stream images are downsampled by this for the screen
         self.errors: list[str] = []  # every error shown, for tests and the log
         self.last_frames = None
@@ -132,6 +137,8 @@ class Controller(QtCore.QObject):
         self._last_tfi = 0.0
         self.guided_timer = QtCore.QTimer(self, singleShot=True, interval=GUIDED_DEBOUNCE_MS)
         self.guided_timer.timeout.connect(self._guided_debounced)
+        self.compare_timer = QtCore.QTimer(self, singleShot=True, interval=COMPARE_DEBOUNCE_MS)
+        self.compare_timer.timeout.connect(self.submit_compare)
 
         ev = session.events
         ev.source_changed.connect(self._on_source)
@@ -147,6 +154,7 @@ class Controller(QtCore.QObject):
         self.rates_timer.stop()
         self.tfi_timer.stop()
         self.guided_timer.stop()
+        self.compare_timer.stop()
         ev = self.session.events
         for e, cb in ((ev.source_changed, self._on_source), (ev.tick_changed, self._on_tick), (ev.param_changed, self._on_param),
                       (ev.roi_changed, self._on_roi), (ev.playback_changed, self._on_playback)):
@@ -169,7 +177,7 @@ class Controller(QtCore.QObject):
         self.enabled[what] = on
         if changed and on:
             {"tfi": self.request_tfi, "rates": self.request_rates, "degradation": self.request_degradation,
-             "pooling": self.request_degradation}[what]()
+             "pooling": self.request_degradation, "compare": self.request_compare}[what]()
 
     # ------------------------------------------------------------------------------ memory
     @staticmethod
@@ -202,6 +210,7 @@ class Controller(QtCore.QObject):
         self.refresh_exposure()
         self.request_frames()
         self.request_degradation()
+        self.request_compare()
 
     def refresh_exposure(self) -> None:
         """The sequence's α (Bayer streams) and white point (every stream) for the recipe as it is now, as the CLI
@@ -226,6 +235,7 @@ class Controller(QtCore.QObject):
         self.request_frames()
         if not self.session.playing:
             self.request_degradation()
+            self.request_compare()
 
     def _on_param(self, name: str, value: Any) -> None:
         if name == "white":  # a white point typed or dragged by the user stays; the estimate's follows the capture
@@ -238,6 +248,8 @@ class Controller(QtCore.QObject):
             self.request_frames()
         if group in _FRAME_GROUPS or group == "forward":
             self.request_degradation()
+        if group in _FRAME_GROUPS or name == "white":
+            self.request_compare()
         restart = group in ("guided", "forward") or name in ("window", "demosaic", "colour_cast")
         if restart and (self.guided.is_active("guided") or self.guided_live):
             self.guided_timer.start()
@@ -245,6 +257,7 @@ class Controller(QtCore.QObject):
     def _on_roi(self, roi: Any) -> None:
         self.request_rates()
         self.request_degradation()
+        self.request_compare()
 
     def _on_playback(self, playing: bool) -> None:
         if playing:
@@ -255,6 +268,7 @@ class Controller(QtCore.QObject):
             self.request_degradation()
             self.request_rates()
             self.request_tfi()  # every pane catches up with the tick playback stopped on
+            self.request_compare()
 
     # ------------------------------------------------------------------------------ playback
     def _play_tick(self) -> None:
@@ -352,6 +366,8 @@ class Controller(QtCore.QObject):
         label = "TFP"
         if g is not None and g.tick == s.tick and self._guided_key == self._guided_context():
             x, label = g.image, f"guided run {g.run}"
+            if self.guided_run > g.run and self.guided.is_active("guided"):  # a newer run refines: say which X this is
+                label += f" (run {self.guided_run} running)"
         try:
             recipe = s.recipe()
         except Exception as e:  # a value the recipe refuses: say so, keep the old preview
@@ -359,6 +375,28 @@ class Controller(QtCore.QObject):
             return
         req = self._request(x_override=x, x_label=label, recipe=recipe)
         self.preview.submit("degradation", lambda ctx, r=req: jobs.degradation_job(r, ctx))
+
+    # ------------------------------------------------------------------------------ comparison
+    def request_compare(self) -> None:
+        """Score TFP and TFI of the window (on the ROI) against the ground truth, after a quiet moment: only when
+        the capture has a ground truth, the comparison is shown and playback is paused."""
+        s = self.session
+        if s.source is None or s.stream is None or s.stream.ground_truth is None or not self.enabled["compare"] or s.playing:
+            return
+        self.compare_timer.start()
+
+    def submit_compare(self) -> None:
+        """Submit the comparison job now (the debounce's end; the screenshot's flow)."""
+        s = self.session
+        if s.source is None or s.stream is None or s.stream.ground_truth is None:
+            return
+        try:
+            recipe = s.recipe()
+        except Exception:  # noqa: BLE001 - the recipe's refusal is said where it is used (frames, degradation)
+            return
+        req = jobs.CompareRequest(s.source, s.tick, self.display_params(), self.alpha, s.roi, s.stream.ground_truth,
+                                  recipe)
+        self.tfi.submit("compare", lambda ctx, r=req: jobs.compare_job(r, ctx), cancel_running=True)
 
     # ------------------------------------------------------------------------------ guided
     def _guided_context(self) -> tuple[Any, ...]:
@@ -382,6 +420,9 @@ class Controller(QtCore.QObject):
         req = jobs.GuidedRequest(s.source, s.tick, self.display_params(), self.alpha, s.roi, gt, self.guided_run, recipe)
         self._guided_pending_key = self._guided_context()
         self.guided.submit("guided", lambda ctx, r=req: _guided_then_release(r, ctx), cancel_running=True)
+        self.guided_started.emit(self.guided_run, s.roi)
+        if self.guided_result is not None:
+            self.request_degradation()  # X's label says a newer run is on its way
         self.guided_state.emit("running", f"Guided run {self.guided_run} started.")
         return self.guided_run
 
@@ -458,6 +499,8 @@ class Controller(QtCore.QObject):
                 self._play_tick()
         elif channel == "tfi":
             self.tfi_ready.emit(*result)
+        elif channel == "compare":
+            self.compare_ready.emit(result)
         elif channel == "rates":
             self._alpha_hist[int(result.tick)] = np.asarray(result.alpha, dtype=np.float64)
             if len(self._alpha_hist) > 4000:  # keep memory bounded on very long sessions
@@ -519,7 +562,7 @@ class Controller(QtCore.QObject):
             self.guided_state.emit("cancelled", "Guided run cancelled.")
 
     def _worker(self, channel: str) -> Worker:
-        return {"guided": self.guided, "export": self.exporter, "tfi": self.tfi}.get(channel, self.preview)
+        return {"guided": self.guided, "export": self.exporter, "tfi": self.tfi, "compare": self.tfi}.get(channel, self.preview)
 
     def _error(self, message: str) -> None:
         self.errors.append(message)

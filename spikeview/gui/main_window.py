@@ -18,9 +18,11 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from spikeview.errors import SpikeviewError
 from spikeview.session import core
+from spikeview.gui.canvas import ImageCanvas
 from spikeview.gui.controller import Controller
 from spikeview.gui.dialogs import ShortcutsDialog, StreamSettingsDialog, app_icon
 from spikeview.session.model import OpenedStream, Session, format_us
+from spikeview.gui.panels.compare import ComparePanel
 from spikeview.gui.panels.degradation import DegradationPanel
 from spikeview.gui.panels.export import ExportPanel
 from spikeview.gui.panels.guided import GuidedPanel
@@ -31,7 +33,9 @@ from spikeview.gui.workers import Worker, configure_runtime
 
 MAX_RECENT = 10
 #: bump when the dock layout changes incompatibly (older saved states are ignored)
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2
+#: the dock column beside the central canvas: this share of the window's width, within these bounds (px)
+SIDE_SHARE, SIDE_MIN, SIDE_MAX = 0.285, 320, 480
 #: file suffixes offered by File ▸ Open
 CAPTURE_FILTER = "Spike captures (*.dat *.bin *.raw *.npy *.npz);;All files (*)"
 
@@ -148,17 +152,19 @@ class MainWindow(QtWidgets.QMainWindow):
         self.degradation_panel = DegradationPanel(s)
         self.guided_panel = GuidedPanel(s)
         self.export_panel = ExportPanel(s)
+        # the image, large: the window's central widget; the panels are docks around it
+        self.canvas = ImageCanvas(s)
+        self.setCentralWidget(self.canvas)
+        self.compare_panel = ComparePanel(s, self.canvas)
+        self.stream_panel.set_images_visible(False)  # the canvas shows the spikes, TFP and TFI
         self.docks: dict[str, QtWidgets.QDockWidget] = {}  # the panels default_layout places
         self.file_menu: QtWidgets.QMenu | None = None
         self.view_menu: QtWidgets.QMenu | None = None
-        for key, title, panel in (("stream", "Stream", self.stream_panel), ("rates", "Firing rates and colour cast", self.rates_panel),
-                                  ("degradation", "Degradation preview", self.degradation_panel),
-                                  ("guided", "Guided reconstruction", self.guided_panel), ("export", "Export", self.export_panel)):
+        # short titles: the tabs of one column show them whole
+        for key, title, panel in (("stream", "Stream", self.stream_panel), ("guided", "Guided", self.guided_panel),
+                                  ("compare", "Compare", self.compare_panel), ("export", "Export", self.export_panel),
+                                  ("rates", "Rates", self.rates_panel), ("degradation", "Degradation", self.degradation_panel)):
             self.add_panel(key, title, panel)
-        placeholder = QtWidgets.QWidget()
-        placeholder.setObjectName("central_placeholder")
-        placeholder.setMaximumSize(0, 0)
-        self.setCentralWidget(placeholder)
         self.setDockNestingEnabled(True)
         self.default_layout()
         self.notice = NotificationBar()
@@ -204,7 +210,7 @@ class MainWindow(QtWidgets.QMainWindow):
         """
         dock = QtWidgets.QDockWidget(title, self)
         dock.setObjectName(f"dock_{key}")
-        dock.setWidget(widget)
+        dock.setWidget(scrolled(widget))
         dock.setFeatures(QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetMovable
                          | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetFloatable
                          | QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetClosable)
@@ -229,18 +235,72 @@ class MainWindow(QtWidgets.QMainWindow):
         self.file_menu.insertAction(self.recent_menu.menuAction(), action)
 
     def default_layout(self) -> None:
+        """The start-up layout (View ▸ Reset layout): the canvas in the centre showing the TFP; one column of docks on
+        the right, the Stream panel (transport, window, display) on top and the other panels as tabs below it, the
+        Guided panel in front. The column takes 28.5 % of the window's width (320–480 px), so the canvas keeps
+        about two thirds of a 1366×768 window whatever the panels hold (each panel scrolls rather than grows)."""
+        from spikeview.gui.canvas import DEFAULT_VIEW
+
         d = self.docks
+        right = QtCore.Qt.DockWidgetArea.RightDockWidgetArea
+        for dock in self.findChildren(QtWidgets.QDockWidget):
+            if dock not in d.values():  # a panel added later (live capture): back beside the others
+                continue
+            dock.setFloating(False)
+            self.removeDockWidget(dock)
+        self.addDockWidget(right, d["stream"])
+        d["stream"].show()
+        self.addDockWidget(right, d["guided"])
+        self.splitDockWidget(d["stream"], d["guided"], QtCore.Qt.Orientation.Vertical)
+        d["guided"].show()
+        for key in ("compare", "export", "rates", "degradation"):
+            self.tabifyDockWidget(d["guided"], d[key])
+            d[key].show()
+        for dock in self.findChildren(QtWidgets.QDockWidget):
+            if dock not in d.values() and not dock.isFloating() and self.dockWidgetArea(dock) != QtCore.Qt.DockWidgetArea.NoDockWidgetArea:
+                self.tabifyDockWidget(d["degradation"], dock)
+        d["guided"].raise_()
+        self._size_docks()
+        if hasattr(self, "canvas"):
+            self.canvas.set_view(*DEFAULT_VIEW)
+            self.canvas.fit()
+        QtCore.QTimer.singleShot(0, self._size_docks)  # again once the window has its size (first start, Reset layout)
+
+    def tile_panels(self) -> None:
+        """View ▸ Panels side by side: every panel in sight at once (no tabs), in two columns right of the canvas —
+        for a large screen; on a small one the panels scroll."""
+        d = self.docks
+        right = QtCore.Qt.DockWidgetArea.RightDockWidgetArea
         for dock in d.values():
             dock.setFloating(False)
+            self.removeDockWidget(dock)
+        self.addDockWidget(right, d["stream"])
+        self.splitDockWidget(d["stream"], d["compare"], QtCore.Qt.Orientation.Horizontal)
+        self.splitDockWidget(d["stream"], d["guided"], QtCore.Qt.Orientation.Vertical)
+        self.splitDockWidget(d["guided"], d["export"], QtCore.Qt.Orientation.Vertical)
+        self.splitDockWidget(d["compare"], d["rates"], QtCore.Qt.Orientation.Vertical)
+        self.splitDockWidget(d["rates"], d["degradation"], QtCore.Qt.Orientation.Vertical)
+        for dock in d.values():
             dock.show()
-        self.addDockWidget(QtCore.Qt.DockWidgetArea.LeftDockWidgetArea, d["stream"])
-        self.splitDockWidget(d["stream"], d["degradation"], QtCore.Qt.Orientation.Vertical)
-        self.addDockWidget(QtCore.Qt.DockWidgetArea.RightDockWidgetArea, d["guided"])
-        self.splitDockWidget(d["guided"], d["rates"], QtCore.Qt.Orientation.Horizontal)
-        self.splitDockWidget(d["rates"], d["export"], QtCore.Qt.Orientation.Vertical)
-        self.resizeDocks([d["stream"], d["guided"], d["rates"]], [820, 440, 420], QtCore.Qt.Orientation.Horizontal)
-        self.resizeDocks([d["stream"], d["degradation"]], [450, 550], QtCore.Qt.Orientation.Vertical)
-        self.resizeDocks([d["rates"], d["export"]], [520, 430], QtCore.Qt.Orientation.Vertical)
+        self._size_tiles()
+        QtCore.QTimer.singleShot(0, self._size_tiles)  # again once the window has its size
+
+    def _size_tiles(self) -> None:
+        d = self.docks
+        side = int(min(SIDE_MAX, max(SIDE_MIN, SIDE_SHARE * self.width())))
+        self.resizeDocks([d["stream"], d["compare"]], [side, side], QtCore.Qt.Orientation.Horizontal)
+        h = self.height()
+        self.resizeDocks([d["compare"], d["rates"], d["degradation"]], [int(0.28 * h), int(0.24 * h), int(0.48 * h)],
+                         QtCore.Qt.Orientation.Vertical)  # the degradation's six images get the most
+
+    def _size_docks(self) -> None:
+        """The default sizes of :meth:`default_layout`: the column's width from the window's, the Stream panel its
+        natural height, the tabs the rest."""
+        d = self.docks
+        side = int(min(SIDE_MAX, max(SIDE_MIN, SIDE_SHARE * self.width())))
+        self.resizeDocks([d["stream"]], [side], QtCore.Qt.Orientation.Horizontal)
+        stream_h = self.stream_panel.sizeHint().height() + 40  # the title bar and the frame
+        self.resizeDocks([d["stream"], d["guided"]], [stream_h, max(200, self.height() - stream_h)], QtCore.Qt.Orientation.Vertical)
 
     def _restore_layout(self) -> None:
         geo = self.settings.value("window/geometry")
@@ -255,6 +315,8 @@ class MainWindow(QtWidgets.QMainWindow):
             self.resize(min(1700, avail.width()), min(1000, avail.height() - 30))
         if isinstance(state, QtCore.QByteArray):
             self.restoreState(state)
+        else:
+            QtCore.QTimer.singleShot(0, self._size_docks)
 
     # ------------------------------------------------------------------------------ actions
     def _action(self, menu: QtWidgets.QMenu, text: str, slot: Any, shortcut: Any = None, tip: str = "",
@@ -283,6 +345,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self._action(f, "Open the &demo capture", lambda: self.open_demo(), tip="The built-in simulated capture")
         self.recent_menu = f.addMenu("Open &recent")
         self._action(f, "Stream &settings (CFA, flip)…", self.stream_settings, "Ctrl+Shift+G", "Re-interpret the open capture")
+        self._action(f, "Load &ground truth…", self.load_truth_dialog, tip="An image of the scene to score against "
+                     "(a capture without .gt.npz, e.g. a Spike-Zoo clip's PNG)", name="act_load_truth")
         f.addSeparator()
         self._action(f, "&Load preset…", self.load_preset_dialog, "Ctrl+L", "Load parameters from a TOML preset")
         self._action(f, "&Save preset…", self.save_preset_dialog, K.Save, "Save the parameters as a TOML preset")
@@ -323,7 +387,12 @@ class MainWindow(QtWidgets.QMainWindow):
         v.addSeparator()
         self._action(v, "&Fit images (reset zoom)", self.fit_images, "Ctrl+0",
                      "Show the whole image in every pane again (double-click a pane for one group)", name="act_fit")
-        self._action(v, "Reset layout", self.default_layout)
+        self._action(v, "Reset layout", self.default_layout, name="act_reset_layout")
+        self._action(v, "Panels side by side (no tabs)", self.tile_panels, tip="Every panel in sight at once (a large screen)",
+                     name="act_tile")
+        v.addSeparator()
+        self._action(v, "Canvas: split A | B", lambda: self.canvas.set_view(mode="wipe"), "Ctrl+\\", name="act_split")
+        self._action(v, "Canvas: swap A and B", self.canvas.swap, "Ctrl+Shift+S", name="act_swap")
 
         h = mb.addMenu("&Help")
         self._action(h, "&Keyboard shortcuts", self.show_help, "F1", name="act_help")
@@ -338,6 +407,17 @@ class MainWindow(QtWidgets.QMainWindow):
         c.alpha_history.connect(self.rates_panel.show_alpha_history)
         c.alpha_ready.connect(self.rates_panel.show_sequence_alpha)
         c.degradation_ready.connect(self.degradation_panel.show_result)
+        c.degradation_ready.connect(self.canvas.show_degradation)
+        c.tfi_ready.connect(self.canvas.show_tfi)
+        c.guided_started.connect(self.canvas.guided_started)
+        c.guided_update.connect(self.canvas.show_guided_update)
+        c.guided_done.connect(self.canvas.show_guided_result)
+        c.compare_ready.connect(self.canvas.show_compare)
+        self.canvas.readout.connect(self._on_readout)
+        self.canvas.display_factor_changed.connect(c.set_display_factor)
+        self.canvas.changed.connect(self._update_compare_wanted)
+        self.docks["compare"].visibilityChanged.connect(lambda _v: self._update_compare_wanted())
+        self.compare_panel.load_truth_requested.connect(self.load_truth_dialog)
         c.degradation_ready.connect(lambda view: self.guided_panel.show_knobs(view.knobs))
         c.degradation_ready.connect(lambda view: self.guided_panel.show_pooling(view.pooling, view.knobs, view.tick,
                                                                                getattr(view, "pooling_image", None)))
@@ -357,9 +437,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.export_panel.export_requested.connect(self.export_to)
         self.export_panel.cancel_requested.connect(c.cancel_export)
         self.stream_panel.tfi_check.toggled.connect(lambda v: c.set_enabled("tfi", v))
-        self.stream_panel.display_factor_changed.connect(c.set_display_factor)
-        for key, what in (("rates", "rates"), ("degradation", "degradation")):
-            self.docks[key].visibilityChanged.connect(lambda vis, w=what: c.set_enabled(w, vis) if not self._closing else None)
+        for key in ("rates", "degradation"):
+            self.docks[key].visibilityChanged.connect(lambda _v: self._update_compare_wanted())
         ev = s.events
         self._session_links = [(ev.tick_changed, self._on_tick), (ev.undo_changed, self._on_undo_changed),
                                (ev.param_changed, self._on_param), (ev.message, self._on_message),
@@ -669,6 +748,57 @@ class MainWindow(QtWidgets.QMainWindow):
         for pane in self.findChildren(ImagePane):
             pane.reset_zoom()
 
+    # ------------------------------------------------------------------------------ canvas and ground truth
+    def _on_readout(self, text: str) -> None:
+        """The pixel under the cursor, in the status bar (while the cursor is over the image)."""
+        if text:
+            self.statusBar().showMessage(text)
+        elif self.statusBar().currentMessage() and self.statusBar().currentMessage().startswith("x "):
+            self.statusBar().clearMessage()
+
+    def _update_compare_wanted(self) -> None:
+        """Compute what is in sight only: the rates while their panel is, the degradation stages while their panel or
+        the canvas shows them, the classical methods' scores while the Compare panel is in front or the canvas
+        compares two images or shows the truth."""
+        if self._closing:
+            return
+        a, mode, b = self.canvas.view()
+        shown = {a} | ({b} if mode != "single" else set())
+        c = self.controller
+        c.set_enabled("rates", self.docks["rates"].isVisible())
+        c.set_enabled("degradation", self.docks["degradation"].isVisible() or any(k.startswith("deg:") for k in shown))
+        c.set_enabled("compare", self.docks["compare"].isVisible() or mode != "single" or a == "truth")
+
+    def load_truth(self, path: str | os.PathLike[str]) -> bool:
+        """Use an image file as the open capture's ground truth (every tick): the canvas shows it, and the Compare
+        panel and the guided runs score against it. Refused in one sentence (nothing changes) for an unreadable
+        file or one of another size."""
+        st = self.session.stream
+        if st is None:
+            self.show_error("Open a capture first, then load its ground truth.")
+            return False
+        try:
+            img = core.load_ground_truth(path, (st.source.height, st.source.width), st.source.cfa is not None)
+        except SpikeviewError as e:
+            self.show_error(str(e))
+            return False
+        st.ground_truth = lambda tick, _img=img: _img
+        self.settings.setValue("last_truth_dir", str(Path(path).parent))
+        self.statusBar().showMessage(f"Ground truth: {Path(path).name} (for every tick of {st.label}).", 8000)
+        self.canvas.forget("truth")
+        self._update_compare_wanted()
+        self.controller.request_compare()
+        self.compare_panel.redraw()
+        return True
+
+    def load_truth_dialog(self) -> None:
+        st = self.session.stream
+        start = self.settings.value("last_truth_dir", "", str) or (str(st.path.parent) if st is not None and st.path else str(Path.home()))
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Load the ground truth of this capture", start,
+                                                        "Images (*.png *.jpg *.jpeg *.tif *.tiff *.npy);;All files (*)")
+        if path:
+            self.load_truth(path)
+
     # ------------------------------------------------------------------------------ session → window
     def _on_source(self) -> None:
         st = self.session.stream
@@ -677,6 +807,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _on_frames(self, f: Any) -> None:
         self.stream_panel.show_frames(f)
+        self.canvas.show_frames(f)
         rate_hz = f.spike_rate * self.session.tick_rate
         self.rate_status.setText(f"  rate {f.spike_rate:.3f} spikes/px/tick ({rate_hz / 1000:.1f} kHz)  ")
 
@@ -740,6 +871,17 @@ class MainWindow(QtWidgets.QMainWindow):
         if st is not None and st.path is not None:
             st.source.close()
         super().closeEvent(ev)
+
+
+def scrolled(widget: QtWidgets.QWidget) -> QtWidgets.QScrollArea:
+    """``widget`` in a frameless scroll area: a panel whose contents need more room than its dock has scrolls
+    instead of widening or heightening the window (after a run, an export or a long message)."""
+    area = QtWidgets.QScrollArea()
+    area.setObjectName(f"scroll_{widget.objectName() or type(widget).__name__}")
+    area.setWidgetResizable(True)
+    area.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
+    area.setWidget(widget)
+    return area
 
 
 def _only(d: dict[str, Any], *keys: str) -> dict[str, Any]:

@@ -143,6 +143,42 @@ def _file_ground_truth(path: Path, info: Any, kwargs: dict[str, Any]) -> Callabl
     return ground_truth_reader(path, (info.height, info.width), GT_TICK_TOLERANCE)
 
 
+def load_ground_truth(path: str | Path, shape: tuple[int, int], colour: bool) -> np.ndarray:
+    """An image of a capture's scene (File ▸ Load ground truth…) as the ground truth of every tick: float32 in [0, 1],
+    ``(H, W, 3)`` for a colour capture, ``(H, W)`` for a monochrome one (the mean of its channels).
+
+    An 8-bit image (PNG, JPEG, TIFF) counts as linear values / 255, as ``spikeview bench`` scores the Spike-Zoo
+    clips' PNGs (:func:`spikeview.bench.data.spikezoo_clips`); the scores align it to the observation with a gain
+    anyway. A ``.npy`` is taken as it is (values above 1 as 8-bit). Raises :class:`ParameterError` for an unreadable
+    file or one of another size than the capture (``shape = (H, W)``).
+    """
+    path = Path(path)
+    try:
+        if path.suffix.lower() == ".npy":
+            img = np.asarray(np.load(path, allow_pickle=False), dtype=np.float32)
+            if img.max(initial=0.0) > 1.0:
+                img = img / np.float32(255.0)
+        else:
+            from PIL import Image
+
+            with Image.open(path) as im:
+                img = np.asarray(im.convert("RGB"), dtype=np.float32) / np.float32(255.0)
+    except (OSError, ValueError) as e:
+        raise ParameterError(f"Cannot read {path.name} as an image ({e}); choose a PNG, JPEG, TIFF or .npy file.") from None
+    if img.ndim == 3 and img.shape[-1] == 4:
+        img = img[..., :3]
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[-1] != 3):
+        raise ParameterError(f"{path.name} is not an image (shape {img.shape}); choose an (H, W) or (H, W, 3) one.")
+    if img.shape[:2] != tuple(shape):
+        raise ParameterError(f"{path.name} is {img.shape[1]}×{img.shape[0]} but the capture is {shape[1]}×{shape[0]}: "
+                             "load the ground truth of this capture (the same size).")
+    if not colour:
+        img = img.mean(axis=-1) if img.ndim == 3 else img
+    elif img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=-1)
+    return np.ascontiguousarray(np.clip(img, 0.0, 1.0), dtype=np.float32)
+
+
 def has_sidecar(path: str | Path) -> bool:
     """Whether ``path`` has a sidecar that says how to read it (:func:`spikeview.io.read_sidecar`)."""
     from spikeview.io import sidecar_path
@@ -217,6 +253,17 @@ def to_display(img: np.ndarray, black: float = 0.0, white: float = 1.0, gamma: s
     from spikeview.classical.display import to_display as td
 
     return td(img, black, white, gamma)
+
+
+def roi_origin(roi: tuple[int, int, int, int] | None, shape: tuple[int, int]) -> tuple[int, int]:
+    """Top-left ``(x, y)`` of the crop an ROI job works on (:func:`spikeview.cfa.crop_roi`'s rule: even pixels, the
+    CFA phase kept), so the app places an ROI-sized result where it belongs in the frame."""
+    from spikeview.cfa import crop_roi
+
+    if roi is None:
+        return (0, 0)
+    y, x = crop_roi(np.broadcast_to(np.uint8(0), tuple(shape[:2])), roi)[1]
+    return int(x), int(y)
 
 
 def show(img: np.ndarray, params: dict[str, Any]) -> np.ndarray:

@@ -195,6 +195,11 @@ class GuidedResult:
     psnr: float | None = None
     ssim: float | None = None
     config: dict[str, Any] = field(default_factory=dict)
+    #: the whole score against the aligned ground truth (:func:`score_frame`: PSNR, SSIM, one-gain PSNR, ΔE00),
+    #: empty without a ground truth
+    scores: dict[str, float] = field(default_factory=dict)
+    #: the aligned ground truth the run was scored against, as a display image (uint8, ROI-sized), or None
+    truth_preview: np.ndarray | None = None
 
 
 def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
@@ -225,12 +230,7 @@ def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
                               pooling=plan.pooling, pooling_image=pooling_display(plan.pooling),
                               tile_map=None if plan.tile_map is None else plan.tile_map.as_dict(),
                               tiles=plan.reasons.get("tiles", "")))
-    gt = None
-    g = req.ground_truth(req.tick) if req.ground_truth is not None else None  # None: no frame stored near this tick
-    if g is not None:
-        g = np.asarray(g, dtype=np.float32)
-        gt = crop_roi(g, req.roi)[0] if req.roi is not None else g
-        gt = metrics.align_ground_truth(gt, obs.y, obs.cfa, obs.alpha, obs.eta) if gt.shape[:2] == obs.y.shape else None
+    gt = aligned_truth(req.ground_truth, req.tick, req.roi, obs)
     t0 = time.perf_counter()
 
     # frames come back in linear-frame units; they are scored at the sampler's exposure, where the
@@ -258,8 +258,95 @@ def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     ctx.check()
     image = np.asarray(image, dtype=np.float32)
     psnr, ssim = score(image)
+    elapsed = time.perf_counter() - t0
+    scores = score_frame(image, gt, to_exposed)
+    truth = None if gt is None else core.show(gt / to_exposed, p)
     return GuidedResult(req.run, req.tick, image, core.show(image, p), origin, str(plan),
-                        time.perf_counter() - t0, psnr, ssim, recipe.to_dict())
+                        elapsed, psnr, ssim, recipe.to_dict(), scores, truth)
+
+
+def aligned_truth(ground_truth: Callable[[int], Any] | None, tick: int, roi: tuple[int, int, int, int] | None,
+                  obs: Any) -> np.ndarray | None:
+    """The ground truth of the window at ``tick`` (ROI-cropped) in the observation's colour normalisation at the
+    sampler's exposure (:func:`spikeview.metrics.align_ground_truth`), float32 in [0, 1]; ``None`` without one, or
+    when its size is not the observation's."""
+    from spikeview import metrics
+    from spikeview.cfa import crop_roi
+
+    g = ground_truth(tick) if ground_truth is not None else None  # None: no frame stored near this tick
+    if g is None:
+        return None
+    g = np.asarray(g, dtype=np.float32)
+    gt = crop_roi(g, roi)[0] if roi is not None else g
+    return metrics.align_ground_truth(gt, obs.y, obs.cfa, obs.alpha, obs.eta) if gt.shape[:2] == obs.y.shape else None
+
+
+def score_frame(image: np.ndarray, gt: np.ndarray | None, to_exposed: float) -> dict[str, float]:
+    """PSNR and SSIM (data range 1) of a linear frame ``image`` against the aligned ground truth ``gt`` at the
+    sampler's exposure (``image · to_exposed``, clipped to [0, 1]: how the guided runs are scored), and the colour
+    scores of :func:`spikeview.metrics.colour_scores` (``psnr_1gain``: one gain for all channels; ``delta_e00``).
+    Empty without a ground truth or when the sizes differ."""
+    from spikeview import metrics
+
+    if gt is None or gt.shape != image.shape:
+        return {}
+    x = np.clip(np.asarray(image, dtype=np.float32) * np.float32(to_exposed), 0.0, 1.0)
+    psnr, ssim = metrics.psnr_ssim(x, gt, data_range=1.0)
+    colour = metrics.colour_scores(x, gt)
+    return {"psnr": psnr, "ssim": ssim, "psnr_1gain": colour["psnr_1gain"], "delta_e00": colour["delta_e00"]}
+
+
+# ---------------------------------------------------------------------------------- comparison
+
+
+@dataclass(frozen=True)
+class CompareRequest(WindowRequest):
+    """Score classical reconstructions of the window around ``tick`` (on the ROI) against the ground truth."""
+
+    ground_truth: Callable[[int], np.ndarray] | None = None
+    recipe: Recipe = field(default_factory=Recipe)
+    methods: tuple[str, ...] = ("tfp", "tfi")
+
+
+@dataclass
+class CompareView:
+    """What the app's comparison shows for one window: the aligned ground truth and each classical method's
+    frame (uint8 display images, ROI-sized, top-left at ``origin`` = (x, y)) and their scores (:func:`score_frame`)."""
+
+    tick: int
+    origin: tuple[int, int]
+    truth: np.ndarray | None
+    images: dict[str, np.ndarray]
+    scores: dict[str, dict[str, float]]
+    roi: tuple[int, int, int, int] | None = None
+
+
+def compare_job(req: CompareRequest, ctx: Any) -> CompareView:
+    """Reconstruct the window with each of ``req.methods`` through the pipeline (the CLI's frames) and score
+    them as the guided runs are scored (same observation, same aligned ground truth, same exposure)."""
+    from spikeview.cfa import crop_roi
+    from spikeview.errors import cancel_scope
+    from spikeview.pipeline import guided_scale, plan_window, reconstruct_windows
+
+    with cancel_scope(ctx.cancelled):
+        base = req.recipe.with_values({"run.method": "guided"})
+        state = sequence_state(req.source, base, req.alpha, ctx)
+        origin = crop_roi(np.zeros((req.source.height, req.source.width), np.uint8), req.roi)[1][::-1] if req.roi else (0, 0)
+        gt = None
+        if req.ground_truth is not None:
+            wp = plan_window(req.source, base, req.tick, state=state, roi=req.roi)
+            gt = aligned_truth(req.ground_truth, req.tick, req.roi, wp.obs)
+        to_exposed = 1.0 / guided_scale(state)
+        images: dict[str, np.ndarray] = {}
+        scores: dict[str, dict[str, float]] = {}
+        for m in req.methods:
+            ctx.check()
+            recipe = req.recipe.with_values({"run.method": m})
+            img = np.asarray(next(reconstruct_windows(req.source, [req.tick], recipe, state, roi=req.roi)), dtype=np.float32)
+            images[m] = core.show(img, req.params)
+            scores[m] = score_frame(img, gt, to_exposed)
+        truth = None if gt is None else core.show(gt / np.float32(to_exposed), req.params)
+        return CompareView(req.tick, (int(origin[0]), int(origin[1])), truth, images, scores, req.roi)
 
 
 # ---------------------------------------------------------------------------------- export

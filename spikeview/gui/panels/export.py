@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -235,10 +236,16 @@ class ExportPanel(QtWidgets.QWidget):
         self.status.setStyleSheet("color: #ff6060;" if state == "failed" else "")
         if running:
             self.progress.setValue(0)
+            self._started = time.monotonic()
 
     def set_progress(self, done: int, total: int) -> None:
+        """Frames done of ``total``, with the time taken, the time left and the ETA (as the CLI's progress bar)."""
         self.progress.setRange(0, max(total, 1))
         self.progress.setValue(done)
+        started = getattr(self, "_started", None)
+        if started is not None and self.cancel_btn.isEnabled():
+            self.status.setText(progress_text(done, total, time.monotonic() - started, time.time()))
+
 
     def remember_folder(self, folder: Path) -> None:
         """The folder of a started export: the default for the next capture's exports (not the capture's own)."""
@@ -248,3 +255,21 @@ class ExportPanel(QtWidgets.QWidget):
         if folder:
             self.folder = self._chosen_folder = Path(folder)
             self.refresh()
+
+
+def _clock(seconds: float) -> str:
+    s = int(round(seconds))
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+
+
+def progress_text(done: int, total: int, elapsed: float, now: float) -> str:
+    """``"12 / 40 frames · 0:24 elapsed · 0:56 left · ETA 10:42 (2.0 s/frame)"``: what the CLI's progress bar says,
+    in words; before the first frame the time left is not known yet. ``now`` is the wall clock (s since the epoch)."""
+    text = f"{done} / {total} frames · {_clock(elapsed)} elapsed"
+    if done <= 0 or elapsed <= 0:
+        return text + " · time left after the first frame"
+    per = elapsed / done
+    left = per * max(total - done, 0)
+    eta = time.strftime("%H:%M:%S", time.localtime(now + left))
+    rate = f"{per:.1f} s/frame" if per >= 1 else f"{1 / per:.1f} frames/s"
+    return text + f" · {_clock(left)} left · ETA {eta} ({rate})"

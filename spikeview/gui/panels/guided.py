@@ -120,7 +120,8 @@ class GuidedPanel(QtWidgets.QWidget):
         self.psnr_plot = pg.PlotWidget()
         self.psnr_plot.setObjectName("psnr_plot")
         self.psnr_plot.setLabel("left", "PSNR (dB)")
-        self.psnr_plot.setLabel("bottom", "elapsed (s)")
+        # the time axis is labelled once, under the SSIM plot (the two share it): a label between the plots ran into
+        # the SSIM plot's title on a small screen
         self.psnr_plot.setMenuEnabled(False)
         self.ssim_plot = pg.PlotWidget()
         self.ssim_plot.setObjectName("ssim_plot")
@@ -131,7 +132,7 @@ class GuidedPanel(QtWidgets.QWidget):
         for plot in (self.psnr_plot, self.ssim_plot):
             plot.disableAutoRange()  # ranges grow in coarse steps (see _fit_ranges)
             plot.getAxis("left").enableAutoSIPrefix(False)
-            plot.getAxis("left").setWidth(48)  # fixed: new tick labels do not re-layout the plot
+            plot.getAxis("left").setWidth(58)  # fixed: new tick labels do not re-layout the plot; room for "100.0" and the title
         self.psnr_plot.addLegend(offset=(-5, -5), labelTextSize="7pt")
         self.clear_btn = QtWidgets.QToolButton(text="Clear curves")
         self.clear_btn.clicked.connect(self.clear_curves)

@@ -87,13 +87,12 @@ class StreamPanel(QtWidgets.QWidget):
         self.scrub.valueChanged.connect(lambda v: session.set_tick(v))
         self.time_label = QtWidgets.QLabel()
         self.time_label.setObjectName("time")
-        self.time_label.setMinimumWidth(200)
+        self.time_label.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored, QtWidgets.QSizePolicy.Policy.Preferred)
         self.time_label.setFont(QtGui.QFontDatabase.systemFont(QtGui.QFontDatabase.SystemFont.FixedFont))
         transport = QtWidgets.QHBoxLayout()
         for w in (self.home_btn, self.back_btn, self.play_btn, self.fwd_btn, self.end_btn):
             transport.addWidget(w)
         transport.addWidget(self.scrub, 1)
-        transport.addWidget(self.time_label)
 
         # --- playback options, window, marks
         self.speed = ParamCombo(session, "speed", SPEED_TEXT)
@@ -113,48 +112,59 @@ class StreamPanel(QtWidgets.QWidget):
         self.tfi_check.setChecked(True)
         self.tfi_check.setToolTip("Compute the TFI preview (costs time on large frames)")
         self.tfi_check.toggled.connect(self.tfi.setVisible)
-        # two rows, so that the panel fits beside the others on a 1366-pixel-wide screen
+        # short rows: the panel fits a narrow column beside the central image on a 1366-pixel-wide screen
         options = QtWidgets.QHBoxLayout()
         options.addWidget(QtWidgets.QLabel("Speed"))
         options.addWidget(self.speed, 1)  # narrow when the window is, its whole name when there is room
         options.addWidget(self.slowmo)
         options.addWidget(self.loop)
-        options.addSpacing(10)
-        options.addWidget(QtWidgets.QLabel("Window Δτ"))
-        options.addWidget(self.window, 1)
+        window_row = QtWidgets.QHBoxLayout()
+        window_row.addWidget(QtWidgets.QLabel("Window Δτ"))
+        window_row.addWidget(self.window, 1)
+        window_row.addWidget(self.tfi_check)
+        window_row.addWidget(self.roi_btn)
         marks = QtWidgets.QHBoxLayout()
         marks.addWidget(QtWidgets.QLabel("Range"))
         for w in (self.mark_in, self.mark_out, self.mark_clear):
             marks.addWidget(w)
         marks.addWidget(self.marks_label, 1)
         self.marks_label.setSizePolicy(QtWidgets.QSizePolicy.Policy.Ignored, QtWidgets.QSizePolicy.Policy.Preferred)
-        marks.addWidget(self.tfi_check)
-        marks.addWidget(self.roi_btn)
 
         # --- display
         self.black = ParamSlider(session, "black", label="Black")
         self.white = ParamSlider(session, "white", label="White")
+        for slider in (self.black, self.white):
+            slider.label.setMinimumWidth(38)
         self.curve = ParamCombo(session, "transfer", {"auto": "Auto", "srgb": "sRGB", "gamma": "Gamma",
                                                       "linear": "Linear"})
         self.demosaic = ParamCombo(session, "demosaic", {"bilinear": "Bilinear", "malvar2004": "Malvar 2004", "menon2007": "Menon 2007"})
         self.cast = ParamCheck(session, "colour_cast", "Colour cast")
         #: controls that act only through a colour filter, with their tooltips for a colour capture
         self.colour_only = {c: c.toolTip() for c in (self.demosaic, self.cast)}
-        display = QtWidgets.QHBoxLayout()
-        display.addWidget(self.black, 2)
-        display.addWidget(self.white, 2)
-        display.addWidget(self.curve)
-        display.addWidget(self.demosaic)
-        display.addWidget(self.cast)
+        curve_row = QtWidgets.QHBoxLayout()
+        curve_row.addWidget(self.curve)
+        curve_row.addWidget(self.demosaic, 1)
+        curve_row.addWidget(self.cast)
 
+        #: the three small image panes (spikes, TFP, TFI); the window shows them large on its central canvas
+        #: and hides these (:meth:`set_images_visible`)
+        self.images_box = QtWidgets.QWidget()
+        self.images_box.setLayout(images)
+        images.setContentsMargins(0, 0, 0, 0)
         lay = QtWidgets.QVBoxLayout(self)
         lay.setContentsMargins(3, 3, 3, 3)
         lay.setSpacing(3)
-        lay.addLayout(images, 1)
+        lay.addWidget(self.images_box, 1)
         lay.addLayout(transport)
+        lay.addWidget(self.time_label)
         lay.addLayout(options)
+        lay.addLayout(window_row)
         lay.addLayout(marks)
-        lay.addLayout(display)
+        lay.addWidget(self.black)
+        lay.addWidget(self.white)
+        lay.addLayout(curve_row)
+        self._stretch = QtWidgets.QWidget()  # takes the spare height while the images are hidden
+        lay.addWidget(self._stretch, 0)
 
         ev = session.events
         subscribe(self, ev.source_changed, self._on_source)
@@ -164,6 +174,12 @@ class StreamPanel(QtWidgets.QWidget):
         subscribe(self, ev.param_changed, self._on_param)
         subscribe(self, ev.roi_changed, self._on_roi)
         self._on_source()
+
+    def set_images_visible(self, on: bool) -> None:
+        """Show or hide the panel's own small image panes (hidden while the central canvas shows the images)."""
+        self.images_box.setVisible(on)
+        lay = self.layout()
+        lay.setStretchFactor(self._stretch, 0 if on else 1)
 
     # ------------------------------------------------------------------------------ model → view
     def _on_source(self) -> None:

@@ -1,0 +1,73 @@
+"""The comparison job (issue 27): classical frames scored as the guided runs are, ROI included; one global gain for
+the colour scores (spikeview.metrics.colour_scores)."""
+
+from __future__ import annotations
+
+import functools
+import threading
+
+import numpy as np
+import pytest
+
+from spikeview.session import core, jobs
+
+
+class _Ctx:
+    def __init__(self):
+        self.cancelled = threading.Event()
+        self.state: dict = {}
+
+    def report(self, payload):
+        pass
+
+    def check(self):
+        pass
+
+
+@functools.cache
+def _capture():
+    from spikeview.sim.demo import demo_capture
+
+    return demo_capture(size=32, n_ticks=60, seed=5)
+
+
+def _request(roi=None, truth=True):
+    from spikeview.session.model import Session
+
+    cap = _capture()
+    st = core.memory_stream(cap, "compare", cap.gt_at if truth else None)
+    s = Session()
+    s.open_stream(st)
+    params = dict(s.params, transfer="srgb")
+    return jobs.CompareRequest(st.source, 30, params, None, roi, st.ground_truth, s.recipe(), ("tfp", "tfi"))
+
+
+def test_score_frame_is_psnr_ssim_at_the_exposure_and_the_colour_scores():
+    from spikeview import metrics
+
+    rng = np.random.default_rng(0)
+    gt = rng.uniform(0.1, 0.9, (16, 16, 3)).astype(np.float32)
+    img = (gt * 2.0).astype(np.float32)  # linear-frame units twice the exposed ones
+    s = jobs.score_frame(img, gt, 0.5)
+    assert s["psnr"] == 100.0 and s["ssim"] == pytest.approx(1.0) and s["delta_e00"] == pytest.approx(0.0, abs=1e-6)
+    cast = img * np.array([1.0, 1.0, 0.8], np.float32)  # a blue deficit: the one global gain cannot hide it
+    c = jobs.score_frame(cast, gt, 0.5)
+    assert c["delta_e00"] > 1.0 and c["psnr_1gain"] == pytest.approx(metrics.colour_scores(np.clip(cast * 0.5, 0, 1), gt)["psnr_1gain"])
+    assert jobs.score_frame(img, None, 0.5) == {} and jobs.score_frame(img[:8], gt, 0.5) == {}
+
+
+def test_compare_job_scores_tfp_and_tfi_on_the_frame_and_on_an_roi():
+    v = jobs.compare_job(_request(), _Ctx())
+    assert v.origin == (0, 0) and v.truth.shape == (32, 32, 3) and set(v.images) == {"tfp", "tfi"}
+    for m in ("tfp", "tfi"):
+        assert 10 < v.scores[m]["psnr"] < 60 and 0 < v.scores[m]["ssim"] <= 1 and v.scores[m]["delta_e00"] > 0
+    r = jobs.compare_job(_request(roi=(9, 5, 16, 16)), _Ctx())
+    assert r.origin == (8, 4)  # the crop starts on even pixels (the CFA phase), as every ROI job's
+    assert r.truth.shape == (17, 17, 3) and r.images["tfp"].shape == (17, 17, 3) and "psnr" in r.scores["tfp"]
+    n = jobs.compare_job(_request(truth=False), _Ctx())
+    assert n.truth is None and n.scores == {"tfp": {}, "tfi": {}}
+
+
+def test_roi_origin_follows_crop_roi():
+    assert core.roi_origin(None, (10, 10)) == (0, 0)
+    assert core.roi_origin((3, 5, 4, 4), (10, 10)) == (2, 4)
