@@ -149,3 +149,23 @@ def test_cli_white_balance_flag_prints_the_choice_and_records_it(tmp_path, capsy
     assert main(["reconstruct", str(path), *geom, "--white-balance", "teal", "--out", str(tmp_path / "x.npy")]) != 0
     err = capsys.readouterr().err.strip()
     assert err.startswith("spikeview: error:") and "--white-balance" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", "GRBG"])
+def test_auto_keeps_gray_world_on_featureless_noise(cfa):
+    # equal rates in every channel and no texture: edges and highlights are noise; with both greens averaged G's noise
+    # is half the others' and the edge estimate once took that for colour (auto chose "combined" here)
+    rng = np.random.default_rng(4)
+    src = ArraySource((rng.random((200, 96, 96)) < 0.2).astype(np.uint8), cfa=cfa)
+    a, _, why = sequence_white_balance(src, ClassicalConfig(white_balance="auto"))
+    assert "gray-world" in why and wb.angle_deg(a, np.ones(3)) < 1.0
+
+
+def test_large_sequence_images_are_binned():
+    img = np.random.default_rng(0).random((600, 300, 3))
+    b = wb.binned(img)
+    assert b.shape == (200, 100, 3)
+    np.testing.assert_allclose(b[0, 0], img[:3, :3].mean(axis=(0, 1)))
+    assert wb.binned(img[:200]) is not img  # 200 rows, 300 cols: k = 2
+    small = img[:100, :100]
+    assert wb.binned(small) is small

@@ -235,13 +235,16 @@ def sequence_channel_means(source: SpikeSource, window: int = 10, max_windows: i
 
 
 def sequence_images(source, window: int = 10, max_windows: int = 64, correct=None
-                    ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray], int]:
-    """The sequence image the estimators see, the same of the even and of the odd sampled windows, and the ticks.
+                    ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray], int, np.ndarray]:
+    """What the white-balance estimators see (:mod:`spikeview.classical.white_balance`): the sequence image, the same of
+    the even and of the odd sampled windows, the ticks averaged, and the channel means.
 
-    Mean rate (spikes per tick) of each 2×2 cell's R, G, B over the windows
-    :func:`~spikeview.classical.colour_cast.sample_starts` picks (the gray-world estimate's windows), each
-    ``(H//2, W//2, 3)`` float64. ``correct``: a function ``(rates (H, W) float64) → rates`` (a camera profile's dark
-    and flat correction, :meth:`spikeview.classical.calibration.CameraProfile.correct`) or ``None``.
+    The images hold the mean rate (spikes per tick) of each 2×2 cell's R, G, B
+    (:func:`~spikeview.classical.white_balance.cells_rgb`) over the windows :func:`sample_starts` picks (the gray-world
+    estimate's windows), binned to at most :data:`~spikeview.classical.white_balance.MAX_CELLS` cells a side; float64
+    ``(h, w, 3)``. The channel means (R, G, B, both greens) are those of :func:`sequence_channel_means`. ``correct``: a
+    function ``(rates (H, W) float64) → rates`` (a camera profile's dark and flat correction,
+    :meth:`spikeview.classical.calibration.CameraProfile.correct`) or ``None``.
     """
     from spikeview.classical import white_balance as wb
 
@@ -253,14 +256,19 @@ def sequence_images(source, window: int = 10, max_windows: int = 64, correct=Non
         totals[i % 2] += window_counts(source, s, e)
         ticks[i % 2] += e - s
 
-    def image(total: np.ndarray, n: int) -> np.ndarray:
-        rates = total / max(n, 1)
-        return wb.cells_rgb(rates if correct is None else correct(rates), source.cfa)
+    def rates(total: np.ndarray, n: int) -> np.ndarray:
+        r = total / max(n, 1)
+        return r if correct is None else np.asarray(correct(r), dtype=np.float64)
 
-    whole = image(totals[0] + totals[1], ticks[0] + ticks[1])
+    def image(r: np.ndarray) -> np.ndarray:
+        return wb.binned(wb.cells_rgb(r, source.cfa))
+
+    every = rates(totals[0] + totals[1], ticks[0] + ticks[1])
+    means = _channel_means_from_sums(_site_sums(every, source.cfa), source.cfa)
+    whole = image(every)
     if ticks[1] == 0:
-        return whole, (whole, whole), ticks[0]
-    return whole, (image(totals[0], ticks[0]), image(totals[1], ticks[1])), ticks[0] + ticks[1]
+        return whole, (whole, whole), ticks[0], means
+    return whole, (image(rates(totals[0], ticks[0])), image(rates(totals[1], ticks[1]))), ticks[0] + ticks[1], means
 
 
 def sequence_alpha(source: SpikeSource, config: Any, *, warn: bool = True) -> tuple[np.ndarray | None, str | None]:
@@ -303,9 +311,8 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
         means = sequence_channel_means(source, window=window, max_windows=config.alpha_max_windows)
         how = wb.WhiteBalance("gray-world", means, "white balance gray-world (as asked)")
     else:
-        img, halves, ticks = sequence_images(source, window, config.alpha_max_windows,
-                                                None if camera is None else camera.correct)
-        means = img.reshape(-1, 3).mean(axis=0)
+        img, halves, ticks, means = sequence_images(source, window, config.alpha_max_windows,
+                                                    None if camera is None else camera.correct)
         how = wb.choose(img, choice, halves, ticks) if choice != "profile" else wb.WhiteBalance(
             "profile", camera.colour_response, f"white balance profile: the colour response of {camera.name} "
                                                "(measured on a flat capture)")

@@ -83,14 +83,31 @@ def parse_white_balance(text: str, name: str = "--white-balance") -> str | list[
 
 
 def cells_rgb(rates: np.ndarray, cfa: str) -> np.ndarray:
-    """``(H, W)`` mosaicked rates → ``(H//2, W//2, 3)`` float64: each 2×2 cell's R, mean of its two G, B."""
+    """``(H, W)`` mosaicked rates → ``(H//2, W//2, 3)`` float64: each 2×2 cell's R, G (the one on R's row) and B.
+
+    One photosite per channel, so that every channel's noise is alike (a mean of the two greens would halve G's noise
+    variance, and the edge and highlight estimators would take the noise for colour).
+    """
     h, w = (rates.shape[0] // 2) * 2, (rates.shape[1] // 2) * 2
     r = np.asarray(rates, dtype=np.float64)[:h, :w]
     out = np.zeros((h // 2, w // 2, 3))
     for name, (py, px) in site_offsets(cfa).items():
-        c = CHANNEL_INDEX[name[0]]
-        out[..., c] += r[py::2, px::2] * (0.5 if c == 1 else 1.0)
+        if name != "Gb":
+            out[..., CHANNEL_INDEX[name[0]]] = r[py::2, px::2]
     return out
+
+
+#: the estimators see the sequence image binned so that its longer side is at most this many cells
+MAX_CELLS = 256
+
+
+def binned(img: np.ndarray, max_side: int = MAX_CELLS) -> np.ndarray:
+    """``img`` ``(h, w, 3)`` averaged over ``k×k`` blocks, the smallest ``k`` that makes its longer side ≤ ``max_side``."""
+    k = -(-max(img.shape[:2]) // max_side)
+    if k <= 1:
+        return img
+    h, w = img.shape[0] // k * k, img.shape[1] // k * k
+    return img[:h, :w].reshape(h // k, k, w // k, k, 3).mean(axis=(1, 3))
 
 
 def _blur(img: np.ndarray, sigma: float) -> np.ndarray:
