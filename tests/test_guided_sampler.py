@@ -137,7 +137,7 @@ def test_fallbacks_follow_the_plan():
     assert smp.info.mode == "tfp"
     base = smp.run(obs, GuidedConfig(diffusion="never", fallback="baseline", eta=1.0))
     np.testing.assert_allclose(base, baseline(obs, BlurDenoiser(), sigma_scale=GuidedConfig().sigma_scale,
-                                             demosaic=GuidedConfig().demosaic), atol=1e-6)
+                                             demosaic=GuidedConfig().demosaic, sigma_map=True), atol=1e-6)
     assert smp.info.mode == "baseline"
 
 

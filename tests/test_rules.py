@@ -31,7 +31,7 @@ def _obs(cfa, window=10, kind="ramp", ticks=60):
 @pytest.mark.parametrize("cfa", CFAS)
 def test_plan_skips_diffusion_exactly_at_or_below_the_noise_target(cfa):
     obs = _obs(cfa)
-    smax = float(make_plan(obs, GuidedConfig()).sigma.max())
+    smax = float(make_plan(obs, GuidedConfig()).judged_sigma)  # the σ the rule compares (its worst block, its white)
     assert smax > 0
     above = make_plan(obs, GuidedConfig(noise_target=smax * 0.98))  # σ 2 % above the target: diffusion
     assert above.diffusion, above.reasons["diffusion"]
@@ -42,7 +42,7 @@ def test_plan_skips_diffusion_exactly_at_or_below_the_noise_target(cfa):
 @pytest.mark.parametrize("cfa", CFAS)
 def test_plan_falls_back_to_tfp_exactly_at_a_quarter_of_the_target(cfa):
     obs = _obs(cfa)
-    smax = float(make_plan(obs, GuidedConfig()).sigma.max())
+    smax = float(make_plan(obs, GuidedConfig()).judged_sigma)
     # σ a little above target/4: the baseline; a little below: the TFP frame itself
     assert make_plan(obs, GuidedConfig(noise_target=4 * smax * 0.98)).fallback == "baseline"
     assert make_plan(obs, GuidedConfig(noise_target=4 * smax * 1.02)).fallback == "tfp"

@@ -335,6 +335,25 @@ def _start_variance(obs: Observation, use_mosaic: bool, use_cast: bool) -> tuple
     return v, np.asarray(gain, dtype=np.float64)
 
 
+#: blocks (pixels) over which :func:`worst_block_sigma` looks for noise the frame's mean hides
+NOISE_BLOCK = 32
+
+
+def worst_block_sigma(var: np.ndarray, gain: np.ndarray, block: int = NOISE_BLOCK) -> float:
+    """The largest σ over :data:`NOISE_BLOCK`-pixel blocks (RMS over each block of a :func:`start_variance` map,
+    times the gains, the worst channel): a region that pooled less stays noisy where the frame's mean is quiet."""
+    c, h, w = var.shape
+    bh, bw = -(-h // block), -(-w // block)
+    pad = np.zeros((c, bh * block, bw * block), np.float64)
+    cnt = np.zeros((bh * block, bw * block), np.float64)
+    pad[:, :h, :w] = var
+    cnt[:h, :w] = 1.0
+    sums = pad.reshape(c, bh, block, bw, block).sum(axis=(2, 4))
+    n = cnt.reshape(bh, block, bw, block).sum(axis=(1, 3))
+    sig = np.sqrt(sums / np.maximum(n, 1.0)) * np.asarray(gain, dtype=np.float64).reshape(-1, 1, 1)
+    return float(sig.max())
+
+
 def sigma_of(var: np.ndarray, gain: np.ndarray) -> np.ndarray:
     """Per-channel σ (float64, ``(C,)``) of a :func:`start_variance` map: the RMS over its pixels × gain."""
     if var.shape[0] == 1:

@@ -50,7 +50,7 @@ from scipy.special import chdtri  # chi2.ppf(1 - a, k) = chdtri(k, a), without i
 from spikeview.classical.noise import choose_demosaic
 from spikeview.errors import ParameterError
 from spikeview.guided.config import GuidedConfig
-from spikeview.guided.observation import Observation, sigma_of, start_variance
+from spikeview.guided.observation import NOISE_BLOCK, Observation, sigma_of, start_variance, worst_block_sigma
 from spikeview.ops.pyramid import max_levels
 
 #: block size (pixels) of the region-level change test
@@ -96,6 +96,10 @@ class Plan:
     #: where the window runs (``"cpu"``, ``"cuda:0"``: ``guided.device`` resolved)
     device: str = "cpu"
     tile_map: object = field(default=None, repr=False)
+    #: how much darker than :data:`WHITE_REF` the image the sampler sees is (≥ 1): noise is judged × this
+    exposure: float = 1.0
+    #: the σ the diffusion rule compared with ``noise_target``: the worst block's (or the frame's) × ``exposure``
+    judged_sigma: float = 0.0
 
     def __str__(self) -> str:
         sig = ", ".join(f"{255 * s:.1f}" for s in self.sigma)
@@ -190,6 +194,32 @@ def _distinct(a: float, b: float) -> tuple[str, str]:
     return fa, fb
 
 
+#: the white of the image the sampler sees at which the noise target is judged (the colour cast's exposure puts a
+#: Bayer frame's white here): a dark capture's σ is judged relative to its own white, so its noise, small in
+#: absolute units, is not taken for "already meets the target" (a real capture at 0.03 spikes per tick was)
+WHITE_REF = 0.9
+
+
+def exposure_scale(obs: Observation, mosaic: bool, cast: bool) -> float:
+    """:data:`WHITE_REF` over the 99.5th percentile of the image the sampler sees (the local rate, times α/η with
+    a cast), at least 1: how much the display will brighten this frame's noise."""
+    r = obs.local_rate().astype(np.float64)
+    if mosaic and cast and obs.alpha is not None and obs.cfa is not None:
+        r = r * (np.asarray(obs.alpha, dtype=np.float64) / obs.eta)[obs.channel_map()]
+    top = float(np.quantile(r, 0.995)) if r.size else 1.0
+    return max(1.0, WHITE_REF / max(top, 1e-6))
+
+
+def _judged(scale: float, worst: float, sigma: np.ndarray) -> str:
+    """What the judged σ is, when it is not the frame's RMS: its worst block, relative to the frame's white."""
+    parts = []
+    if worst > float(sigma.max()) * 1.05:
+        parts.append(f"the worst {NOISE_BLOCK}-px block's, {255 * worst:.2f}/255")
+    if scale > 1.0:
+        parts.append(f"× {scale:.3g}: judged relative to the frame's white, its 99.5th percentile brought to {WHITE_REF:g}")
+    return f" ({'; '.join(parts)})" if parts else ""
+
+
 def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     """Analyse one window and decide the stages (see the module docstring for the rules).
 
@@ -253,7 +283,10 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     # --- diffusion
     var, gain = start_variance(obs, mosaic, cast)  # per pixel: the tile plan averages it per tile
     sigma = sigma_of(var, gain)
-    smax = float(sigma.max())
+    scale = exposure_scale(obs, mosaic, cast)
+    worst = worst_block_sigma(var, gain)
+    # judged against the target: the worst block's σ, relative to the frame's white (WHITE_REF)
+    smax = max(float(sigma.max()), worst) * scale
     auto_fallback = "tfp" if smax <= p.noise_target / 4 else "baseline"
     fallback = p.fallback or auto_fallback
     if p.diffusion == "always":
@@ -263,11 +296,11 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     elif smax <= p.noise_target:
         diffusion = False
         a, b = _distinct(255 * smax, 255 * p.noise_target)
-        r["diffusion"] = f"TFP noise σ = {a}/255 already meets the target {b}/255 (bright or long window)"
+        r["diffusion"] = f"TFP noise σ = {a}/255{_judged(scale, worst, sigma)} already meets the target {b}/255 (bright or long window)"
     else:
         diffusion = True
         a, b = _distinct(255 * smax, 255 * p.noise_target)
-        r["diffusion"] = f"TFP noise σ = {a}/255 is above the target {b}/255"
+        r["diffusion"] = f"TFP noise σ = {a}/255{_judged(scale, worst, sigma)} is above the target {b}/255"
     if not diffusion:
         r["diffusion"] += f"; fallback {fallback}" + (" (set by fallback)" if p.fallback else "")
 
@@ -299,7 +332,7 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     if p.tile and max(obs.shape) > p.tile and diffusion and p.prior != "sd" and p.guidance == "hqs":
         from spikeview.guided.tiles import plan_tiles
 
-        probe = Plan(mosaic, cast, levels, diffusion, fallback, False, None, sigma, {}, quantise, demosaic)
+        probe = Plan(mosaic, cast, levels, diffusion, fallback, False, None, sigma, {}, quantise, demosaic, exposure=scale)
         tile_map = plan_tiles(obs, probe, p, variance=(var, gain))
         r["tiles"] = tile_map.summary()
     elif not p.tile:
@@ -322,4 +355,5 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
 
         precision, r["precision"] = resolve_precision(p.precision, device=dev)
     return Plan(mosaic, cast, levels, diffusion, fallback, reuse, changed, sigma, r, quantise, demosaic, temporal,
-                pooling=pool, precision=precision, tile_map=tile_map, device=device_label(dev))
+                pooling=pool, precision=precision, tile_map=tile_map, device=device_label(dev), exposure=scale,
+                judged_sigma=smax)

@@ -77,7 +77,7 @@ TILE_CHI = 1.5
 #: blinking photosite alone cannot fail a tile of 64: it adds at most 16/64 = 0.25 to the normalised SSD)
 CHI_CLIP = 16.0
 #: a tile with fewer spikes per photosite in its own window than this stays at rest whenever zero shift matches
-#: within :data:`TILE_CHI`: at that light the search's velocity is mostly noise (a real dark capture at 0.31
+#: within :data:`REST_CHI` on average over its neighbours: at that light the search's velocity is mostly noise (a real dark capture at 0.31
 #: spikes: a static scene's tiles otherwise moved on 13 %, blurring it)
 DIM_COUNT = 1.0
 #: a dim tile at rest (:data:`DIM_COUNT`) takes each neighbour whose raw match at zero shift is within this (at 1.5
@@ -481,12 +481,13 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
         motion, _ = estimate_motion(g0, guides, tile_g, curve, kernel_energy, radius, MAX_SPEED / f, cap, factors)
         chis = {k: match_quality(raw0, raws[k], motion[k], tile_g, factors[k], cap, curve) for k in offsets}
     # at rest: where the search found no motion, and on a dim tile (DIM_COUNT) wherever the raw counts' mean match
-    # at zero shift is within TILE_CHI; a dim tile at rest takes each neighbour whose match is within REST_CHI
+    # at zero shift is within REST_CHI (a real capture's darkest tiles, 0.2 spikes a window, match at rest at 1.5–2.1
+    # against every neighbour alike: the model's variance is low there, nothing moves); a dim tile at rest takes each neighbour whose match is within REST_CHI
     chi0 = {k: chi0[k] / factors[k] for k in offsets}
     rest_cost = np.mean([chi0[k] for k in offsets], axis=0)
     dim = _tile_sum(raw0, tile_g) / (4.0 * tile_g * tile_g) < DIM_COUNT  # spikes per photosite in the own window
     searched = np.logical_and.reduce([np.all(motion[k] == 0, axis=-1) for k in offsets])
-    at_rest = searched | ((rest_cost <= TILE_CHI) & dim)
+    at_rest = searched | ((rest_cost <= REST_CHI) & dim)
     for k in offsets:
         motion[k] = np.where(at_rest[..., None], 0, motion[k])
         chis[k] = np.where(at_rest, chi0[k], chis[k])

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from spikeview.errors import Cancelled, ParameterError, check_cancelled, is_cancelled
-from spikeview.guided.observation import Observation
+from spikeview.guided.observation import Observation, worst_block_sigma
 
 #: pixels a skipped tile's fallback is cross-faded over into its diffused neighbours
 BLEND = 32
@@ -202,10 +202,14 @@ def plan_tiles(obs: Any, plan: Any, p: Any, size: int | None = None,
             sc = np.sqrt(ratio * var[:, y0:y1, x0:x1].reshape(var.shape[0], -1).mean(axis=1, dtype=np.float64)) * gain
             s = float(sc.max())
             t = Tile(y0, y1, x0, x1, "full", s, sigma_c=tuple(sc.tolist()))
-            told = s * float(p.sigma_scale)
-            if not plan.diffusion or (s <= p.noise_target and p.diffusion == "auto"):
+            # a tile joins the sampler at the σ of its noisiest block (a block that pooled less is not left with raw
+            # noise by a tile mean that its quiet neighbours lower), and is skipped as the plan judges the frame
+            worst = max(s, worst_block_sigma(var[:, y0:y1, x0:x1] * np.asarray(ratio).reshape(-1, 1, 1), gain))
+            told = worst * float(p.sigma_scale)
+            judged = worst * float(getattr(plan, "exposure", 1.0))
+            if not plan.diffusion or (judged <= p.noise_target and p.diffusion == "auto"):
                 t.kind = "skipped"
-                t.fallback = plan.fallback if not plan.diffusion else ("tfp" if s <= p.noise_target / 4 else "baseline")
+                t.fallback = plan.fallback if not plan.diffusion else ("tfp" if judged <= p.noise_target / 4 else "baseline")
                 t.join = n
             else:
                 below = np.flatnonzero(levels <= JOIN_FACTOR * told)
