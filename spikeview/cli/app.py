@@ -27,6 +27,8 @@ def add_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--pixel", metavar="X,Y", help="show the readout of this frame pixel in the status bar")
     g.add_argument("--export", metavar="FILE", help="export with the Export panel's settings to FILE after the run")
     g.add_argument("--reset-layout", action="store_true", help="View ▸ Reset layout before the screenshot")
+    g.add_argument("--panel", metavar="NAME", help="bring this panel's tab to the front (stream, guided, compare, export, "
+                   "rates, degradation)")
     g.add_argument("--demo-size", type=int, metavar="N", help="the demo capture's size (N×N, default 256)")
 
 
@@ -63,7 +65,8 @@ def screenshot(args: argparse.Namespace) -> int:
     try:
         r = shot.render(args.screenshot, args.input, size=size, run=args.run, view=args.view, truth=args.truth,
                         roi=_ints(args.roi, 4, "--roi"), tick=args.tick, pixel=_ints(args.pixel, 2, "--pixel"),
-                        export=args.export, reset_layout=args.reset_layout, demo_size=args.demo_size)
-    except (RuntimeError, TimeoutError) as e:
+                        export=args.export, reset_layout=args.reset_layout, demo_size=args.demo_size,
+                        panel=args.panel)
+    except (RuntimeError, TimeoutError, ValueError) as e:
         raise ParameterError(str(e)) from None
     return shot.report(args.screenshot, r, size)

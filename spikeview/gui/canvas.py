@@ -43,6 +43,8 @@ SOURCES = {
 MODES = {"single": "A only", "wipe": "Split A | B (wipe)", "side": "Side by side", "diff": "Difference A − B"}
 #: the difference image's display range: ± this share of the display range maps to black / white
 DIFF_RANGE = 0.25
+#: opacity of the context layer under a wipe (where neither A nor B covers the frame)
+CONTEXT_OPACITY = 0.35
 #: what the canvas shows when the app starts (and after View ▸ Reset layout)
 DEFAULT_VIEW = ("tfp", "single", "guided")
 
@@ -148,13 +150,10 @@ class ImageCanvas(QtWidgets.QWidget):
         for pane in (self.a, self.b):
             pane.title.setVisible(False)  # the header and the note say what is shown
             pane.view.scene().sigMouseMoved.connect(lambda pos, p=pane: self._hover(p, pos))
-        # the wipe: B drawn over A, clipped to the right of a draggable line
-        self.clip = QtWidgets.QGraphicsRectItem()
-        self.clip.setFlag(QtWidgets.QGraphicsItem.GraphicsItemFlag.ItemClipsChildrenToShape, True)
-        self.clip.setPen(pg.mkPen(None))
-        self.wipe_item = pg.ImageItem(axisOrder="row-major")
-        self.wipe_item.setParentItem(self.clip)
-        self.a.vb.addItem(self.clip)
+        # the wipe: A left of a draggable line, B right of it, each clipped to its side; under both, dimmed, the one
+        # of them that covers more of the frame (the context around an ROI result)
+        self.clip_left, self.wipe_left = self._clipped_layer()
+        self.clip, self.wipe_item = self._clipped_layer()
         self.line = pg.InfiniteLine(angle=90, movable=True, pen=pg.mkPen((255, 200, 0), width=2),
                                     hoverPen=pg.mkPen((255, 230, 120), width=3))
         self.line.setZValue(20)
@@ -188,6 +187,16 @@ class ImageCanvas(QtWidgets.QWidget):
         subscribe(self, session.events.source_changed, self._on_source)
         subscribe(self, session.events.roi_changed, self._on_roi)
         self.set_view(*DEFAULT_VIEW)
+
+    def _clipped_layer(self) -> tuple[QtWidgets.QGraphicsRectItem, pg.ImageItem]:
+        clip = QtWidgets.QGraphicsRectItem()
+        clip.setFlag(QtWidgets.QGraphicsItem.GraphicsItemFlag.ItemClipsChildrenToShape, True)
+        clip.setPen(pg.mkPen(None))
+        clip.setZValue(5)
+        item = pg.ImageItem(axisOrder="row-major")
+        item.setParentItem(clip)
+        self.a.vb.addItem(clip)
+        return clip, item
 
     def _source_combo(self, name: str, tip: str) -> QtWidgets.QComboBox:
         c = QtWidgets.QComboBox(objectName=name)
@@ -251,7 +260,9 @@ class ImageCanvas(QtWidgets.QWidget):
         self.b.setVisible(mode == "side")
         wipe = mode == "wipe"
         self.clip.setVisible(wipe)
+        self.clip_left.setVisible(wipe)
         self.line.setVisible(wipe)
+        self.a.item.setOpacity(CONTEXT_OPACITY if wipe else 1.0)
         missing = [SOURCES[k] for k, img in ((a_key, A), (b_key, B)) if img is None and (k == a_key or two)]
         note = ""
         if mode == "diff":
@@ -260,18 +271,20 @@ class ImageCanvas(QtWidgets.QWidget):
             note = d.title if d is not None else ""
             if A is not None and B is not None and d is None:
                 note = "A and B do not overlap"
+        elif wipe:
+            shown = [img for img in (A, B) if img is not None]
+            context = max(shown, key=lambda img: img.rect[2] * img.rect[3]) if shown else None
+            self._place(self.a, self.a.item, context)
+            self._place(self.a, self.wipe_left, A)
+            self._place(self.a, self.wipe_item, B)
+            note = A.title if A is not None else ""
+            self._place_line(A, B)
         else:
             self._place(self.a, self.a.item, A)
             note = A.title if A is not None else ""
             if mode == "side":
                 self._place(self.b, self.b.item, B)
-            elif wipe:
-                self._place(self.a, self.wipe_item, B)
-                if not self._line_placed and self._frame_shape() is not None:
-                    self._line_placed = True
-                    with QtCore.QSignalBlocker(self.line):
-                        self.line.setValue(self._frame_shape()[1] / 2)
-                self._update_clip()
+        if mode != "diff":
             if two and B is not None:
                 note += f"   │   B: {B.title}"
         if missing:
@@ -279,10 +292,26 @@ class ImageCanvas(QtWidgets.QWidget):
         self.note.setText(note)
         self.changed.emit()
 
-    def _update_clip(self) -> None:
-        shape = self._frame_shape() or (1, 1)
+    def _place_line(self, A: Shown | None, B: Shown | None) -> None:
+        """The wipe line at the middle of where A and B overlap when it is first shown, or when it lies outside that
+        overlap (a new ROI): a line beside an ROI result would show only one of the two."""
+        if self._frame_shape() is None:
+            return
+        h, w = self._frame_shape()
+        box = overlap(A.rect, B.rect) if A is not None and B is not None else None
+        if box is None:
+            box = A.rect if A is not None else B.rect if B is not None else (0, 0, w, h)
         x = float(self.line.value())
-        self.clip.setRect(QtCore.QRectF(x, -1e6, 2e6, 2e6 + shape[0]))
+        if not self._line_placed or not box[0] < x < box[0] + box[2]:
+            self._line_placed = True
+            with QtCore.QSignalBlocker(self.line):
+                self.line.setValue(box[0] + box[2] / 2)
+        self._update_clip()
+
+    def _update_clip(self) -> None:
+        x = float(self.line.value())
+        self.clip.setRect(QtCore.QRectF(x, -1e6, 2e6, 2e6 + 1e6))
+        self.clip_left.setRect(QtCore.QRectF(x - 2e6, -1e6, 2e6, 2e6 + 1e6))
 
     # ------------------------------------------------------------------------------ images in
     def _put(self, key: str, shown: Shown | None) -> None:
@@ -398,6 +427,7 @@ class ImageCanvas(QtWidgets.QWidget):
         self.a.item.clear()
         self.b.item.clear()
         self.wipe_item.clear()
+        self.wipe_left.clear()
         self._on_roi(self.session.roi)
         self._refresh()
         self.a.reset_zoom()

@@ -105,9 +105,11 @@ def parse_view(text: str) -> tuple[str, str | None, str | None]:
 def render(out: str | Path, path: str | Path | None = None, *, size: tuple[int, int] = (1366, 768),
            run: str | None = None, view: str | None = None, truth: str | Path | None = None,
            roi: tuple[int, int, int, int] | None = None, tick: int | None = None, pixel: tuple[int, int] | None = None,
-           export: str | Path | None = None, reset_layout: bool = False, demo_size: int | None = None) -> Rendered:
+           export: str | Path | None = None, reset_layout: bool = False, demo_size: int | None = None,
+           panel: str | None = None) -> Rendered:
     """Open ``path`` (or the demo capture) in a window of ``size``, do the actions in order (ground truth, tick,
-    ROI, run, export, reset layout, view, pixel), wait until every preview is idle, save the window to ``out``."""
+    ROI, run, export, reset layout, view, the panel in front, pixel), wait until every preview is idle, save the window
+    to ``out``. ``panel`` names the dock whose tab is brought to the front (``compare``, ``guided``, ``export``, …)."""
     from PySide6 import QtCore
 
     from spikeview.gui.app import make_application
@@ -125,7 +127,9 @@ def render(out: str | Path, path: str | Path | None = None, *, size: tuple[int, 
         w.show()
         steps: list[tuple[str, tuple[int, int]]] = []
         try:
-            _act(app, w, path, run, parsed_view, truth, roi, tick, pixel, export, reset_layout, demo_size, steps)
+            if panel is not None and panel not in w.docks:
+                raise ValueError(f"--panel {panel!r}: choose one of {', '.join(w.docks)}")
+            _act(app, w, path, run, parsed_view, truth, roi, tick, pixel, export, reset_layout, demo_size, steps, panel)
             out.parent.mkdir(parents=True, exist_ok=True)
             if not w.grab().save(str(out)):
                 raise OSError(f"could not write {out}")
@@ -143,7 +147,7 @@ def render(out: str | Path, path: str | Path | None = None, *, size: tuple[int, 
 
 def _act(app: Any, w: Any, path: Any, run: str | None, view: tuple[str, str | None, str | None] | None, truth: Any,
          roi: Any, tick: int | None, pixel: tuple[int, int] | None, export: Any, reset_layout: bool,
-         demo_size: int | None, steps: list[tuple[str, tuple[int, int]]]) -> None:
+         demo_size: int | None, steps: list[tuple[str, tuple[int, int]]], panel: str | None = None) -> None:
     c, s = w.controller, w.session
 
     def step(what: str) -> None:
@@ -194,6 +198,9 @@ def _act(app: Any, w: Any, path: Any, run: str | None, view: tuple[str, str | No
         step("reset layout")
     if view is not None:
         w.canvas.set_view(*view)
+    if panel is not None:
+        w.docks[panel].show()
+        w.docks[panel].raise_()
     if s.stream is not None and s.stream.ground_truth is not None and c.enabled.get("compare"):
         done = w.canvas.compares
         c.compare_timer.stop()

@@ -5,7 +5,8 @@ the ground truth aligned to the observation (how the guided runs are scored, ROI
 one global gain (a colour cast costs) and the mean CIEDE2000 ΔE00. They exist where the capture has a ground
 truth: a simulated capture's ``.gt.npz``, or an image loaded with File ▸ Load ground truth… (a Spike-Zoo clip's
 PNG of the same stem). The histogram counts the displayed values (0–255) of A, and of B when it is shown, per
-channel.
+channel (64 bins; the clipped values at 0 and 255 are given as shares beside it, so that they do not flatten
+the plot).
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ from spikeview.gui.widgets import ElidedLabel, subscribe
 #: the score columns: key in the scores, header, format
 COLUMNS = (("psnr", "PSNR dB", "{:.2f}"), ("ssim", "SSIM", "{:.3f}"), ("psnr_1gain", "PSNR 1 gain", "{:.2f}"),
            ("delta_e00", "ΔE00", "{:.2f}"))
+#: histogram bins over the display values 0–255
+HIST_BINS = 64
 #: histogram pens per channel (A solid, B dashed)
 _PENS = ((235, 80, 80), (90, 200, 90), (90, 140, 255))
 
@@ -63,8 +66,10 @@ class ComparePanel(QtWidgets.QWidget):
         self.hist.hideButtons()
         self.hist.setLabel("bottom", "displayed value")
         self.hist.getAxis("left").setStyle(showValues=False)
-        self.hist.setXRange(0, 255, padding=0.01)
+        self.hist.setXRange(0, 256, padding=0.01)
         self.hist.setMinimumHeight(90)
+        # the plot takes the height there is (its own hint asked for more than a 768-pixel screen's column has)
+        self.hist.setSizePolicy(QtWidgets.QSizePolicy.Policy.Expanding, QtWidgets.QSizePolicy.Policy.Ignored)
         self.curves = {(w, c): self.hist.plot(pen=pg.mkPen(_PENS[c], width=1,
                                                         style=QtCore.Qt.PenStyle.SolidLine if w == "A" else QtCore.Qt.PenStyle.DashLine),
                                              stepMode="center")
@@ -75,7 +80,13 @@ class ComparePanel(QtWidgets.QWidget):
         lay.addWidget(self.table)
         lay.addWidget(self.note)
         lay.addWidget(self.load_btn)
-        lay.addWidget(QtWidgets.QLabel("Histogram of the shown image (A solid, B dashed)"))
+        title = QtWidgets.QLabel("Histogram of what is shown (A solid, B dashed, each to its own peak)")
+        title.setWordWrap(True)
+        lay.addWidget(title)
+        self.clipped = QtWidgets.QLabel(objectName="compare_clipped")
+        self.clipped.setWordWrap(True)
+        self.clipped.setToolTip("Share of the shown values at black (0) and white (255), over all channels")
+        lay.addWidget(self.clipped)
         lay.addWidget(self.hist, 1)
         self._timer = QtCore.QTimer(self, singleShot=True, interval=100)  # one redraw per burst of frames
         self._timer.timeout.connect(self.redraw)
@@ -104,7 +115,9 @@ class ComparePanel(QtWidgets.QWidget):
                        and k != "truth" and not k.startswith("deg:") and k != "spikes"]
             self.note.setText(f"Scored on {where} at tick {self.session.tick}."
                               + (f" Waiting for: {', '.join(pending)}." if pending else ""))
+        clipped = []
         for which, img in (("A", A), ("B", B)):
+            hists = []
             for c in range(3):
                 curve = self.curves[(which, c)]
                 if img is None or (img.image.ndim == 2 and c > 0):
@@ -113,9 +126,19 @@ class ComparePanel(QtWidgets.QWidget):
                 chan = img.image if img.image.ndim == 2 else img.image[..., c]
                 counts = np.bincount(chan.ravel(), minlength=256).astype(np.float64)
                 counts /= max(counts.sum(), 1.0)
-                curve.setData(np.arange(257, dtype=np.float64) - 0.5, counts)
+                hists.append((curve, counts.reshape(HIST_BINS, -1).sum(axis=1)))
                 curve.setPen(pg.mkPen((200, 200, 200) if img.image.ndim == 2 else _PENS[c], width=1,
                                       style=QtCore.Qt.PenStyle.SolidLine if which == "A" else QtCore.Qt.PenStyle.DashLine))
+            # each image scaled to its own highest bin between the ends (the clipped values at 0 and 255 are said in
+            # words: their bins would flatten the rest), so that a smooth estimate and a quantised TFP both show
+            top = max((float(b[1:-1].max(initial=0.0)) for _, b in hists), default=0.0)
+            for curve, b in hists:
+                curve.setData(np.arange(HIST_BINS + 1, dtype=np.float64) * (256 / HIST_BINS), b / max(top, 1e-9))
+            if img is not None:
+                lo, hi = float((img.image == 0).mean()), float((img.image == 255).mean())
+                clipped.append(f"{which}: {lo:.1%} at 0, {hi:.1%} at 255")
+        self.hist.setYRange(0, 1.15, padding=0)
+        self.clipped.setText("Clipped: " + "; ".join(clipped) if clipped else "")
 
     def scores(self) -> tuple[dict[str, float], dict[str, float]]:
         """The scores of A and B as shown (tests)."""
