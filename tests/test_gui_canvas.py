@@ -105,6 +105,10 @@ def test_an_roi_run_sits_over_its_roi_with_scores_and_the_previous_run_is_kept(o
     assert g.scores["psnr"] == pytest.approx(c.guided_result.psnr) and g.scores["ssim"] == pytest.approx(c.guided_result.ssim)
     assert 0 < g.scores["delta_e00"] < 100 and g.scores["psnr_1gain"] > 0
     assert cv.images["truth"].rect == (16, 16, 32, 32)
+    # new display levels redraw the result as they redraw the stream images (its uint8 was made at the old ones)
+    w.session.set("white", w.session.get("white") * 2)
+    qtbot.waitUntil(lambda: not np.array_equal(cv.images["guided"].image, c.guided_result.preview), timeout=WAIT_MS)
+    assert np.array_equal(cv.images["guided"].image, core.show(c.guided_result.image, c.display_params()))
     w.session.set("k", 10.0)
     second = c.run_guided()
     qtbot.waitUntil(lambda: c.guided_result is not None and c.guided_result.run == second, timeout=WAIT_MS)

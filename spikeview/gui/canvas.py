@@ -45,6 +45,8 @@ MODES = {"single": "A only", "wipe": "Split A | B (wipe)", "side": "Side by side
 DIFF_RANGE = 0.25
 #: opacity of the context layer under a wipe (where neither A nor B covers the frame)
 CONTEXT_OPACITY = 0.35
+#: parameters whose change redraws the canvas's own float images (the stream images come back from the worker)
+DISPLAY_PARAMS = frozenset({"black", "white", "transfer", "gamma"})
 #: what the canvas shows when the app starts (and after View ▸ Reset layout)
 DEFAULT_VIEW = ("tfp", "single", "guided")
 
@@ -59,6 +61,8 @@ class Shown:
     rect: tuple[int, int, int, int]
     title: str
     scores: dict[str, float] = field(default_factory=dict)
+    #: the linear float frame the image shows (a guided result), redrawn when the display levels change
+    data: np.ndarray | None = None
 
     def value_at(self, x: int, y: int) -> np.ndarray | None:
         """The displayed value at frame pixel ``(x, y)`` (one value per channel), ``None`` outside the image."""
@@ -120,6 +124,10 @@ class ImageCanvas(QtWidgets.QWidget):
         self._scores_tick: int | None = None
         #: comparisons received (tests and the screenshot wait on it)
         self.compares = 0
+        #: the display parameters as the jobs get them (``Controller.display_params``); set by the window
+        self.display_params: Any = None
+        self._redisplay_timer = QtCore.QTimer(self, singleShot=True, interval=60)
+        self._redisplay_timer.timeout.connect(self._redisplay)
 
         self.combo_a = self._source_combo("canvas_a", "A: the image the canvas shows")
         self.combo_b = self._source_combo("canvas_b", "B: the image A is compared with (split, side by side, difference)")
@@ -186,6 +194,7 @@ class ImageCanvas(QtWidgets.QWidget):
         self.mode.currentIndexChanged.connect(lambda _i: self._refresh())
         subscribe(self, session.events.source_changed, self._on_source)
         subscribe(self, session.events.roi_changed, self._on_roi)
+        subscribe(self, session.events.param_changed, self._on_param)
         self.set_view(*DEFAULT_VIEW)
 
     def _clipped_layer(self) -> tuple[QtWidgets.QGraphicsRectItem, pg.ImageItem]:
@@ -368,7 +377,7 @@ class ImageCanvas(QtWidgets.QWidget):
     def _new_run(self, run: int) -> None:
         done = self.images.get("guided")
         if done is not None and done.title.startswith("guided run") and "step" not in done.title:
-            self.images["guided_prev"] = Shown(done.image, done.rect, done.title, done.scores)
+            self.images["guided_prev"] = Shown(done.image, done.rect, done.title, done.scores, done.data)
         self._guided_run = run
 
     def show_guided_result(self, r: Any) -> None:
@@ -378,7 +387,8 @@ class ImageCanvas(QtWidgets.QWidget):
         x, y = int(r.origin[1]), int(r.origin[0])  # GuidedResult.origin is (y, x)
         h, w = r.preview.shape[:2]
         self._guided_origin = (x, y)
-        self.images["guided"] = Shown(r.preview, (x, y, w, h), f"guided run {r.run} (tick {r.tick})", dict(r.scores))
+        self.images["guided"] = Shown(r.preview, (x, y, w, h), f"guided run {r.run} (tick {r.tick})", dict(r.scores),
+                                      np.asarray(r.image))
         if getattr(r, "truth_preview", None) is not None:
             self.images["truth"] = Shown(r.truth_preview, (x, y, w, h), f"ground truth (tick {r.tick})")
         self._refresh()
@@ -410,6 +420,22 @@ class ImageCanvas(QtWidgets.QWidget):
             x, y = v.origin
             self.images["truth"] = Shown(v.truth, (x, y, w, h), f"ground truth (tick {v.tick})")
         self._refresh()
+
+    def _on_param(self, name: str, value: Any) -> None:
+        if name in DISPLAY_PARAMS:
+            self._redisplay_timer.start()
+
+    def _redisplay(self) -> None:
+        """The guided results again with the display levels as they are now (as the stream images are)."""
+        if self.display_params is None:
+            return
+        params = None
+        for img in self.images.values():
+            if img.data is not None:
+                params = params or self.display_params()
+                img.image = core.show(img.data, params)
+        if params is not None:
+            self._refresh()
 
     def forget(self, *keys: str) -> None:
         for k in keys:

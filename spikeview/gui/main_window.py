@@ -414,6 +414,7 @@ class MainWindow(QtWidgets.QMainWindow):
         c.guided_done.connect(self.canvas.show_guided_result)
         c.compare_ready.connect(self.canvas.show_compare)
         self.canvas.readout.connect(self._on_readout)
+        self.canvas.display_params = c.display_params
         self.canvas.display_factor_changed.connect(c.set_display_factor)
         self.canvas.changed.connect(self._update_compare_wanted)
         self.docks["compare"].visibilityChanged.connect(lambda _v: self._update_compare_wanted())

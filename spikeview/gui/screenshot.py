@@ -164,8 +164,9 @@ def _act(app: Any, w: Any, path: Any, run: str | None, view: tuple[str, str | No
         _wait(app, lambda: dlg.stream is not None, "the capture's preview", c.errors)
         dlg.accept()
         _wait(app, lambda: s.stream is not None, "the capture")
-    _wait(app, lambda: c.last_frames is not None and c.alpha is not None or (s.source.cfa is None and c.last_frames is not None),
-          "the first frames", c.errors)
+    # the first frames and the capture's exposure (the white point the CLI would use; α too for a colour capture)
+    _wait(app, lambda: c.last_frames is not None and getattr(c, "capture_white", None) is not None
+          and (c.alpha is not None or s.source.cfa is None), "the first frames", c.errors)
     step("open")
     if truth is not None and not w.load_truth(truth):
         raise RuntimeError(f"screenshot: the ground truth was refused: {w.notice.text()}")

@@ -284,7 +284,8 @@ def aligned_truth(ground_truth: Callable[[int], Any] | None, tick: int, roi: tup
 def score_frame(image: np.ndarray, gt: np.ndarray | None, to_exposed: float) -> dict[str, float]:
     """PSNR and SSIM (data range 1) of a linear frame ``image`` against the aligned ground truth ``gt`` at the
     sampler's exposure (``image · to_exposed``, clipped to [0, 1]: how the guided runs are scored), and the colour
-    scores of :func:`spikeview.metrics.colour_scores` (``psnr_1gain``: one gain for all channels; ``delta_e00``).
+    scores of :func:`spikeview.metrics.colour_scores` (``psnr_1gain``: one gain for all channels; ``delta_e00`` for
+    colour frames only).
     Empty without a ground truth or when the sizes differ."""
     from spikeview import metrics
 
@@ -293,7 +294,10 @@ def score_frame(image: np.ndarray, gt: np.ndarray | None, to_exposed: float) -> 
     x = np.clip(np.asarray(image, dtype=np.float32) * np.float32(to_exposed), 0.0, 1.0)
     psnr, ssim = metrics.psnr_ssim(x, gt, data_range=1.0)
     colour = metrics.colour_scores(x, gt)
-    return {"psnr": psnr, "ssim": ssim, "psnr_1gain": colour["psnr_1gain"], "delta_e00": colour["delta_e00"]}
+    out = {"psnr": psnr, "ssim": ssim, "psnr_1gain": colour["psnr_1gain"]}
+    if x.ndim == 3:  # a monochrome frame has no colour error to report (colour_scores gives it 0)
+        out["delta_e00"] = colour["delta_e00"]
+    return out
 
 
 # ---------------------------------------------------------------------------------- comparison
