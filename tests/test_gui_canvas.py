@@ -61,6 +61,14 @@ def test_the_difference_is_mid_grey_where_equal_and_signed():
     assert difference(brighter, a).image.min() == 255 and difference(a, brighter).image.max() == 0
 
 
+def test_app_messages_name_controls_not_flags():
+    """Issue 27: a core sentence naming a parameter's flag names the app's control instead (from the recipe's rows)."""
+    from spikeview.gui.widgets import app_words
+
+    text = app_words("too few ticks: lower --window or --temporal-radius, or set --crf")
+    assert text == "too few ticks: lower the Window Δτ control or the Temporal radius control, or set --crf"  # crf: no control
+
+
 # ------------------------------------------------------------------------------------ the canvas in the window
 def test_the_canvas_is_the_central_widget_and_shows_every_stream_image(opened, qtbot):
     w, cv = opened, opened.canvas

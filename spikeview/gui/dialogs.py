@@ -224,6 +224,9 @@ SHORTCUTS = (
     ("Ctrl+E", "Export (the Export panel's settings)"),
     ("Ctrl+R", "Run the guided reconstruction"),
     ("Esc", "Cancel the guided run"),
+    ("Ctrl+0", "Fit the whole frame (canvas and panels)"),
+    ("Ctrl+\\", "Canvas: split A | B (drag the line)"),
+    ("Ctrl+Shift+S", "Canvas: swap A and B"),
     ("Ctrl+Z / Ctrl+Shift+Z", "Undo / redo a parameter change"),
     ("Ctrl+S / Ctrl+L", "Save / load a parameter preset"),
     ("F1", "This help"),
@@ -249,7 +252,8 @@ class ShortcutsDialog(QtWidgets.QDialog):
         table.resizeColumnsToContents()
         tips = QtWidgets.QLabel(
             "Drop a capture or a preset (.toml) on the window to open it. Drag a slider: one undo step. "
-            "The ROI button draws a region used by the rates, the degradation preview and guided runs. "
+            "The ROI button draws a region on the canvas used by the rates, the degradation preview and guided runs. "
+            "Hover the canvas to read a pixel (rate, shown values, the ground truth's) in the status bar. "
             "Wrong colours or unequal greens in the rates panel usually mean a wrong CFA or flip "
             "(File ▸ Stream settings (CFA, flip)…)."
         )

@@ -723,10 +723,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self.statusBar().showMessage(message.splitlines()[0], 10000)
 
     def _on_message(self, message: str) -> None:
-        self.statusBar().showMessage(message, 8000)
+        self.statusBar().showMessage(app_words(message), 8000)
 
     def _on_guided_state(self, state: str, message: str) -> None:
-        self.statusBar().showMessage(message, 6000)
+        self.statusBar().showMessage(app_words(message), 6000)
 
     def show_help(self) -> ShortcutsDialog:
         dlg = ShortcutsDialog(self)

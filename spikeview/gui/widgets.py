@@ -43,7 +43,25 @@ def app_words(message: str) -> str:
     """
     for cli, app in _APP_WORDS:
         message = message.replace(cli, app)
-    return message
+    if "--" not in message:
+        return message
+    import re
+
+    controls = _flag_controls()
+
+    def control(m: re.Match[str]) -> str:
+        name = controls.get(m.group(0))
+        return f"the {name} control" if name else m.group(0)
+
+    # any other flag of a parameter: the control that sets it (a preset-only one keeps its flag: the README names it)
+    return re.sub(r"--[a-z][a-z0-9-]*", control, message)
+
+
+def _flag_controls() -> dict[str, str]:
+    """Command-line flag → the app control's label, for every parameter that has a control (the recipe's help rows)."""
+    from spikeview.recipe import help_rows
+
+    return {row[1]: row[2] for row in help_rows() if row[2] and row[2] != "—"}
 
 
 # ------------------------------------------------------------------------------------- images
