@@ -874,6 +874,33 @@ class MainWindow(QtWidgets.QMainWindow):
         super().closeEvent(ev)
 
 
+class _Fill(QtWidgets.QWidget):
+    """Holds a panel in a scroll area: the panel gets the whole visible area, or its minimum size and scroll bars
+    when the area is smaller. (A panel with word-wrapped labels put straight into a resizable scroll area was
+    sized by its height-for-width at its preferred width: 1200 px wide and ~1000 px tall in a 400-pixel column,
+    its images scrolled out of sight.)"""
+
+    def __init__(self, inner: QtWidgets.QWidget):
+        super().__init__()
+        self.inner = inner
+        inner.setParent(self)
+        inner.installEventFilter(self)
+
+    def sizeHint(self) -> QtCore.QSize:  # noqa: N802 - Qt's name
+        return self.inner.minimumSizeHint()
+
+    def minimumSizeHint(self) -> QtCore.QSize:  # noqa: N802 - Qt's name
+        return self.inner.minimumSizeHint()
+
+    def resizeEvent(self, ev: QtGui.QResizeEvent) -> None:  # noqa: N802 - Qt's name
+        self.inner.setGeometry(0, 0, ev.size().width(), ev.size().height())
+
+    def eventFilter(self, obj: QtCore.QObject, ev: QtCore.QEvent) -> bool:  # noqa: N802 - Qt's name
+        if obj is self.inner and ev.type() == QtCore.QEvent.Type.LayoutRequest:
+            self.updateGeometry()  # the panel's minimum may have changed: the scroll area asks again
+        return False
+
+
 def scrolled(widget: QtWidgets.QWidget) -> QtWidgets.QScrollArea:
     """``widget`` in a frameless scroll area: a panel whose contents need more room than its dock has scrolls
     instead of widening or heightening the window (after a run, an export or a long message)."""
@@ -881,7 +908,7 @@ def scrolled(widget: QtWidgets.QWidget) -> QtWidgets.QScrollArea:
     area.setObjectName(f"scroll_{widget.objectName() or type(widget).__name__}")
     area.setWidgetResizable(True)
     area.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
-    area.setWidget(widget)
+    area.setWidget(_Fill(widget))
     return area
 
 

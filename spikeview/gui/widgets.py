@@ -191,6 +191,12 @@ class ImagePane(QtWidgets.QWidget):
         if self.fit:
             QtCore.QTimer.singleShot(0, self.fit_view)  # after the layout settles (linked views resize in turn)
 
+    def showEvent(self, ev: QtGui.QShowEvent) -> None:  # noqa: N802 - Qt's name
+        """A pane shown again (its tab brought to the front) fits the image it received while hidden."""
+        super().showEvent(ev)
+        if self.fit:
+            QtCore.QTimer.singleShot(0, self.fit_view)
+
     def _double_click(self, ev: QtGui.QMouseEvent) -> None:
         self.reset_zoom()
         ev.accept()
