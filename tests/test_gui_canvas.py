@@ -180,3 +180,29 @@ def test_spikeview_app_screenshot_from_the_command_line(qtbot, tmp_path, capsys)
     assert "window 1366x768 on a 1366x768 screen" in printed
     assert main(["app", "--screenshot", str(out), "--view", "tfp:wipe"]) == 1  # a mode without its B
     assert "give A:wipe:B" in capsys.readouterr().err
+
+
+@pytest.mark.qt_log_ignore(OFFSCREEN_NOISE, r"This plugin does not support raise\(\)")  # a floating dock, offscreen
+def test_reset_layout_restores_the_start_up_layout(window, qtbot):
+    from PySide6 import QtGui
+
+    w = window
+    w.resize(1366, 768)
+    w.default_layout()
+    qtbot.wait(100)
+
+    def layout():
+        docks = {k: (w.dockWidgetArea(d), d.isFloating(), d.isVisible(),
+                     sorted(x.objectName() for x in w.tabifiedDockWidgets(d))) for k, d in w.docks.items()}
+        return docks, w.canvas.view()
+
+    start = layout()
+    assert start[1] == ("tfp", "single", "guided") and start[0]["stream"][3] == [] and start[0]["guided"][2]
+    w.docks["compare"].setFloating(True)
+    w.docks["export"].hide()
+    w.canvas.set_view("spikes", "side", "tfi")
+    qtbot.wait(50)
+    assert layout() != start
+    w.findChild(QtGui.QAction, "act_reset_layout").trigger()
+    qtbot.waitUntil(lambda: layout() == start, timeout=WAIT_MS)
+    assert (w.width(), w.height()) == (1366, 768)
