@@ -13,6 +13,11 @@ def add_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size", type=int, help="frame size of the synthetic set (default 256)")
     p.add_argument("--frames", type=int, default=2, help="windows per scene (default 2)")
     p.add_argument("--out", metavar="DIR", help="folder for guided.md, guided.json and guided_pareto.png (default benchmarks/results)")
+    p.add_argument("--real", nargs="+", metavar="FILE",
+                   help="score real captures (no truth): detail against the capture's long exposure, patchiness and "
+                        "residual noise of TFP, TFI and the guided default, through `spikeview reconstruct` (spikeview.bench.lowlight)")
+    p.add_argument("--low-light", action="store_true",
+                   help="simulated static scenes at 3 light levels (mono and RGGB) with truth: PSNR, detail, patchiness (spikeview.bench.lowlight)")
     p.add_argument("--sequences", action="store_true",
                    help="only the sequences benchmark: back-to-back windows of static, slow and fast scenes, PSNR/SSIM and temporal error (temporal.md)")
 
@@ -20,6 +25,8 @@ def add_args(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from spikeview.bench.guided import main as bench_main
 
+    if getattr(args, "real", None) or getattr(args, "low_light", False):
+        return _lowlight(args)
     argv = ["--frames", str(args.frames)]
     if args.quick:
         argv.append("--quick")
@@ -32,3 +39,23 @@ def run(args: argparse.Namespace) -> int:
             raise ParameterError(f"--out {args.out}: folder not found; create it first.")
         argv += ["--out", args.out]
     return bench_main(argv)
+
+
+def _lowlight(args: argparse.Namespace) -> int:
+    from spikeview.bench.lowlight import report, run_low_light, run_real
+
+    text = []
+    if args.real:
+        for f in args.real:
+            if not Path(f).is_file():
+                raise ParameterError(f"--real {f}: file not found; name a spike capture (.dat, .npy, .npz).")
+        text.append(report(run_real(list(args.real)), "Real captures (reference: the capture's long exposure)"))
+    if args.low_light:
+        text.append(report(run_low_light(size=args.size or 256), "Simulated low light (static scenes, reference: the truth)"))
+    out = "\n\n".join(text)
+    print(out)
+    if args.out:
+        if not Path(args.out).is_dir():
+            raise ParameterError(f"--out {args.out}: folder not found; create it first.")
+        (Path(args.out) / "lowlight.md").write_text(out + "\n", encoding="utf-8")
+    return 0
