@@ -96,7 +96,10 @@ def test_the_pixel_readout_names_the_rate_and_the_shown_values(opened, qtbot):
     text = cv.point_at(10, 20)
     assert seen[-1] == text and w.statusBar().currentMessage() == text
     assert text.startswith("x 10  y 20")
-    assert f"rate {float(f.mosaic[20, 10]):.4f} spikes/tick" in text
+    assert w.session.source.cfa == "RGGB"
+    assert f"R rate {float(f.mosaic[20, 10]):.4f} spikes/tick" in text  # RGGB: an even row and column is a red site
+    assert core.site_at("RGGB", 0, 0) == "R" and core.site_at("RGGB", 1, 0) == "Gr" and core.site_at("RGGB", 0, 1) == "Gb"
+    assert core.site_at("RGGB", 1, 1) == "B" and core.site_at(None, 3, 3) == ""
     r, g, b = (int(v) for v in f.tfp[20, 10])
     assert f"A TFP ({r}, {g}, {b})" in text and f"B Spikes {int(f.raw[20, 10])}" in text
     assert cv.pixel_text(64, 0) == "" and cv.pixel_text(-1, 3) == ""  # outside the frame: nothing

@@ -517,7 +517,8 @@ class ImageCanvas(QtWidgets.QWidget):
         parts = [f"x {x}  y {y}"]
         if self.mosaic is not None and self.mosaic.shape == shape:
             rate = float(self.mosaic[y, x])
-            parts.append(f"rate {rate:.4f} spikes/tick ({rate * self.session.tick_rate / 1000:.2f} kHz)")
+            site = core.site_at(getattr(self.session.source, "cfa", None), x, y)
+            parts.append(f"{site + ' ' if site else ''}rate {rate:.4f} spikes/tick ({rate * self.session.tick_rate / 1000:.2f} kHz)")
         a_key, mode, b_key = self.view()
         keys = [("A", a_key)] + ([("B", b_key)] if mode != "single" else [])
         if "truth" not in (a_key, b_key if mode != "single" else None):

@@ -255,6 +255,16 @@ def to_display(img: np.ndarray, black: float = 0.0, white: float = 1.0, gamma: s
     return td(img, black, white, gamma)
 
 
+def site_at(cfa: str | None, x: int, y: int) -> str:
+    """The Bayer site (``R``, ``Gr``, ``Gb``, ``B``) of photosite ``(x, y)`` under ``cfa``, ``""`` for a monochrome
+    capture (:func:`spikeview.cfa.site_offsets`' rule)."""
+    from spikeview.cfa import site_offsets
+
+    if cfa is None:
+        return ""
+    return next(name for name, (py, px) in site_offsets(cfa).items() if (py, px) == (y % 2, x % 2))
+
+
 def roi_origin(roi: tuple[int, int, int, int] | None, shape: tuple[int, int]) -> tuple[int, int]:
     """Top-left ``(x, y)`` of the crop an ROI job works on (:func:`spikeview.cfa.crop_roi`'s rule: even pixels, the
     CFA phase kept), so the app places an ROI-sized result where it belongs in the frame."""
