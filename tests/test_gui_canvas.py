@@ -131,6 +131,9 @@ def test_an_roi_run_sits_over_its_roi_with_scores_and_the_previous_run_is_kept(o
     assert a["psnr"] == pytest.approx(c.guided_result.psnr) and "psnr" in b
     cv.set_view("guided", "diff", "guided_prev")
     assert cv.a.item.image.shape[:2] == (32, 32)  # A − B where both are: the ROI
+    run_tick = c.guided_result.tick
+    w.session.set_tick(run_tick + 5)  # the results stay, and say that they are of another tick
+    qtbot.waitUntil(lambda: f"of tick {run_tick}; the stream is at tick {run_tick + 5}" in cv.note.text(), timeout=WAIT_MS)
 
 
 def test_a_ground_truth_image_loads_and_scores_tfp(window, qtbot, tmp_path):

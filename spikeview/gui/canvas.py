@@ -63,6 +63,8 @@ class Shown:
     scores: dict[str, float] = field(default_factory=dict)
     #: the linear float frame the image shows (a guided result), redrawn when the display levels change
     data: np.ndarray | None = None
+    #: the tick it is of, where it can differ from the stream's (a guided run, the truth); None: follows the stream
+    tick: int | None = None
 
     def value_at(self, x: int, y: int) -> np.ndarray | None:
         """The displayed value at frame pixel ``(x, y)`` (one value per channel), ``None`` outside the image."""
@@ -195,6 +197,7 @@ class ImageCanvas(QtWidgets.QWidget):
         subscribe(self, session.events.source_changed, self._on_source)
         subscribe(self, session.events.roi_changed, self._on_roi)
         subscribe(self, session.events.param_changed, self._on_param)
+        subscribe(self, session.events.tick_changed, lambda _t: self._refresh_if_shown("guided", "guided_prev", "truth"))
         self.set_view(*DEFAULT_VIEW)
 
     def _clipped_layer(self) -> tuple[QtWidgets.QGraphicsRectItem, pg.ImageItem]:
@@ -296,6 +299,10 @@ class ImageCanvas(QtWidgets.QWidget):
         if mode != "diff":
             if two and B is not None:
                 note += f"   │   B: {B.title}"
+        stale = sorted({img.tick for img in ((A, B) if two else (A,)) if img is not None and img.tick is not None
+                        and img.tick != self.session.tick})
+        if stale:
+            note += f"   · of tick {', '.join(map(str, stale))}; the stream is at tick {self.session.tick}"
         if missing:
             note = (note + "   · " if note else "") + "not available yet: " + ", ".join(missing) + _hint(a_key, b_key, missing)
         self.note.setText(note)
@@ -377,7 +384,7 @@ class ImageCanvas(QtWidgets.QWidget):
     def _new_run(self, run: int) -> None:
         done = self.images.get("guided")
         if done is not None and done.title.startswith("guided run") and "step" not in done.title:
-            self.images["guided_prev"] = Shown(done.image, done.rect, done.title, done.scores, done.data)
+            self.images["guided_prev"] = Shown(done.image, done.rect, done.title, done.scores, done.data, done.tick)
         self._guided_run = run
 
     def show_guided_result(self, r: Any) -> None:
@@ -388,9 +395,9 @@ class ImageCanvas(QtWidgets.QWidget):
         h, w = r.preview.shape[:2]
         self._guided_origin = (x, y)
         self.images["guided"] = Shown(r.preview, (x, y, w, h), f"guided run {r.run} (tick {r.tick})", dict(r.scores),
-                                      np.asarray(r.image))
+                                      np.asarray(r.image), int(r.tick))
         if getattr(r, "truth_preview", None) is not None:
-            self.images["truth"] = Shown(r.truth_preview, (x, y, w, h), f"ground truth (tick {r.tick})")
+            self.images["truth"] = Shown(r.truth_preview, (x, y, w, h), f"ground truth (tick {r.tick})", tick=int(r.tick))
         self._refresh()
 
     def show_degradation(self, view: Any) -> None:
@@ -418,7 +425,7 @@ class ImageCanvas(QtWidgets.QWidget):
         if v.truth is not None:
             h, w = v.truth.shape[:2]
             x, y = v.origin
-            self.images["truth"] = Shown(v.truth, (x, y, w, h), f"ground truth (tick {v.tick})")
+            self.images["truth"] = Shown(v.truth, (x, y, w, h), f"ground truth (tick {v.tick})", tick=int(v.tick))
         self._refresh()
 
     def _on_param(self, name: str, value: Any) -> None:
