@@ -44,6 +44,10 @@ def image(name: str) -> np.ndarray:
 def capture(name: str, size: int, seed: int, ticks: int = 200, **over):
     from spikeview.sim import MotionScene, SimConfig, simulate
 
+    if name.startswith("bench:"):  # a scene of the guided benchmark, as it simulates it (its sensor, its motion)
+        from spikeview.bench.data import make_capture
+
+        return make_capture(name[6:], size, n_ticks=ticks, seed=seed, window=10, **over)
     cfg = SimConfig(n_ticks=ticks, seed=seed, gt_every=5, spectral_gains=SENSOR, **over)
     return simulate(MotionScene(image(name), size=(size, size), pan=(600.0, 300.0)), cfg)
 
@@ -79,6 +83,8 @@ def scores(outs, cap, centres) -> dict:
     rows = []
     for f, c in zip(outs, centres):
         gt = cap.gt_at(c)
+        if f.ndim == 2:  # monochrome: the truth's luminance (the simulator's monochrome response)
+            gt = gt @ np.array([0.2126, 0.7152, 0.0722], np.float32)
         s = colour_scores(f, gt)
         s["psnr_gain3"] = score(f, gt)[0]
         rows.append(s)
@@ -111,11 +117,11 @@ def run_wb(size: int, guided: bool, scenes: list[str]) -> None:
                 print(f"| {name} | {path} | {m} | {chosen} | {fmt(scores(outs, cap, centres))} |", flush=True)
 
 
-def run_calib(size: int, scenes: list[str], guided: bool) -> None:
+def run_calib(size: int, scenes: list[str], guided: bool, cfa: str = "RGGB") -> None:
     from spikeview.classical.calibration import attach, measure
 
     seed = 21
-    over = dict(hot_pixels=0.002)
+    over = dict(hot_pixels=0.002, cfa=cfa)
     flat, dark = flat_dark(size, seed, **over)
     t = time.perf_counter()
     prof = measure(dark, flat)
@@ -135,7 +141,8 @@ def run_calib(size: int, scenes: list[str], guided: bool) -> None:
                 from spikeview.recipe import Recipe
 
                 sampler = GuidedSampler(Recipe().guided)
-            for use, wbm in ((False, "auto"), (True, "auto"), (True, "profile")):
+            for use, wbm in ((False, "auto"), (True, "auto"), (True, "profile")) if cfa != "none" else ((False, "auto"),
+                                                                                                        (True, "auto")):
                 cap.info = cap.info.replace(camera=None)
                 if use:
                     attach(cap, prof)
@@ -156,6 +163,8 @@ def hot_outliers(x: np.ndarray, gt: np.ndarray, where: np.ndarray, k: float = 5.
         d = lum - np.median(nb, axis=0)
         s = 1.4826 * np.median(np.abs(d - np.median(d))) + 1e-6
         return np.abs(d) > k * s
+    if x.ndim == 2 and gt.ndim == 3:
+        gt = gt @ np.array([0.2126, 0.7152, 0.0722], np.float32)
     g = gt * (float((x * gt).sum()) / max(float((gt * gt).sum()), 1e-12))
     return int((outliers(x) & ~outliers(g) & where).sum())
 
@@ -165,13 +174,20 @@ def main(argv=None) -> int:
     p.add_argument("what", choices=["wb", "calib"])
     p.add_argument("--size", type=int, default=128)
     p.add_argument("--guided", action="store_true")
-    p.add_argument("--scenes", default=None, help="comma-separated (default: all)")
+    p.add_argument("--scenes", default=None, help="comma-separated (default: all); 'bench' = the guided benchmark's "
+                                                  "13 scenes with its own sensor and motion")
+    p.add_argument("--cfa", default="RGGB", help="calib: RGGB or none (monochrome)")
     a = p.parse_args(argv)
-    scenes = a.scenes.split(",") if a.scenes else COLOURFUL + GRAYISH
+    if a.scenes == "bench":
+        from spikeview.bench.data import SCENES
+
+        scenes = [f"bench:{n}" for n in SCENES]
+    else:
+        scenes = a.scenes.split(",") if a.scenes else COLOURFUL + GRAYISH
     if a.what == "wb":
         run_wb(a.size, a.guided, scenes)
     else:
-        run_calib(a.size, scenes, a.guided)
+        run_calib(a.size, scenes, a.guided, a.cfa)
     return 0
 
 

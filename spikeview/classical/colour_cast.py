@@ -307,7 +307,10 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
         raise ParameterError("--white-balance profile needs a camera profile with a colour response: pass --camera "
                              "PROFILE.toml made by `spikeview calibrate --flat FLAT` (or choose auto).")
     window = min(config.alpha_window, source.n_frames)
-    if choice == "gray-world" and camera is None:  # the paper's rule from the counts (exactly as before)
+    tiny = min(source.height, source.width) < 2  # no 2×2 cell: nothing but the channel means
+    if tiny and choice != "profile":
+        choice = "gray-world"
+    if choice == "gray-world" and (camera is None or tiny):  # the paper's rule from the counts (exactly as before)
         means = sequence_channel_means(source, window=window, max_windows=config.alpha_max_windows)
         how = wb.WhiteBalance("gray-world", means, "white balance gray-world (as asked)")
     else:
@@ -482,8 +485,11 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
         # plain rates Y (reconstruct_frame applies neither α nor η to them), and so is the white point
         eta = 1.0
     n_ticks = min(int(window), source.n_frames)
-    if getattr(source.info, "camera", None) is not None:
+    camera = getattr(source.info, "camera", None)
+    if camera is not None and not camera.from_capture:
         return _white_corrected(source, gains, n_ticks, max_windows, eta, percentile)
+    # the capture's own hot photosites (spikeview.classical.defects) are left out of the histogram
+    keep_px = None if camera is None else ~camera.hot
     # a histogram per distinct gain: counts take only n_ticks + 1 values per photosite class
     hist: dict[float, np.ndarray] = {}
     for s in sample_starts(source.n_frames, n_ticks, max_windows):
@@ -493,7 +499,10 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
         for py in (0, 1):
             for px in (0, 1):
                 g = 1.0 if gains is None else float(gains[py, px])
-                h = np.bincount(np.asarray(counts[py::2, px::2]).ravel(), minlength=n_ticks + 1)[: n_ticks + 1]
+                plane = np.asarray(counts[py::2, px::2])
+                if keep_px is not None:
+                    plane = plane[keep_px[py::2, px::2]]
+                h = np.bincount(plane.ravel(), minlength=n_ticks + 1)[: n_ticks + 1]
                 hist[g] = hist.get(g, 0) + h
     # TFP values are quantised (multiples of 1/Δτ): a level can hold several percent of the photosites
     # (3 % of a Spike-Zoo clip sit on its top level), and a white point ON that level would show them

@@ -40,7 +40,7 @@ class ClassicalConfig(Config):
             Malvar-2004 where the window is clean or the prior denoises afterwards;
             :func:`spikeview.guided.plan.choose_demosaic`), or one of ``"bilinear"``,
             ``"malvar2004"``, ``"menon2007"`` (Bayer streams only).
-        colour_cast: undo the sensor's colour cast with gray-world gains (Bayer streams only;
+        colour_cast: undo the sensor's colour cast with gains chosen by ``white_balance`` (Bayer streams only;
             monochrome frames are returned uncorrected).
         eta: range parameter η: after correction each channel's sequence mean is ``1/η``.
         alpha: fixed gray-world gains ``[α_R, α_G, α_B]``; ``None`` estimates them once per
@@ -68,8 +68,8 @@ class ClassicalConfig(Config):
                                "the measured noise: bilinear where noise dominates, malvar2004 where clean or denoised "
                                "afterwards), bilinear, malvar2004 or menon2007.")
     colour_cast: bool = param(True, label="Correct colour cast",
-                              help="Undo the sensor's per-channel response with gray-world gains estimated once per sequence "
-                                   "(Bayer streams).")
+                              help="Undo the sensor's per-channel response with gains estimated once per sequence "
+                                   "(white_balance says how; Bayer streams).")
     eta: float = param(DEFAULT_ETA, label="Colour range η", lo=0.0, lo_open=True, hi=8.0, step=0.05,
                        help="Range parameter η of the colour cast: after correction each channel's sequence mean is 1/η "
                             "(2 → 0.5).")

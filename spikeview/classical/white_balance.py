@@ -3,14 +3,12 @@
 Every estimator here returns the illuminant ``e`` (the raw RGB rate of a neutral surface, up to scale) of a
 **sequence** (one estimate per sequence, so colours stay stable from frame to frame) and the gains are
 ``α_c ∝ 1 / e_c``, scaled so that ``Σ_c α_c · mean_c = 3`` (the overall level gray-world gives: the exposure is set
-afterwards by the white point). The estimators see the sequence image: the mean rate of each 2×2 Bayer cell
-``(R, (Gr + Gb) / 2, B)`` over the sampled windows
-(:func:`spikeview.classical.colour_cast.sequence_images`, half resolution, no demosaicking).
+afterwards by the white point). The estimators see the sequence image: the mean rate of each 2×2 Bayer cell's R, G
+(one green: every channel's noise alike) and B over the sampled windows, binned to at most :data:`MAX_CELLS` cells a
+side (:func:`spikeview.classical.colour_cast.sequence_images`; no demosaicking). All but gray-world see it after a
+3×3 median: a hot pixel would otherwise be the brightest patch and the strongest edge of the frame.
 
 * ``gray-world`` — the mean of each channel (the paper's rule): right when the scene averages to gray.
-
-The other estimators see the sequence image after a 3×3 median (cells): a hot pixel would otherwise be the
-brightest patch and the strongest edge of the frame.
 * ``shades-of-gray`` — the Minkowski ``p = 6`` mean of each channel (Finlayson & Trezzi 2004).
 * ``gray-edge`` — the Minkowski ``p = 6`` mean of the gradient magnitude of each channel after a Gaussian of σ = 1 cell
   (van de Weijer, Gevers & Gijsenij 2007, first order); ``gray-edge-2`` uses the second derivatives. Edges
@@ -23,8 +21,9 @@ brightest patch and the strongest edge of the frame.
 * ``auto`` — gray-world unless it disagrees with ``combined`` by more than :data:`AGREE_DEG` degrees **and** by more
   than twice the estimators' own uncertainty (the angle between ``combined`` on the even and on the odd sampled
   windows: a dark or fast-changing scene's edges and highlights are noisy) and the sampled windows hold at least
-  :data:`MIN_SPIKES` spikes per photosite (fewer: a dark scene, whose edges are noise); then ``combined``. Gray-world is the
-  paper's rule and the least noisy where the scene averages to gray. The choice and its reason are one sentence.
+  :data:`MIN_SPIKES` spikes per photosite (fewer: a dark scene, whose edges are noise); then ``combined``.
+  Gray-world is the paper's rule and the least noisy where the scene averages to gray. The choice and its reason are
+  one sentence. (The thresholds were set on simulated scenes: ``benchmarks/bench_colour.py``.)
 * ``profile`` — the colour response measured by ``spikeview calibrate`` from a flat capture
   (:mod:`spikeview.classical.calibration`): the only choice that is right for a scene that is itself tinted.
 
