@@ -132,8 +132,16 @@ class CameraProfile:
                                  "with spikeview calibrate --flat FLAT, or choose another --white-balance.")
         return self.colour_response[1] / self.colour_response
 
+    @property
+    def from_capture(self) -> bool:
+        """The capture's own defect map (:func:`spikeview.classical.defects.auto_profile`), not a calibration."""
+        return self.stats.get("source") == "capture"
+
     def describe(self) -> str:
         """One line: what the profile corrects."""
+        if self.from_capture:
+            n = int(self.hot.sum())
+            return f"none given; the capture's own {n} hot pixel{'s' if n != 1 else ''} filled from their neighbours (defects below)."
         parts = []
         if self.captures.get("dark"):
             parts.append(f"dark rate {self.stats.get('dark_rate_mean', float(self.dark.mean())):.4g} spikes/tick, "
@@ -423,7 +431,12 @@ def measure(dark: Any = None, flat: Any = None) -> CameraProfile:
 def attach(source: Any, profile: CameraProfile | str | Path | None) -> Any:
     """``source`` with ``profile`` (or the profile file) as its camera: checked against the capture's geometry, CFA and
     flips (one sentence if it does not match), then carried in ``source.info.camera`` (views of the source keep it)."""
-    if profile is None:
+    if profile is None:  # no profile: the capture's own hot photosites (spikeview.classical.defects), when it has any
+        from spikeview.classical.defects import auto_profile
+
+        auto = auto_profile(source)
+        if auto is not None:
+            source.info = source.info.replace(camera=auto)
         return source
     if not isinstance(profile, CameraProfile):
         profile = CameraProfile.load(profile)

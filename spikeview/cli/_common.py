@@ -65,14 +65,15 @@ def open_source_from_args(args: argparse.Namespace, recipe: Any = None, *, show_
     kwargs["tag_check"] = getattr(args, "tag_check", None)
     src = open_source(args.input, **kwargs)
     camera = getattr(args, "camera", None) if recipe is None else recipe.stream.camera
-    if camera is not None:  # the profile's corrections travel with the source (spikeview.classical.calibration)
-        from spikeview.classical.calibration import attach
+    # the profile's corrections travel with the source (spikeview.classical.calibration); without one, the capture's
+    # own hot photosites (spikeview.classical.defects)
+    from spikeview.classical.calibration import attach
 
-        try:
-            attach(src, camera)
-        except BaseException:
-            src.close()
-            raise
+    try:
+        attach(src, camera)
+    except BaseException:
+        src.close()
+        raise
     if show_warnings:
         for note in src.info.warnings:
             print(f"spikeview: warning: {src.info.path.name if src.info.path else args.input}: {note}", file=sys.stderr)

@@ -79,6 +79,10 @@ def describe(src: SpikeSource, sample_windows: int = 64) -> str:
     cam = getattr(info, "camera", None)
     if cam is not None:
         lines.append(f"camera:      {cam.describe()}")
+    if info.n_frames > 0 and min(info.width, info.height) > 0:
+        from spikeview.classical.defects import find_defects
+
+        lines.append(f"defects:     {find_defects(src).describe()}")
     for w in info.warnings:
         lines.append(f"warning:     {w}")
     return "\n".join(lines)

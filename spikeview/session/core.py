@@ -112,6 +112,9 @@ def open_file(path: str | Path, **kwargs: Any) -> OpenedStream:
     path = Path(path)
     kwargs = {k: v for k, v in kwargs.items() if v is not None}
     src = open_source(path, **kwargs)
+    from spikeview.classical.calibration import attach
+
+    attach(src, None)  # the capture's own hot photosites, filled as the CLI fills them (spikeview.classical.defects)
     info = src.info
 
     def reopen(**settings: Any) -> OpenedStream:
