@@ -307,11 +307,13 @@ class MainWindow(QtWidgets.QMainWindow):
         state = self.settings.value("window/state")
         if int(self.settings.value("window/layout_version", 0, int)) != LAYOUT_VERSION:
             state = None
+        screen = QtGui.QGuiApplication.primaryScreen()
+        avail = screen.availableGeometry() if screen is not None else QtCore.QRect(0, 0, 1700, 1000)
         if isinstance(geo, QtCore.QByteArray):
             self.restoreGeometry(geo)
+            if self.width() > avail.width() or self.height() > avail.height():  # saved on a larger screen
+                self.resize(min(self.width(), avail.width()), min(self.height(), avail.height() - 30))
         else:  # first start: large, but never larger than the screen (a 1366×768 laptop)
-            screen = QtGui.QGuiApplication.primaryScreen()
-            avail = screen.availableGeometry() if screen is not None else QtCore.QRect(0, 0, 1700, 1000)
             self.resize(min(1700, avail.width()), min(1000, avail.height() - 30))
         if isinstance(state, QtCore.QByteArray):
             self.restoreState(state)
