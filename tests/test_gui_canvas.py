@@ -212,3 +212,11 @@ def test_reset_layout_restores_the_start_up_layout(window, qtbot):
     w.findChild(QtGui.QAction, "act_reset_layout").trigger()
     qtbot.waitUntil(lambda: layout() == start, timeout=WAIT_MS)
     assert (w.width(), w.height()) == (1366, 768)
+
+
+def test_screenshot_options_without_screenshot_are_refused(capsys):
+    from spikeview.cli.main import main
+
+    assert main(["app", "--run", "guided", "--truth", "gt.png"]) == 1
+    assert "--run, --truth only act with --screenshot OUT.png" in capsys.readouterr().err
+

@@ -51,6 +51,14 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"the desktop app is not available in this installation ({e}); use the sub-commands (spikeview --help).") from None
     if args.screenshot:
         return screenshot(args)
+    given = [flag for flag, value in (("--run", args.run), ("--view", args.view), ("--truth", args.truth),
+                                      ("--tick", args.tick), ("--roi", args.roi), ("--pixel", args.pixel),
+                                      ("--export", args.export), ("--reset-layout", args.reset_layout),
+                                      ("--panel", args.panel), ("--demo-size", args.demo_size)) if value]
+    if given or args.size != "1366x768":
+        given = given or ["--size"]
+        raise ParameterError(f"{', '.join(given)} only act{'s' if len(given) == 1 else ''} with --screenshot OUT.png; "
+                             "in the open app use its menus (File ▸ Load ground truth…, the canvas's A/B menus, Guided ▸ Run).")
     return run_app(args.input)
 
 
