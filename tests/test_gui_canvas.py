@@ -105,6 +105,25 @@ def test_the_pixel_readout_names_the_rate_and_the_shown_values(opened, qtbot):
     assert cv.pixel_text(64, 0) == "" and cv.pixel_text(-1, 3) == ""  # outside the frame: nothing
 
 
+def test_hovering_the_canvas_reads_out_the_pixel_under_the_cursor(opened, qtbot):
+    """The scene position pyqtgraph reports for a mouse move maps to the frame pixel under it, in either view of a
+    side-by-side comparison (the panes share zoom and pan); off the image the readout clears."""
+    from PySide6 import QtCore
+
+    w, cv = opened, opened.canvas
+    cv.set_view("tfp", "side", "spikes")
+    cv.fit()
+    qtbot.wait(100)
+    for pane in (cv.a, cv.b):
+        for x, y in ((10, 20), (50, 3)):
+            scene = pane.vb.mapViewToScene(QtCore.QPointF(x + 0.5, y + 0.5))
+            pane.view.scene().sigMouseMoved.emit(scene)  # what a mouse move over the view emits
+            assert cv.last_readout.startswith(f"x {x}  y {y}") and "A TFP (" in cv.last_readout
+            assert w.statusBar().currentMessage() == cv.last_readout
+    pane.view.scene().sigMouseMoved.emit(cv.b.vb.mapViewToScene(QtCore.QPointF(-30.0, 5.0)))  # left of the frame
+    assert cv.last_readout == "" and w.statusBar().currentMessage() == ""
+
+
 def test_an_roi_run_sits_over_its_roi_with_scores_and_the_previous_run_is_kept(opened, qtbot):
     w, cv, c = opened, opened.canvas, opened.controller
     w.session.set_roi((16, 16, 32, 32))
