@@ -13,7 +13,9 @@ Workers:
   holds up the raw/TFP frames, throttled during playback like the rates;
 * ``guided`` — the guided sampler; owns the prior model (loaded once, kept in the worker's state);
   parameter changes restart it after a debounce;
-* ``export`` — one export at a time, with progress and cancel.
+* ``export`` — one export at a time, with progress and cancel;
+* ``compare`` — TFP and TFI of the window scored against the ground truth (the canvas's comparison and the
+  Compare panel), only while shown and paused, after a short debounce.
 
 Playback is back-pressured: the next frame is requested only when the previous one has been
 shown, so a slow machine drops frames (real-time mode skips ticks) instead of queueing them, and
@@ -103,7 +105,9 @@ class Controller(QtCore.QObject):
         self.guided = Worker("spikeview-guided", parent=self, nice=WORKER_NICE, torch_threads=os.cpu_count() or 1)
         self.exporter = Worker("spikeview-export", parent=self, nice=WORKER_NICE)
         self.tfi = Worker("spikeview-tfi", parent=self, nice=WORKER_NICE)
-        for w in (self.preview, self.guided, self.exporter, self.tfi):
+        # the comparison's scores (seconds on a large frame) on a thread of their own: the TFI pane never waits on them
+        self.scorer = Worker("spikeview-compare", parent=self, nice=WORKER_NICE)
+        for w in (self.preview, self.guided, self.exporter, self.tfi, self.scorer):
             w.finished.connect(self._on_finished)
             w.failed.connect(self._on_failed)
             w.cancelled.connect(self._on_cancelled)
@@ -159,7 +163,7 @@ class Controller(QtCore.QObject):
         for e, cb in ((ev.source_changed, self._on_source), (ev.tick_changed, self._on_tick), (ev.param_changed, self._on_param),
                       (ev.roi_changed, self._on_roi), (ev.playback_changed, self._on_playback)):
             e.disconnect(cb)
-        for w in (self.preview, self.guided, self.exporter, self.tfi):
+        for w in (self.preview, self.guided, self.exporter, self.tfi, self.scorer):
             w.stop()
         gc.unfreeze()  # let the interpreter's final cleanup see everything again
 
@@ -396,7 +400,7 @@ class Controller(QtCore.QObject):
             return
         req = jobs.CompareRequest(s.source, s.tick, self.display_params(), self.alpha, s.roi, s.stream.ground_truth,
                                   recipe)
-        self.tfi.submit("compare", lambda ctx, r=req: jobs.compare_job(r, ctx), cancel_running=True)
+        self.scorer.submit("compare", lambda ctx, r=req: jobs.compare_job(r, ctx), cancel_running=True)
 
     # ------------------------------------------------------------------------------ guided
     def _guided_context(self) -> tuple[Any, ...]:
@@ -562,7 +566,7 @@ class Controller(QtCore.QObject):
             self.guided_state.emit("cancelled", "Guided run cancelled.")
 
     def _worker(self, channel: str) -> Worker:
-        return {"guided": self.guided, "export": self.exporter, "tfi": self.tfi, "compare": self.tfi}.get(channel, self.preview)
+        return {"guided": self.guided, "export": self.exporter, "tfi": self.tfi, "compare": self.scorer}.get(channel, self.preview)
 
     def _error(self, message: str) -> None:
         self.errors.append(message)

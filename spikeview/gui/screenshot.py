@@ -207,7 +207,8 @@ def _act(app: Any, w: Any, path: Any, run: str | None, view: tuple[str, str | No
         c.compare_timer.stop()
         c.submit_compare()  # at once: no debounce to wait for
         _wait(app, lambda: w.canvas.compares > done, "the scores against the ground truth", c.errors)
-    _wait(app, lambda: not c.preview.is_active() and not c.tfi.is_active(), "idle previews", c.errors)
+    _wait(app, lambda: not c.preview.is_active() and not c.tfi.is_active() and not c.scorer.is_active(), "idle previews",
+          c.errors)
     _spin(app, 0.6)  # the dock layout and the throttled panels settle
     w.canvas.fit()
     _spin(app, 0.3)
