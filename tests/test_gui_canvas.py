@@ -122,6 +122,13 @@ def test_hovering_the_canvas_reads_out_the_pixel_under_the_cursor(opened, qtbot)
             assert w.statusBar().currentMessage() == cv.last_readout
     pane.view.scene().sigMouseMoved.emit(cv.b.vb.mapViewToScene(QtCore.QPointF(-30.0, 5.0)))  # left of the frame
     assert cv.last_readout == "" and w.statusBar().currentMessage() == ""
+    cv.one_btn.click()  # one frame pixel per screen pixel, in both views
+    for pane in (cv.a, cv.b):
+        px = pane.vb.viewPixelSize()
+        assert px[0] == pytest.approx(1.0, rel=0.02) and px[1] == pytest.approx(1.0, rel=0.02)
+    assert not cv.a.fit
+    cv.fit_btn.click()
+    assert cv.a.fit and cv.a.covers_image()
 
 
 def test_an_roi_run_sits_over_its_roi_with_scores_and_the_previous_run_is_kept(opened, qtbot):

@@ -140,6 +140,8 @@ class ImageCanvas(QtWidgets.QWidget):
         self.swap_btn = tool_button("⇄", "Swap A and B", self.swap, name="canvas_swap")
         self.fit_btn = tool_button("Fit", "Show the whole frame (Ctrl+0, or double-click the image)", self.fit,
                                    name="canvas_fit")
+        self.one_btn = tool_button("1:1", "One frame pixel per screen pixel, around the centre of the view", self.one_to_one,
+                                   name="canvas_1to1")
         header = QtWidgets.QHBoxLayout()
         header.setContentsMargins(2, 0, 2, 0)
         header.addWidget(QtWidgets.QLabel("A"))
@@ -152,6 +154,7 @@ class ImageCanvas(QtWidgets.QWidget):
         self.note = ElidedLabel()
         self.note.setObjectName("canvas_note")
         header.addWidget(self.note, 1)
+        header.addWidget(self.one_btn)
         header.addWidget(self.fit_btn)
 
         self.a = ImagePane("A", min_size=160)
@@ -246,6 +249,15 @@ class ImageCanvas(QtWidgets.QWidget):
 
     def fit(self) -> None:
         self.a.reset_zoom()
+
+    def one_to_one(self) -> None:
+        """One frame pixel per screen pixel (the B view follows), centred where the view is centred now."""
+        vb = self.a.vb
+        (x0, x1), (y0, y1) = vb.viewRange()
+        w, h = max(vb.width(), 1.0), max(vb.height(), 1.0)
+        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+        self.a._user_zoomed()  # the view stays at this zoom when frames arrive, until Fit
+        vb.setRange(QtCore.QRectF(cx - w / 2, cy - h / 2, w, h), padding=0)
 
     def _frame_shape(self) -> tuple[int, int] | None:
         src = self.session.source
