@@ -212,7 +212,7 @@ def _sim_static(cfa: str | None, rate: float, ticks: int = 400, size: int = 96):
 
 
 @CFAS
-@pytest.mark.parametrize("rate", [0.03, 0.3], ids=["dark", "bright"])
+@pytest.mark.parametrize("rate", [0.03, 0.1, 0.3], ids=["dark", "mid", "bright"])
 def test_a_static_scene_pools_every_neighbour_at_every_light(cfa, rate):
     """≥ 95 % of a static scene's photosites take all ±3 windows at rest (a single κ for the frame once failed the
     dark tiles of a bright scene, and the velocity search picked noise in the dark: 75 % and 50 %)."""
