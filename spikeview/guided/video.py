@@ -132,7 +132,10 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
     centers = list(centers)
     n = len(centers)
     prev: np.ndarray | None = None
-    cache = WindowCache(4 * p.temporal_radius + 4)  # neighbouring windows are shared by consecutive frames
+    # neighbouring windows are shared by consecutive frames; in low light a static tile reads up to ±LOW_LIGHT_RADIUS
+    from spikeview.guided.temporal import LOW_LIGHT_RADIUS
+
+    cache = WindowCache(2 * max(2 * p.temporal_radius, LOW_LIGHT_RADIUS if p.temporal_radius else 0) + 6)
 
     def observe(fi: int, c: int) -> tuple[Observation, Any]:
         """Frame ``fi``'s observation (counts, pooling) and plan: they depend on the capture and the
