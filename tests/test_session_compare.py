@@ -71,3 +71,25 @@ def test_compare_job_scores_tfp_and_tfi_on_the_frame_and_on_an_roi():
 def test_roi_origin_follows_crop_roi():
     assert core.roi_origin(None, (10, 10)) == (0, 0)
     assert core.roi_origin((3, 5, 4, 4), (10, 10)) == (2, 4)
+
+
+def test_load_ground_truth_reads_8_and_16_bit_images_and_refuses_another_size(tmp_path):
+    from PIL import Image
+
+    from spikeview.errors import ParameterError
+
+    rgb = np.zeros((4, 6, 3), np.uint8)
+    rgb[..., 0] = 255
+    Image.fromarray(rgb).save(tmp_path / "rgb.png")
+    colour = core.load_ground_truth(tmp_path / "rgb.png", (4, 6), colour=True)
+    assert colour.shape == (4, 6, 3) and colour[0, 0].tolist() == [1.0, 0.0, 0.0]  # linear values / 255, as the bench
+    mono = core.load_ground_truth(tmp_path / "rgb.png", (4, 6), colour=False)
+    assert mono.shape == (4, 6) and mono[0, 0] == pytest.approx(1 / 3)
+    deep = np.full((4, 6), 32768, np.uint16)
+    Image.fromarray(deep).save(tmp_path / "deep.png")
+    assert core.load_ground_truth(tmp_path / "deep.png", (4, 6), colour=False)[0, 0] == pytest.approx(32768 / 65535)
+    with pytest.raises(ParameterError, match="rgb.png is 6×4 but the capture is 8×8"):
+        core.load_ground_truth(tmp_path / "rgb.png", (8, 8), colour=True)
+    (tmp_path / "bad.png").write_bytes(b"not an image")
+    with pytest.raises(ParameterError, match="Cannot read bad.png as an image"):
+        core.load_ground_truth(tmp_path / "bad.png", (4, 6), colour=True)

@@ -150,7 +150,7 @@ def load_ground_truth(path: str | Path, shape: tuple[int, int], colour: bool) ->
     """An image of a capture's scene (File ▸ Load ground truth…) as the ground truth of every tick: float32 in [0, 1],
     ``(H, W, 3)`` for a colour capture, ``(H, W)`` for a monochrome one (the mean of its channels).
 
-    An 8-bit image (PNG, JPEG, TIFF) counts as linear values / 255, as ``spikeview bench`` scores the Spike-Zoo
+    An 8-bit image (PNG, JPEG, TIFF) counts as linear values / 255 (a 16-bit greyscale one / 65535), as ``spikeview bench`` scores the Spike-Zoo
     clips' PNGs (:func:`spikeview.bench.data.spikezoo_clips`); the scores align it to the observation with a gain
     anyway. A ``.npy`` is taken as it is (values above 1 as 8-bit). Raises :class:`ParameterError` for an unreadable
     file or one of another size than the capture (``shape = (H, W)``).
@@ -165,7 +165,11 @@ def load_ground_truth(path: str | Path, shape: tuple[int, int], colour: bool) ->
             from PIL import Image
 
             with Image.open(path) as im:
-                img = np.asarray(im.convert("RGB"), dtype=np.float32) / np.float32(255.0)
+                if im.mode.startswith("I"):  # 16-bit (or 32-bit integer) greyscale: its own full scale
+                    raw = np.asarray(im, dtype=np.float32)
+                    img = raw / np.float32(65535.0 if raw.max(initial=0.0) > 255 or "16" in im.mode else 255.0)
+                else:
+                    img = np.asarray(im.convert("RGB"), dtype=np.float32) / np.float32(255.0)
     except (OSError, ValueError) as e:
         raise ParameterError(f"Cannot read {path.name} as an image ({e}); choose a PNG, JPEG, TIFF or .npy file.") from None
     if img.ndim == 3 and img.shape[-1] == 4:
