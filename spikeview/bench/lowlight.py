@@ -5,8 +5,8 @@ Usage::
     spikeview bench --real uhsr.npz [MORE…]     # real captures: detail, patchiness, residual noise
     spikeview bench --low-light                  # simulated static scenes at 3 light levels, mono and RGGB
 
-**What runs is the CLI**: every frame is ``spikeview reconstruct FILE --method M --at T --transfer linear``
-(its defaults: the planner, the pooling, the exposure, the white point), read back from the ``.npy`` it writes.
+**What runs is the CLI**: every frame is ``spikeview reconstruct FILE --method M --at T --transfer linear`` run as a
+command (its defaults: the planner, the pooling, the exposure, the white point), read back from the ``.npy`` it writes.
 Methods: TFP-10 (the window alone), TFI, and the guided default.
 
 **Scores** (:mod:`spikeview.metrics`):
@@ -58,20 +58,21 @@ def residual_noise(x: np.ndarray) -> float:
     return 255.0 * float(np.median(np.abs(hh))) / 0.6745 / max(white, 1e-9)
 
 
+def _spikeview(*argv: str) -> None:
+    """``spikeview ARGV…`` in a child process (the command line a user types; the bench does not import the CLI)."""
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "spikeview", *argv], capture_output=True, text=True)
+    if r.returncode != 0:
+        raise RuntimeError(f"spikeview {' '.join(argv[:2])} failed: {r.stderr.strip()}")
+
+
 def _reconstruct(path: str, method: str, at: int, out: Path, extra: list[str] | None = None) -> np.ndarray:
-    """``spikeview reconstruct PATH --method METHOD --at AT --transfer linear`` through the CLI's own entry point."""
-    import contextlib
-    import io
-
-    from spikeview.cli.main import main
-
+    """``spikeview reconstruct PATH --method METHOD --at AT --transfer linear`` (its defaults otherwise)."""
     dest = out / f"{Path(path).stem}_{method}_{at}.npy"
-    err = io.StringIO()
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
-        rc = main(["reconstruct", path, "--method", method, "--at", str(at), "--transfer", "linear",
-                   "--out", str(dest), "--overwrite", *(extra or [])])
-    if rc != 0:
-        raise RuntimeError(f"spikeview reconstruct {path} --method {method} failed: {err.getvalue().strip()}")
+    _spikeview("reconstruct", path, "--method", method, "--at", str(at), "--transfer", "linear", "--out", str(dest),
+               "--overwrite", *(extra or []))
     return np.squeeze(np.load(dest)).astype(np.float64)
 
 
@@ -123,19 +124,11 @@ def run_low_light(size: int = 256, ticks: int = 400) -> list[dict]:
         t = Path(tmp)
         Image.fromarray(skimage.data.camera()).save(t / "camera.png")
         Image.fromarray(skimage.data.coffee()[:400, 100:500]).save(t / "coffee.png")
-        from spikeview.cli.main import main
-
         for scene, cfa in (("camera", "none"), ("coffee", "RGGB")):
             for rate in LIGHT_LEVELS:
                 cap = t / f"{scene}_{cfa}_{rate}.dat"
-                import contextlib
-                import io
-
-                with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-                    rc = main(["simulate", str(t / f"{scene}.png"), "--ticks", str(ticks), "--cfa", cfa, "--rate", str(rate),
-                               "--width", str(size), "--height", str(size), "--out", str(cap), "--overwrite"])
-                if rc != 0:
-                    raise RuntimeError(f"spikeview simulate {scene} failed")
+                _spikeview("simulate", str(t / f"{scene}.png"), "--ticks", str(ticks), "--cfa", cfa, "--rate", str(rate),
+                           "--width", str(size), "--height", str(size), "--out", str(cap), "--overwrite")
                 g = np.load(str(cap).replace(".dat", ".gt.npz"))
                 at = ticks // 2
                 i = int(np.argmin(np.abs(g["ticks"] - at)))

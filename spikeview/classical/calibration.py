@@ -432,9 +432,7 @@ def attach(source: Any, profile: CameraProfile | str | Path | None) -> Any:
     """``source`` with ``profile`` (or the profile file) as its camera: checked against the capture's geometry, CFA and
     flips (one sentence if it does not match), then carried in ``source.info.camera`` (views of the source keep it)."""
     if profile is None:  # no profile: the capture's own hot photosites (spikeview.classical.defects), when it has any
-        from spikeview.classical.defects import auto_profile
-
-        auto = auto_profile(source)
+        auto = capture_profile(source)
         if auto is not None:
             source.info = source.info.replace(camera=auto)
         return source
@@ -443,6 +441,21 @@ def attach(source: Any, profile: CameraProfile | str | Path | None) -> Any:
     profile.check_source(source.info)
     source.info = source.info.replace(camera=profile)
     return source
+
+
+def capture_profile(source: Any) -> CameraProfile | None:
+    """A profile of the capture's own hot photosites (:func:`spikeview.classical.defects.find_defects`; no dark rate,
+    unit gain) for a capture opened without a camera profile; ``None`` when it has none."""
+    from spikeview.classical.defects import find_defects
+
+    d = find_defects(source)
+    if not d.hot.any():
+        return None
+    info = source.info
+    h, w = d.hot.shape
+    return CameraProfile(w, h, info.cfa, np.zeros((h, w), np.float32), np.ones((h, w), np.float32), d.hot,
+                         flip_vertical=bool(info.flip_vertical), flip_horizontal=bool(info.flip_horizontal),
+                         stats={"source": "capture", "hot_pixels": int(d.hot.sum()), "ticks": d.ticks})
 
 
 def camera_of(source: Any) -> CameraProfile | None:

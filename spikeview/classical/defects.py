@@ -19,8 +19,8 @@ Not found: short bright streaks of a few photosites along an edge (the real ``uh
 edge, 3–6× the rate around them). A rule that took bright clusters near an edge also took scene content (a dark
 coat against a bright sky at a frame's edge), so it is not used.
 
-Where they go (:func:`spikeview.classical.calibration.attach`): a capture opened without a camera profile gets
-its hot photosites as a profile of its own (no dark rate, unit gain), so the one rate correction
+Where they go (:func:`spikeview.classical.calibration.attach`, which reads them through :func:`find_defects`): a
+capture opened without a camera profile gets its hot photosites as a profile of its own (no dark rate, unit gain), so the one rate correction
 (:func:`~spikeview.classical.calibration.correct_rates`) fills them from their neighbours for the classical frames,
 the guided observation (its noise estimate and plan) and the white point alike; the border and edge lines are
 kept out of the white point (:func:`interior`) and named by ``spikeview info``.
@@ -158,17 +158,3 @@ def find_defects(source: Any) -> Defects:
         pass
     return d
 
-
-def auto_profile(source: Any) -> Any:
-    """A :class:`~spikeview.classical.calibration.CameraProfile` of the capture's own hot photosites (no dark rate,
-    unit gain), for a capture opened without a camera profile; ``None`` when it has none."""
-    d = find_defects(source)
-    if not d.hot.any():
-        return None
-    from spikeview.classical.calibration import CameraProfile
-
-    info = source.info
-    h, w = d.hot.shape
-    return CameraProfile(w, h, info.cfa, np.zeros((h, w), np.float32), np.ones((h, w), np.float32), d.hot,
-                         flip_vertical=bool(info.flip_vertical), flip_horizontal=bool(info.flip_horizontal),
-                         stats={"source": "capture", "hot_pixels": int(d.hot.sum()), "ticks": d.ticks})
