@@ -278,3 +278,27 @@ def test_the_fallback_denoises_each_photosite_at_its_own_noise(cfa):
 
     assert rough(mapped, ~left[0]) < 0.9 * rough(flat, ~left[0])
     assert rough(mapped, left[0]) > 1.5 * rough(flat, left[0])
+
+
+@CFAS
+def test_a_dim_pan_is_seen_by_the_whole_frame_and_not_pooled_at_rest(cfa, monkeypatch):
+    """At 0.1–0.4 spikes per photosite a window no tile shows a pan of 2 photosites a window above its noise; the
+    whole frame does (its best velocity against the opposite one): its dim tiles are not held at rest and the support
+    does not grow. A static scene at the same light is not taken for a pan (at rest, any shift matches it ~10 % better
+    than none: the test never compares with zero)."""
+    rng = np.random.default_rng(7)
+    tex = gaussian_filter(rng.random((260, 280)), 3.0)
+    tex = 0.005 + 0.04 * (tex - tex.min()) / (tex.max() - tex.min())  # 0.05–0.45 spikes a 10-tick window
+
+    def capture(dx):
+        out = np.zeros((9 * WINDOW, 192, 192), np.uint8)
+        for k in range(9):
+            r = tex[20:212, 40 - k * dx:232 - k * dx]
+            for t in range(WINDOW):
+                out[k * WINDOW + t] = rng.random((192, 192)) < r
+        return ArraySource(out, cfa=cfa)
+
+    _, moving = _pool(capture(2))
+    assert "the frame pans" in moving.reason and not moving.extended, moving.reason
+    _, still = _pool(capture(0))
+    assert "pans" not in still.reason, still.reason

@@ -287,7 +287,7 @@ def _velocity_grid(radius: int, max_speed: float) -> list[tuple[float, float]]:
 
 def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, curve: tuple[np.ndarray, np.ndarray],
                     kernel_energy: float, radius: int, max_speed: float = MAX_SPEED, cap: float = np.inf,
-                    factors: dict[int, float] | None = None) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+                    factors: dict[int, float] | None = None) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray], dict]:
     """Per tile, one constant velocity ``v`` (guide pixels per window) for all neighbours, by exhaustive search.
 
     Candidates: ``v`` on a grid of step ``1/radius`` within ``±max_speed`` guide pixels per window;
@@ -299,9 +299,9 @@ def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, cu
     (:func:`_move_cost`), so that a static or flat tile keeps ``v = 0`` unless motion explains the data clearly better.
 
     Returns:
-        ``(shifts, chi)``: per offset ``k``, ``(ty, tx, 2)`` int ``(dy, dx)`` in guide pixels (content
+        ``(shifts, chi, frame)``: per offset ``k``, ``(ty, tx, 2)`` int ``(dy, dx)`` in guide pixels (content
         at ``(y, x)`` of the centre window is at ``(y + dy, x + dx)`` of window ``k``) and the ``(ty, tx)``
-        normalised SSD of that shift.
+        normalised SSD of that shift; ``frame``: velocity → the whole frame's mean cost (without the penalty).
     """
     ks = sorted(guides)
     grid = _velocity_grid(radius, max_speed)
@@ -319,8 +319,10 @@ def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, cu
         return memo[key]
 
     best_cost = best_v = None
+    frame: dict[tuple[float, float], float] = {}  # the whole frame's mean cost of each velocity (_global_motion)
     for vy, vx in grid:
         cost = sum(chi(k, int(round(k * vy)), int(round(k * vx))) for k in ks) / len(ks)
+        frame[(vy, vx)] = float(cost.mean())
         cost = cost + SHIFT_PENALTY * float(np.hypot(vy, vx))
         if best_cost is None:
             best_cost = cost
@@ -339,7 +341,7 @@ def estimate_motion(g0: np.ndarray, guides: dict[int, np.ndarray], tile: int, cu
             sel = (sh[..., 0] == dy) & (sh[..., 1] == dx)
             c[sel] = chi(k, dy, dx)[sel]
         shifts[k], chis[k] = sh, c
-    return shifts, chis
+    return shifts, chis, frame
 
 
 def match_quality(raw0: np.ndarray, rawk: np.ndarray, shifts: np.ndarray, tile: int, noise: float, cap: float,
@@ -410,6 +412,9 @@ def _noise_scale(chi_at_rest: np.ndarray, model: float, tile_g: int) -> float:
 #: ones) until its pooled count reaches :data:`LOW_LIGHT_COUNT` spikes per photosite, up to this many windows on
 #: each side (±16 windows of 10 ticks = 33 windows, 16.5 ms at 20 kHz)
 LOW_LIGHT_RADIUS = 16
+#: the mean of one side's extension windows must match the core (the centre and the ±radius windows) within this
+#: (normalised SSD of the tile's super-pixels): slow motion no single window shows accumulates past it
+SIDE_CHI = 1.5
 #: spikes per photosite a static tile's pooled count should reach before the pooling stops growing (10 spikes:
 #: a relative noise of ~0.3/√10 ≈ 0.1 at the dispersion of a dark real pixel, κ ≈ 0.5–0.7)
 LOW_LIGHT_COUNT = 10.0
@@ -475,10 +480,10 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     chi0 = {k: match_quality(raw0, raws[k], zero_g, tile_g, 1.0, cap, curve) for k in offsets}
     factors = {k: _noise_scale(chi0[k], ADJACENT_DISPERSION if abs(k) == 1 else 1.0, tile_g) for k in offsets}
     if getattr(device, "type", "cpu") != "cpu" or TORCH_ON_CPU:  # a resolved torch.device (Observation.from_source)
-        motion, chis = _search_torch(raw0, g0, raws, guides, window, radius, curve, kernel_energy, factors,
-                                     device if device is not None else "cpu")
+        motion, chis, frame = _search_torch(raw0, g0, raws, guides, window, radius, curve, kernel_energy, factors,
+                                            device if device is not None else "cpu")
     else:
-        motion, _ = estimate_motion(g0, guides, tile_g, curve, kernel_energy, radius, MAX_SPEED / f, cap, factors)
+        motion, _, frame = estimate_motion(g0, guides, tile_g, curve, kernel_energy, radius, MAX_SPEED / f, cap, factors)
         chis = {k: match_quality(raw0, raws[k], motion[k], tile_g, factors[k], cap, curve) for k in offsets}
     # at rest: where the search found no motion, and on a dim tile (DIM_COUNT) wherever the raw counts' mean match
     # at zero shift is within REST_CHI (a real capture's darkest tiles, 0.2 spikes a window, match at rest at 1.5–2.1
@@ -487,7 +492,9 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     rest_cost = np.mean([chi0[k] for k in offsets], axis=0)
     dim = _tile_sum(raw0, tile_g) / (4.0 * tile_g * tile_g) < DIM_COUNT  # spikes per photosite in the own window
     searched = np.logical_and.reduce([np.all(motion[k] == 0, axis=-1) for k in offsets])
-    at_rest = searched | ((rest_cost <= REST_CHI) & dim)
+    pan = _global_motion(raw0, raws, frame, factors, tile_g, cap, curve)
+    # a panning frame's dim tiles keep their own search (held at rest, a pan's dim tiles were blurred)
+    at_rest = searched | ((rest_cost <= REST_CHI) & dim) if pan is None else searched
     for k in offsets:
         motion[k] = np.where(at_rest[..., None], 0, motion[k])
         chis[k] = np.where(at_rest, chi0[k], chis[k])
@@ -541,13 +548,49 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
             pooled += weight
     # low light: static tiles go on pooling at rest beyond ±radius while their pooled count is low
     far = max(abs(k) for k in offsets)
-    ext = _extend_at_rest(source, a, b, cfa, cache, total, pooled, chain, at_rest, curve, cap, tile_g, pixel_ok,
-                          far, radius, accepted, max(factors[k] for k in offsets if abs(k) == far))
+    ext: tuple[int, ...] = ()
+    if pan is None:  # a panning frame does not grow its support at rest
+        ext = _extend_at_rest(source, a, b, cfa, cache, total, pooled, chain, at_rest, curve, cap, tile_g, pixel_ok,
+                              far, radius, accepted, max(factors[k] for k in offsets if abs(k) == far))
     for k in ext:
         shifts[k] = np.zeros((th, tw, 2), np.int64)
     pool = Pooling(radius, window, offsets, (window * (1.0 + pooled)).astype(np.float32), shifts, accepted, extended=ext)
     pool.kind, pool.reason = describe(pool)
+    if pan is not None:
+        pool.reason += (f"; the frame pans (about {f * pan[0]:+.2g}, {f * pan[1]:+.2g} photosites a window, y, x): its dim "
+                        "tiles are not held at rest and the support does not grow")
     return total, pool
+
+
+#: a frame pans when its best velocity matches better than the opposite one by this many standard deviations of
+#: that comparison (:func:`_global_motion`)
+PAN_Z = 4.0
+
+
+def _global_motion(raw0: np.ndarray, raws: dict[int, np.ndarray], frame: dict[tuple[float, float], float],
+                   factors: dict[int, float], tile_g: int, cap: float,
+                   curve: tuple[np.ndarray, np.ndarray]) -> tuple[float, float] | None:
+    """The frame's common velocity (guide pixels per window) when it pans, else ``None``.
+
+    ``frame``: the search's cost of each velocity (smoothed guides) averaged over the whole frame. Its best velocity
+    ``v`` other than zero is tested against ``−v``: a static scene matches both alike, a pan matches ``v`` clearly
+    better (:data:`PAN_Z` standard deviations of the difference, ``sqrt(4 / (n_eff · tiles · neighbours))`` relative,
+    ``n_eff`` = a smoothed tile's independent values ≈ 5). Zero itself is not compared: an integrate-and-fire photosite's
+    counts in two windows correlate with each other, not with a neighbour's, so at low light any shift matches a
+    static scene ~10 % better than none (the velocity search's spurious motion in the dark). In low light no tile
+    alone shows a pan of a photosite a window above its noise; the whole frame does, and its dim tiles are then not
+    held at rest (nor pooled over a growing support: a blur). The velocity is only as fine as the search's grid."""
+    moving = {v: c for v, c in frame.items() if v != (0.0, 0.0)}
+    if not moving:
+        return None
+    vy, vx = min(moving, key=moving.get)
+    back = frame.get((-vy, -vx))
+    if back is None:
+        return None
+    tiles = -(-raw0.shape[0] // tile_g) * -(-raw0.shape[1] // tile_g)
+    n_eff = max(1.0, tile_g * tile_g / (4.0 * np.pi * SMOOTH ** 2))  # a smoothed tile's independent values
+    margin = PAN_Z * float(np.sqrt(4.0 / (n_eff * tiles * max(1, len(raws)))))
+    return (vy, vx) if moving[(vy, vx)] < back * (1.0 - margin) else None
 
 
 def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowCache, total: np.ndarray,
@@ -570,6 +613,13 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
     out: list[int] = []
     if reached < radius:  # the capture's edge already cut the ±radius windows: nothing beyond them either
         return ()
+    # the core (the centre and what the ±radius stage pooled), frozen: each side's extension, as a whole, is compared
+    # with it too, so slow motion that no single window shows above its noise is caught as it accumulates
+    core_t, core_n = _guide_raw(total, cfa), _guide_raw(1.0 + pooled, cfa)
+    core = 4.0 * core_t / np.maximum(core_n, 1.0)
+    core_var = _countvar(core, cap, curve) * 4.0 / np.maximum(core_n, 1.0)
+    side_t = {-1: np.zeros_like(total), 1: np.zeros_like(total)}
+    side_n = {-1: np.zeros_like(total), 1: np.zeros_like(total)}
     for d in range(reached + 1, LOW_LIGHT_RADIUS + 1):
         need_tile = _tile_sum(total, TILE) < LOW_LIGHT_COUNT * _tile_sum(np.ones_like(total), TILE)
         need = need_tile[ty_of][:, tx_of] & rest_px
@@ -591,12 +641,21 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
             var = _countvar(ref, cap, curve) * 4.0 / np.maximum(pn, 1.0) + _countvar(rk, cap, curve)
             dd = ref - rk
             chi = _tile_sum(dd * dd, tile_g) / (factor * _tile_sum(var, tile_g) + 1e-6)
-            ok_tile = _fit_tiles(chi <= REST_CHI, th, tw)[ty_of][:, tx_of]
+            # the side as a whole (its accepted windows and this one, where the photosite is a candidate) against the core
+            st_, sn_ = _guide_raw(side_t[side] + np.where(cand, nk, 0.0), cfa), _guide_raw(side_n[side] + cand, cfa)
+            has = sn_ > 0
+            sm = 4.0 * st_ / np.maximum(sn_, 1.0)
+            dv = np.where(has, core - sm, 0.0)
+            vv = np.where(has, core_var + _countvar(sm, cap, curve) * 4.0 / np.maximum(sn_, 1.0), 0.0)
+            chi_side = _tile_sum(dv * dv, tile_g) / (factor * _tile_sum(vv, tile_g) + 1e-6)
+            ok_tile = _fit_tiles((chi <= REST_CHI) & (chi_side <= SIDE_CHI), th, tw)[ty_of][:, tx_of]
             weight = cand & ok_tile & pixel_ok(_box_same_colour(nk, cfa), factor)
             chain[side] = weight
             if weight.any():
                 oks[k] = (weight, nk)
                 accepted[k] = _tile_sum(weight.astype(np.float32), TILE) > 0
+                side_t[side] += np.where(weight, nk, 0.0).astype(np.float32)
+                side_n[side] += weight
         for k, (weight, nk) in oks.items():
             total += np.where(weight, nk, 0.0).astype(np.float32)
             pooled += weight
@@ -608,13 +667,13 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
 
 def _search_torch(raw0: np.ndarray, g0: np.ndarray, raws: dict[int, np.ndarray], guides: dict[int, np.ndarray],
                   window: int, radius: int, curve: tuple[np.ndarray, np.ndarray], kernel_energy: float,
-                  factors: dict[int, float], device: Any) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+                  factors: dict[int, float], device: Any) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray], dict]:
     """:func:`estimate_motion` and :func:`match_quality` in torch on ``device`` (a GPU; tests run it on the CPU).
 
     The per-tile normalised SSD of every candidate shift of every neighbour at once (float64 tile sums; the
     variances are :func:`_countvar`'s, computed on the CPU), the velocity search with its speed penalty (the
     first minimum in the same grid order), then the match test on the unsmoothed counts at the chosen shifts.
-    Returns ``(shifts, chis)`` as numpy, as the numpy pair does.
+    Returns ``(shifts, chis, frame)`` as numpy, as the numpy pair does.
     """
     import torch
     import torch.nn.functional as F
@@ -668,6 +727,8 @@ def _search_torch(raw0: np.ndarray, g0: np.ndarray, raws: dict[int, np.ndarray],
     assert cost is not None
     pen = torch.tensor([SHIFT_PENALTY * float(np.hypot(vy, vx)) for vy, vx in grid], dtype=torch.float64, device=dev)
     cost = cost / len(ks) + pen[:, None, None]
+    frame_t = (cost - pen[:, None, None]).mean(dim=(1, 2)).cpu().numpy()
+    frame = {v: float(c) for v, c in zip(grid, frame_t)}
     best = torch.argmin(cost, dim=0)  # the first minimum, as the numpy search's strict "<" keeps
     vel = torch.tensor(grid, dtype=torch.float64, device=dev)[best]  # (th, tw, 2)
     motion: dict[int, np.ndarray] = {}
@@ -679,7 +740,7 @@ def _search_torch(raw0: np.ndarray, g0: np.ndarray, raws: dict[int, np.ndarray],
         raw_chi = chi_all(raw0, raws[k], cand[k], factors[k])
         motion[k] = sh.cpu().numpy().astype(np.int64)
         chis[k] = torch.gather(raw_chi, 0, sel[None]).squeeze(0).cpu().numpy()
-    return motion, chis
+    return motion, chis, frame
 
 
 def describe(pool: Pooling) -> tuple[str, str]:
