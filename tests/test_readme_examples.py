@@ -91,6 +91,10 @@ def make_inputs(folder: Path) -> list[Path]:
         inputs.append(write_plain(folder / f"{name}.dat", rng.random((100, 64, 64), dtype=np.float32) < level, cfa="BGGR"))
         inputs.append(folder / f"{name}.dat.toml")
     inputs.append(write_raw1m(folder / "recording.raw", rng.random((2, 1000, 1000)) < 0.2, sidecar=False))
+    real = folder / "tests" / "data" / "uhsr.npz"  # the real dark capture the README names (README: dark and real)
+    real.parent.mkdir(parents=True)
+    real.write_bytes((Path(__file__).parent / "data" / "uhsr.npz").read_bytes())
+    inputs.append(real)
     inputs.append(write_array(folder / "spikes.npz", (rng.random((40, 16, 24)) < 0.3).transpose(1, 2, 0),
                               sidecar=False))
 
