@@ -33,7 +33,9 @@ EPILOG = (
 
 
 def add_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("input", metavar="INPUT", help="spike file (.dat, raw camera stream, .npy/.npz)")
+    p.add_argument("input", metavar="INPUT", nargs="+",
+                   help="spike file (.dat, raw camera stream, .npy/.npz); several files, or a folder of captures, are "
+                        "reconstructed one after another with the same settings, one output each (--out then names a folder)")
     when = p.add_mutually_exclusive_group()
     when.add_argument("--at", type=int, metavar="T", help="reconstruct the one window centred on tick T")
     when.add_argument("--range", metavar="A:B[:STEP]",
@@ -108,7 +110,69 @@ def default_out(args: argparse.Namespace, recipe: Recipe) -> Path:
     return out
 
 
+#: what a folder given as INPUT contributes: its spike captures (not sidecars, ground truth or outputs)
+CAPTURE_SUFFIXES = (".dat", ".npy", ".npz", ".raw", ".bin")
+
+
+def _inputs(names: list[str]) -> list[Path]:
+    """The captures ``names`` list: files as given, a folder's captures (sorted; not its ``.gt.npz`` ground truths)."""
+    from spikeview.errors import ParameterError
+
+    out: list[Path] = []
+    for n in names:
+        p = Path(n)
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in CAPTURE_SUFFIXES
+                           and not q.name.endswith((".gt.npz",)) and not q.name.endswith(".preset.npz"))
+            if not found:
+                raise ParameterError(f"{n}: the folder holds no spike capture ({', '.join(CAPTURE_SUFFIXES)}); name the files instead.")
+            out += found
+        else:
+            out.append(p)
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
+    """One capture, or several one after another (one output each; a failed one is said and the others still run)."""
+    import copy
+
+    from spikeview.errors import ParameterError, SpikeviewError
+
+    names = args.input if isinstance(args.input, list) else [args.input]
+    if len(names) == 1 and not Path(names[0]).is_dir():
+        args.input = names[0]
+        return _run_one(args)
+    inputs = _inputs(names)
+    folder = None
+    if args.out is not None:
+        folder = Path(args.out)
+        if not folder.is_dir():
+            raise ParameterError(f"--out {args.out}: with several inputs --out names an existing folder for their outputs "
+                                 "(each takes its input's name); create it first.")
+    if batch.wants_zarr(args):
+        raise ParameterError("a .zarr store takes one input; run the inputs one by one.")
+    failed = 0
+    for i, path in enumerate(inputs, 1):
+        one = copy.copy(args)
+        one.input = str(path)
+        one.out = None
+        print(f"[{i}/{len(inputs)}] {path}", file=sys.stderr)
+        try:
+            if folder is not None:
+                name = default_out(one, recipe_from_args(one)).name
+                one.out = str(folder / name)
+            _run_one(one)
+        except SpikeviewError as e:
+            failed += 1
+            msg = str(e)
+            print(f"spikeview: error: {msg if str(path) in msg else f'{path}: {msg}'}", file=sys.stderr)
+    if failed:
+        print(f"spikeview: {failed} of {len(inputs)} inputs failed (said above); the others were written.", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _run_one(args: argparse.Namespace) -> int:
     chosen = args.out is None
     recipe = recipe_from_args(args) if chosen else None
     if chosen:
