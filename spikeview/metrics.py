@@ -179,17 +179,23 @@ def detail_kept(x: np.ndarray, ref: np.ndarray) -> float:
     return float((ba * bb).sum() / norm) if norm > 0 else 0.0
 
 
-def patchiness(x: np.ndarray, ref: np.ndarray | None = None, tile: int = 16, flat: float = 0.5) -> float:
+def patchiness(x: np.ndarray, ref: np.ndarray | None = None, tile: int = 16, flat: float = 0.5,
+               truth: bool = False) -> float:
     """Unevenness of the denoising: over the flat ``tile``×``tile`` tiles, the 95th percentile of the high-pass
-    residual's spread (the image minus its Gaussian σ = 2 blur, luminance) divided by its median. ~1 means
-    evenly denoised; patches of raw noise left in a smooth frame make it large. Flat tiles: the ``flat`` fraction
-    of tiles with the least band-pass energy in ``ref`` (the truth, or the capture's long exposure), or in ``x``
-    itself without one."""
+    residual's spread divided by its median (luminance; high-pass = the image minus its Gaussian σ = 2 blur). ~1
+    means evenly denoised; patches of raw noise left in a smooth frame make it large. Flat tiles: the ``flat``
+    fraction of tiles with the least band-pass energy in ``ref`` (the truth, or a capture's long exposure), or in
+    ``x`` itself without one. ``truth``: ``ref`` is the clean truth, and the residual is that of the error
+    ``g·x − ref`` (one global gain ``g``): the scene's own texture then cancels and only what the reconstruction
+    left (noise, patches) is measured; otherwise the residual is ``x``'s own (a clean frame's texture counts)."""
     from scipy.ndimage import gaussian_filter
 
     a = _gray(x)
     r = a if ref is None else _gray(ref)
     _check(a, r, 1.0)
+    if truth and ref is not None:
+        den = float((a * a).sum())
+        a = a * (float((a * r).sum()) / den if den > 0 else 1.0) - r
     hp = a - gaussian_filter(a, 2.0)
     br = np.abs(gaussian_filter(r, 1.0) - gaussian_filter(r, 4.0))
     h, w = a.shape

@@ -43,6 +43,13 @@ def test_patchiness_finds_a_patch_of_raw_noise_in_an_even_frame():
     patchy[32:64, 32:80] += rng.normal(0, 0.2, (32, 48))  # 6 of 64 tiles: raw noise left in a smooth frame
     assert patchiness(even, flat) < 1.6
     assert patchiness(patchy, flat) > 3.0
+    # against the truth, a textured scene reconstructed cleanly is even: its texture cancels in the error
+    truth = 0.2 + 0.6 * _scene(128)
+    clean = truth + rng.normal(0, 0.01, truth.shape)
+    assert patchiness(clean, truth, truth=True) < 1.6
+    blotchy = clean.copy()
+    blotchy[:48, :64] += rng.normal(0, 0.08, (48, 64))
+    assert patchiness(blotchy, truth, truth=True) > 3.0
 
 
 @pytest.mark.skipif(not REAL.exists(), reason="tests/data/uhsr.npz is missing")

@@ -15,7 +15,8 @@ Methods: TFP-10 (the window alone), TFI, and the guided default.
   of the frame with the reference's. A blur and noise both lower it; on the simulated scenes it ranks the truth
   first (1 by definition) and, at low light, TFI and the guided frame above TFP.
 * ``patchiness``: :func:`~spikeview.metrics.patchiness`, the unevenness of the residual noise over the flat tiles
-  (95th percentile over median of the high-pass spread; ~1 = evenly denoised).
+  (95th percentile over median of the high-pass spread; ~1 = evenly denoised): of the error against the truth on
+  simulated scenes (the scene's texture cancels), of the frame itself on real captures.
 * ``noise``: a no-reference residual noise level, the robust (MAD) σ of the finest diagonal Haar detail of the
   frame, in /255 of its white (the 99.5th percentile): what is left to see in a smooth region.
 * with truth: PSNR after ONE global gain (:func:`~spikeview.metrics.colour_scores`), the frame against the
@@ -80,7 +81,7 @@ def score_frame(x: np.ndarray, ref: np.ndarray, truth: bool) -> dict[str, float]
     from spikeview.metrics import colour_scores, detail_kept, patchiness
 
     r = ref / max(float(np.quantile(ref, 0.999)), 1e-9)
-    out = {"detail": detail_kept(x, r), "patchiness": patchiness(x, r), "noise": residual_noise(x)}
+    out = {"detail": detail_kept(x, r), "patchiness": patchiness(x, r, truth=truth), "noise": residual_noise(x)}
     if truth:
         out["psnr"] = colour_scores(x, np.clip(r, 0.0, 1.0) if x.ndim == r.ndim else np.clip(r.mean(axis=-1), 0, 1))["psnr_1gain"]
     return out
