@@ -45,6 +45,8 @@ import numpy as np
 METHODS = ("tfp", "tfi", "guided")
 #: simulated light levels (mean spikes per tick of a mid-gray) of ``--low-light``
 LIGHT_LEVELS = (0.02, 0.05, 0.3)
+#: ... and pans (pixels per second at 20 kHz: 400 = 0.2 px a 10-tick window, slow; 2000 = 1 px a window) at 0.03
+PANS = (400.0, 2000.0)
 
 
 def residual_noise(x: np.ndarray) -> float:
@@ -116,7 +118,8 @@ def run_real(files: list[str]) -> list[dict]:
 
 
 def run_low_light(size: int = 256, ticks: int = 400) -> list[dict]:
-    """Static simulated scenes (camera mono, coffee RGGB) at :data:`LIGHT_LEVELS`, scored against their truth."""
+    """Simulated scenes (camera mono, coffee RGGB), static at :data:`LIGHT_LEVELS` and panning (:data:`PANS`) at
+    0.03 spikes per tick, scored against their truth."""
     import skimage.data
     from PIL import Image
 
@@ -125,20 +128,23 @@ def run_low_light(size: int = 256, ticks: int = 400) -> list[dict]:
         t = Path(tmp)
         Image.fromarray(skimage.data.camera()).save(t / "camera.png")
         Image.fromarray(skimage.data.coffee()[:400, 100:500]).save(t / "coffee.png")
-        for scene, cfa in (("camera", "none"), ("coffee", "RGGB")):
-            for rate in LIGHT_LEVELS:
-                cap = t / f"{scene}_{cfa}_{rate}.dat"
-                _spikeview("simulate", str(t / f"{scene}.png"), "--ticks", str(ticks), "--cfa", cfa, "--rate", str(rate),
-                           "--width", str(size), "--height", str(size), "--out", str(cap), "--overwrite")
-                g = np.load(str(cap).replace(".dat", ".gt.npz"))
-                at = ticks // 2
-                i = int(np.argmin(np.abs(g["ticks"] - at)))
-                truth = g["frames"][i].astype(np.float64)
-                truth = truth.mean(axis=-1) if cfa == "none" else truth
-                for m in METHODS:
-                    x = _reconstruct(str(cap), m, at, t)
-                    rows.append({"capture": f"{scene} {cfa} {rate:g}/tick", "tick": at, "method": m,
-                                 **score_frame(x, truth, True)})
+        runs = [(scene, cfa, rate, 0.0) for scene, cfa in (("camera", "none"), ("coffee", "RGGB")) for rate in LIGHT_LEVELS]
+        runs += [(scene, cfa, 0.03, pan) for pan in PANS for scene, cfa in (("camera", "none"), ("coffee", "RGGB"))]
+        for scene, cfa, rate, pan in runs:
+            cap = t / f"{scene}_{cfa}_{rate}_{pan:g}.dat"
+            _spikeview("simulate", str(t / f"{scene}.png"), "--ticks", str(ticks), "--cfa", cfa, "--rate", str(rate),
+                       "--width", str(size), "--height", str(size), "--pan", f"{pan:g}", "0", "--out", str(cap),
+                       "--overwrite")
+            g = np.load(str(cap).replace(".dat", ".gt.npz"))
+            at = ticks // 2
+            i = int(np.argmin(np.abs(g["ticks"] - at)))
+            truth = g["frames"][i].astype(np.float64)
+            truth = truth.mean(axis=-1) if cfa == "none" else truth
+            for m in METHODS:
+                x = _reconstruct(str(cap), m, at, t)
+                moving = f", pan {pan / 20000:g} px/tick" if pan else ""
+                rows.append({"capture": f"{scene} {cfa} {rate:g}/tick{moving}", "tick": at, "method": m,
+                             **score_frame(x, truth, True)})
     return rows
 
 

@@ -44,6 +44,8 @@ def run(args: argparse.Namespace) -> int:
 def _lowlight(args: argparse.Namespace) -> int:
     from spikeview.bench.lowlight import report, run_low_light, run_real
 
+    if args.out and not Path(args.out).is_dir():
+        raise ParameterError(f"--out {args.out}: folder not found; create it first.")
     text = []
     if args.real:
         for f in args.real:
@@ -55,7 +57,19 @@ def _lowlight(args: argparse.Namespace) -> int:
     out = "\n\n".join(text)
     print(out)
     if args.out:
-        if not Path(args.out).is_dir():
-            raise ParameterError(f"--out {args.out}: folder not found; create it first.")
+        import os
+        import platform
+
+        from spikeview.bench.lowlight import __doc__ as how
+        from spikeview.guided.device import cpu_model
+        from spikeview.guided.precision import cpu_flags
+
+        flags = " ".join(f for f in ("avx2", "avx512f", "avx512_bf16", "amx_bf16") if f in cpu_flags()) or "no avx2"
+        head = ("# Low light and real captures: scores a blur cannot win\n\n"
+                f"Machine: {cpu_model()} ({flags}), {os.cpu_count()} CPU cores, Python {platform.python_version()}. "
+                f"Command: `spikeview bench{' --low-light' if args.low_light else ''}"
+                f"{' --real ' + ' '.join(Path(f).name for f in args.real) if args.real else ''} --out DIR`.\n\n"
+                + "**What runs" + how.split("**What runs", 1)[1].strip() + "\n\n")
+        out = head + out
         (Path(args.out) / "lowlight.md").write_text(out + "\n", encoding="utf-8")
     return 0
