@@ -73,6 +73,12 @@ def run_zarr(args: argparse.Namespace, *, cancel=None, client=None, reports: lis
     require_extra()
     from spikeview.cluster.reconstruct import reconstruct_to_store, store_recipe
 
+    if isinstance(args.input, list):  # `reconstruct` takes several inputs; a store takes one
+        if len(args.input) != 1:
+            from spikeview.errors import ParameterError
+
+            raise ParameterError("a .zarr store takes one input; run the inputs one by one.")
+        args.input = args.input[0]
     out = Path(args.out).absolute()
     base = None
     if not getattr(args, "preset", None) and args.resume:
