@@ -17,8 +17,8 @@ Methods: TFP-10 (the window alone), TFI, and the guided default.
 * ``patchiness``: :func:`~spikeview.metrics.patchiness`, the unevenness of the residual noise over the flat tiles
   (95th percentile over median of the high-pass spread; ~1 = evenly denoised): of the error against the truth on
   simulated scenes (the scene's texture cancels), of the frame itself on real captures.
-* ``noise``: a no-reference residual noise level, the robust (MAD) σ of the finest diagonal Haar detail of the
-  frame, in /255 of its white (the 99.5th percentile): what is left to see in a smooth region.
+* ``noise``: a no-reference residual noise level, the RMS of the finest diagonal Haar detail of the frame, in
+  /255 of its white (the 99.5th percentile): what is left to see in a smooth region.
 * with truth: PSNR after ONE global gain (:func:`~spikeview.metrics.colour_scores`), the frame against the
   clean linear frame at the window's centre.
 
@@ -50,15 +50,16 @@ PANS = (400.0, 2000.0)
 
 
 def residual_noise(x: np.ndarray) -> float:
-    """Robust σ (MAD / 0.6745) of the finest diagonal Haar detail of ``x`` (luminance), in /255 of its 99.5th
-    percentile: a no-reference estimate of the noise left in a frame."""
+    """RMS of the finest diagonal Haar detail of ``x`` (luminance), in /255 of its 99.5th percentile: a no-reference
+    estimate of the noise left in a frame (the finest diagonal detail of a natural image is mostly noise; a robust
+    median would read 0 on a sparse frame of isolated spikes)."""
     a = np.asarray(x, dtype=np.float64)
     a = a.mean(axis=-1) if a.ndim == 3 else a
     h2, w2 = (a.shape[0] // 2) * 2, (a.shape[1] // 2) * 2
     p = a[:h2, :w2]
     hh = (p[0::2, 0::2] - p[0::2, 1::2] - p[1::2, 0::2] + p[1::2, 1::2]) / 2.0
     white = float(np.quantile(a, 0.995))
-    return 255.0 * float(np.median(np.abs(hh))) / 0.6745 / max(white, 1e-9)
+    return 255.0 * float(np.sqrt(np.mean(hh * hh))) / max(white, 1e-9)
 
 
 def _spikeview(*argv: str) -> None:
