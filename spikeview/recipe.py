@@ -188,6 +188,18 @@ def _params() -> tuple[Param, ...]:
 PARAMS: tuple[Param, ...] = _params()
 
 BY_PATH: dict[str, Param] = {p.path: p for p in PARAMS}
+
+#: parameters the app has no control for, with the reason; the app reads them from a preset (File ▸ Load preset…)
+#: and writes them into the presets and exports it makes, so they are not lost. The README's table says so, and a
+#: test holds every other app parameter to a control of the app.
+PRESET_ONLY: dict[str, str] = {
+    "classical.tfi_half_window": "the TFI's interval search, a property of the method more than of a capture",
+    "guided.lam": "the HQS data step's weight, tuned once on the bench (the guidance weight s is the app's knob)",
+    "guided.sigma_scale": "the noise the prior is told, tuned once on the bench",
+    "guided.warm_start": "acts on sequences (exports and ranges), not on the single window the app's Run samples",
+    "guided.tile": "memory and speed of large frames; the plan's tiles row and the Tiles overlay show what it did",
+    "export.gamma": "the γ of the Gamma display curve, whose choice is the app's Display curve control",
+}
 BY_KEY: dict[str, Param] = {p.key: p for p in PARAMS if p.key}
 BY_FLAG: dict[str, Param] = {p.flag: p for p in PARAMS if p.flag}
 
@@ -370,7 +382,8 @@ def help_rows() -> list[tuple[str, str, str, str]]:
         shown = "the plan decides" if d is None and p.kind() is bool else ("unset" if d is None else (
             ("on" if d else "off") if isinstance(d, bool) else f"{d:.4g}" if isinstance(d, float) else str(d)))
         unit = f" {p.unit}" if p.unit and d is not None and not isinstance(d, str) and p.unit != "of full scale" else ""
-        rows.append((p.path, p.flag or "—", p.label if p.key else "—", f"{p.help} Default: {shown}{unit}."))
+        label = f"— (preset only: {PRESET_ONLY[p.path]})" if p.path in PRESET_ONLY else (p.label if p.key else "—")
+        rows.append((p.path, p.flag or "—", label, f"{p.help} Default: {shown}{unit}."))
     return rows
 
 

@@ -265,3 +265,25 @@ def test_the_apps_guided_metrics_compare_like_with_like():
     res = jobs.guided_job(jobs.GuidedRequest(st.source, 60, dict(s.params), alpha, None, st.ground_truth, 1, s.recipe()),
                           Ctx())
     assert res.psnr > 20.0 and res.ssim > 0.6, (res.psnr, res.ssim)
+
+
+def test_every_app_parameter_has_a_control_or_says_it_is_preset_only():
+    """Issue 27: a parameter the app holds has a control in a panel (a Param widget or the weights field), or is
+    listed in recipe.PRESET_ONLY with its reason, which the README's table prints."""
+    import pathlib
+    import re
+
+    from spikeview.recipe import PARAMS, PRESET_ONLY, markdown_table
+
+    gui = "\n".join(p.read_text(encoding="utf-8") for p in pathlib.Path(__file__).parents[1].joinpath("spikeview", "gui").rglob("*.py"))
+    missing = []
+    for p in PARAMS:
+        if not p.key or p.path in PRESET_ONLY:
+            continue
+        widget = re.search(r'Param\w*\(\s*(?:self\.)?session,\s*"' + re.escape(p.key) + '"', gui)
+        if not widget and not re.search(r'session\.set\("' + re.escape(p.key) + '"', gui):
+            missing.append(p.path)
+    assert missing == [], f"app parameters without a control and not marked preset-only: {missing}"
+    table = markdown_table()
+    for path, why in PRESET_ONLY.items():
+        assert f"preset only: {why}" in table and any(q.path == path for q in PARAMS)
