@@ -227,14 +227,16 @@ class WindowPlan:
 
 
 def plan_window(source: Any, recipe: Recipe, at: int, *, state: SequenceState | None = None,
-                roi: tuple[int, int, int, int] | None = None, precision: str | None = None) -> WindowPlan:
+                roi: tuple[int, int, int, int] | None = None, precision: str | None = None,
+                reuse: Any = None) -> WindowPlan:
     """The one place a front end turns a capture, its recipe and a centre tick (and a region of interest) into the
     guided window's observation, plan, knob status and sampler settings (:class:`WindowPlan`).
 
     The CLI (its printed plan and notes), the app's preview and guided jobs and the benchmark call it; the guided
     sequence itself plans each window with :func:`spikeview.guided.window.observe_window`, which this wraps.
     ``precision`` overrides ``guided.precision`` in the plan's settings (the CLI shows ``auto`` as given while the
-    recipe records what it resolved to).
+    recipe records what it resolved to). ``reuse``: an earlier :attr:`WindowPlan.whole` of this source, used when it
+    is the observation these settings build (:func:`spikeview.guided.window.observe_window`).
     """
     from spikeview.guided.knobs import knob_status
     from spikeview.guided.window import observe_window
@@ -243,7 +245,7 @@ def plan_window(source: Any, recipe: Recipe, at: int, *, state: SequenceState | 
     params = sampler_params(recipe, state)
     if precision is not None:
         params = params.replace(precision=precision)
-    w = observe_window(source, at, params, state.alpha, roi=roi)
+    w = observe_window(source, at, params, state.alpha, roi=roi, reuse=reuse)
     return WindowPlan(state, params, w.whole, w.obs, w.plan, knob_status(params, w.plan))
 
 

@@ -23,7 +23,7 @@ def test_the_printed_plan_s_observation_is_the_run_s(tmp_path, capsys, count_obs
 
     count_observations.clear()
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(video, "_same_window", lambda *a: False)
+        mp.setattr(video, "same_window", lambda *a: False)
         assert main(["reconstruct", str(dat), *common, "--range", "40:70:10", "--out", str(tmp_path / "b.npy")]) == 0
     assert count_observations == [40, 40, 50, 60]
     assert np.array_equal(np.load(tmp_path / "r.npy"), np.load(tmp_path / "b.npy"))
@@ -31,7 +31,7 @@ def test_the_printed_plan_s_observation_is_the_run_s(tmp_path, capsys, count_obs
 
 def test_an_observation_of_other_settings_is_not_reused():
     from spikeview.guided.config import GuidedConfig
-    from spikeview.guided.video import _same_window
+    from spikeview.guided.window import same_window as _same_window
     from spikeview.sim import SimConfig, demo_scene, simulate
 
     for cfa in ("RGGB", None):

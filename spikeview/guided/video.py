@@ -33,7 +33,7 @@ from spikeview.guided.observation import Observation
 from spikeview.guided.plan import BLOCK, make_plan
 from spikeview.guided.sampler import GuidedSampler
 from spikeview.guided.temporal import WindowCache
-from spikeview.guided.window import crop_to_roi, observe_window
+from spikeview.guided.window import crop_to_roi, observe_window, same_window
 from spikeview.io.source import SpikeSource
 
 #: margin (pixels) around changed blocks when only a region is re-sampled
@@ -140,7 +140,7 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
     def observe(fi: int, c: int) -> tuple[Observation, Any]:
         """Frame ``fi``'s observation (counts, pooling) and plan: they depend on the capture and the
         settings only, never on an earlier frame's result."""
-        if fi == 0 and first is not None and _same_window(first, c, p, a):
+        if fi == 0 and first is not None and same_window(first, c, p, a):
             o = first if roi is None else crop_to_roi(first, roi)
             return o, make_plan(o, p)
         w = observe_window(source, c, p, a, roi=roi, previous=fi > 0 and p.reuse is not False, cache=cache)
@@ -214,16 +214,6 @@ class _Prefetch:
 
     def __del__(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)
-
-
-def _same_window(obs: Observation, center: int, p: GuidedConfig, alpha: np.ndarray | None) -> bool:
-    """Whether ``obs`` is what :meth:`Observation.from_source` builds for ``center`` at these settings
-    (no previous window: the first frame of a sequence has none)."""
-    pooling = obs.pooling
-    same_alpha = (obs.alpha is None) if alpha is None or obs.cfa is None else (
-        obs.alpha is not None and np.array_equal(obs.alpha, np.asarray(alpha, dtype=np.float64).reshape(-1)))
-    return (obs.center == int(center) and obs.window == p.window and obs.eta == p.eta and obs.previous is None
-            and pooling is not None and pooling.radius == p.temporal_radius and same_alpha)
 
 
 def _resample_region(smp: GuidedSampler, obs: Observation, p: GuidedConfig, box: tuple[int, int, int, int],

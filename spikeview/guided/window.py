@@ -55,9 +55,19 @@ def crop_to_roi(obs: Observation, roi: tuple[int, int, int, int]) -> Observation
     return out
 
 
+def same_window(obs: Observation, center: int, p: GuidedConfig, alpha: np.ndarray | None) -> bool:
+    """Whether ``obs`` is what :meth:`Observation.from_source` builds for ``center`` at these settings
+    (no previous window: the first frame of a sequence has none)."""
+    pooling = obs.pooling
+    same_alpha = (obs.alpha is None) if alpha is None or obs.cfa is None else (
+        obs.alpha is not None and np.array_equal(obs.alpha, np.asarray(alpha, dtype=np.float64).reshape(-1)))
+    return (obs.center == int(center) and obs.window == p.window and obs.eta == p.eta and obs.previous is None
+            and pooling is not None and pooling.radius == p.temporal_radius and same_alpha)
+
+
 def observe_window(source: Any, centre: int, params: GuidedConfig, alpha: np.ndarray | None, *,
                    roi: tuple[int, int, int, int] | None = None, previous: bool = False, cache: Any = None,
-                   plan: bool = True) -> Window:
+                   plan: bool = True, reuse: Observation | None = None) -> Window:
     """The window of ``source`` centred on ``centre`` under ``params`` (see the module docstring).
 
     Args:
@@ -66,16 +76,22 @@ def observe_window(source: Any, centre: int, params: GuidedConfig, alpha: np.nda
         previous: also read the window before (the plan's reuse test in a sequence).
         cache: a :class:`~spikeview.guided.temporal.WindowCache` shared by a sequence's windows.
         plan: make the plan (False: ``Window.plan`` is None).
+        reuse: a whole-frame observation an earlier call returned (``Window.whole``) for this source: used instead of
+            counting and pooling again when it is the one these settings build (:func:`same_window`; the app's
+            knob changes on an ROI re-plan and re-sample, they do not re-pool the 1000² frame).
     """
     h, w = int(source.height), int(source.width)
     if min(h, w) < 2:
         raise ParameterError(f"the capture's frames are {w}x{h} pixels: a guided reconstruction needs at least 2x2; "
                              "use --method tfp (or tfi) for it.")
-    whole = Observation.from_source(source, int(centre), params.window, alpha=alpha, eta=params.eta,
-                                    radius=params.temporal_radius, previous=previous, cache=cache, device=params.device)
-    from spikeview.classical.calibration import correct_observation
+    if reuse is not None and not previous and reuse.y.shape == (h, w) and same_window(reuse, centre, params, alpha):
+        whole = reuse  # built (and corrected) by an earlier call with these settings
+    else:
+        whole = Observation.from_source(source, int(centre), params.window, alpha=alpha, eta=params.eta,
+                                        radius=params.temporal_radius, previous=previous, cache=cache, device=params.device)
+        from spikeview.classical.calibration import correct_observation
 
-    correct_observation(source, whole)  # the camera profile's rate correction, as the classical frames get it
+        correct_observation(source, whole)  # the camera profile's rate correction, as the classical frames get it
     obs = whole if roi is None else crop_to_roi(whole, roi)
     if not plan:
         return Window(whole, obs, None)

@@ -223,7 +223,13 @@ def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     p = req.params
     recipe = req.recipe.with_values({"run.method": "guided"})
     state = sequence_state(req.source, recipe, req.alpha, ctx)
-    wp = plan_window(req.source, recipe, req.tick, state=state, roi=req.roi)
+    # a knob change re-plans and re-samples; the whole frame's pooled observation of the same window is kept
+    key = (id(req.source), str(getattr(req.source.info, "path", "")), req.source.n_frames,
+           id(getattr(req.source.info, "camera", None)))
+    kept = ctx.state.get("whole_observation")
+    wp = plan_window(req.source, recipe, req.tick, state=state, roi=req.roi,
+                     reuse=kept[1] if kept is not None and kept[0] == key else None)
+    ctx.state["whole_observation"] = (key, wp.whole)
     cfg, whole, obs, plan = wp.params, wp.whole, wp.obs, wp.plan  # the run reuses the whole observation (built once)
     origin = crop_roi(np.zeros((req.source.height, req.source.width), np.uint8), req.roi)[1][::-1] if req.roi else (0, 0)
     ctx.report(GuidedUpdate("plan", req.run, total=cfg.steps * cfg.chains, text=str(plan), knobs=wp.knobs,
