@@ -3,7 +3,7 @@
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-ORDER = ["tfp", "random_access", "guided", "temporal", "lowlight", "colour", "ffdnet", "prior", "prior_xeon", "cli", "cli_xeon", "gpu", "tiles", "sd", "sim", "gui", "gui_stall", "ui_stalls", "ui_stalls_xeon", "live", "geometry", "geometry_wide", "cluster", "conformance"]
+ORDER = ["tfp", "random_access", "guided", "temporal", "lowlight", "colour", "roi_knob", "ffdnet", "prior", "prior_xeon", "cli", "cli_xeon", "gpu", "tiles", "sd", "sim", "gui", "gui_stall", "ui_stalls", "ui_stalls_xeon", "live", "geometry", "geometry_wide", "cluster", "conformance"]
 SUMMARY = (ROOT / "benchmarks" / "summary.md").read_text(encoding="utf-8")
 
 
