@@ -73,7 +73,7 @@ class ClassicalConfig(Config):
     eta: float = param(DEFAULT_ETA, label="Colour range η", lo=0.0, lo_open=True, hi=8.0, step=0.05,
                        help="Range parameter η of the colour cast: after correction each channel's sequence mean is 1/η "
                             "(2 → 0.5).")
-    white_balance: str = param("auto", key="", label="White balance",
+    white_balance: str = param("auto", key="white_balance", label="White balance",
                                help="How the colour-cast gains are estimated once per sequence: auto (gray-world where the "
                                     "scene averages to gray, else combined; the reason is printed), gray-world, gray-edge, "
                                     "gray-edge-2, shades-of-gray, white-patch, combined, profile (the --camera profile's "

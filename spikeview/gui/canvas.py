@@ -111,6 +111,8 @@ class ImageCanvas(QtWidgets.QWidget):
     display_factor_changed = QtCore.Signal(int)
     #: the shown images changed (the Compare panel's histogram and scores follow)
     changed = QtCore.Signal()
+    #: a click on the image: frame pixel (x, y) (the white-balance picker)
+    clicked = QtCore.Signal(int, int)
 
     def __init__(self, session: Session, parent: QtWidgets.QWidget | None = None):
         super().__init__(parent)
@@ -163,6 +165,7 @@ class ImageCanvas(QtWidgets.QWidget):
         for pane in (self.a, self.b):
             pane.title.setVisible(False)  # the header and the note say what is shown
             pane.view.scene().sigMouseMoved.connect(lambda pos, p=pane: self._hover(p, pos))
+            pane.view.scene().sigMouseClicked.connect(lambda ev, p=pane: self._click(p, ev))
         # the wipe: A left of a draggable line, B right of it, each clipped to its side; under both, dimmed, the one
         # of them that covers more of the frame (the context around an ROI result)
         self.clip_left, self.wipe_left = self._clipped_layer()
@@ -522,6 +525,13 @@ class ImageCanvas(QtWidgets.QWidget):
             return
         p = pane.vb.mapSceneToView(pos)
         self._emit_readout(self.pixel_text(int(np.floor(p.x())), int(np.floor(p.y()))))
+
+    def _click(self, pane: ImagePane, ev: Any) -> None:
+        pos = ev.scenePos()
+        if not pane.vb.sceneBoundingRect().contains(pos):
+            return
+        p = pane.vb.mapSceneToView(pos)
+        self.clicked.emit(int(np.floor(p.x())), int(np.floor(p.y())))
 
     def _emit_readout(self, text: str) -> None:
         if text != self.last_readout:

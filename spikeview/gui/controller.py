@@ -71,7 +71,7 @@ def _guided_then_release(req: jobs.GuidedRequest, ctx: Any) -> jobs.GuidedResult
 
 
 #: parameters the sequence's white point depends on (Y·α/η over the window): changing one re-estimates it
-EXPOSURE_PARAMS = frozenset({"eta", "window", "colour_cast"})
+EXPOSURE_PARAMS = frozenset({"eta", "window", "colour_cast", "white_balance"})
 
 class Controller(QtCore.QObject):
     """Session → jobs → views (see module docstring)."""

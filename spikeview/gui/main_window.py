@@ -416,6 +416,8 @@ class MainWindow(QtWidgets.QMainWindow):
         c.guided_done.connect(self.canvas.show_guided_result)
         c.compare_ready.connect(self.canvas.show_compare)
         self.canvas.readout.connect(self._on_readout)
+        self.canvas.clicked.connect(self._on_canvas_click)
+        self.stream_panel.error.connect(self.show_error)
         self.canvas.display_params = c.display_params
         self.canvas.display_factor_changed.connect(c.set_display_factor)
         self.canvas.changed.connect(self._update_compare_wanted)
@@ -716,6 +718,17 @@ class MainWindow(QtWidgets.QMainWindow):
             f"Export finished: {what} in {first.parent}.", "success",
             [("Open", lambda: QtGui.QDesktopServices.openUrl(QtCore.QUrl.fromLocalFile(str(first)))),
              ("Show folder", lambda: QtGui.QDesktopServices.openUrl(QtCore.QUrl.fromLocalFile(str(first.parent))))])
+
+    def _on_canvas_click(self, x: int, y: int) -> None:
+        """A click on the image: the white-balance picker takes it when its Pick button is down."""
+        if not self.stream_panel.wb_pick.isChecked():
+            return
+        refused = self.stream_panel.pick_white(x, y)
+        if refused:
+            self.show_error(refused)
+        else:
+            self.statusBar().showMessage(f"White balance from the patch at ({x}, {y}): gains "
+                                         f"{self.session.get('white_balance')} (R, G, B).", 8000)
 
     # ------------------------------------------------------------------------------ messages
     def show_error(self, message: str, dialog_title: str | None = None) -> None:

@@ -548,3 +548,38 @@ def pooling_display(pool: Any) -> np.ndarray | None:
     return pooling_image(pool.dtau, pool.window, len(pool.offsets))
 
 
+
+
+#: the white-balance picker's patch: (2·half + 1)² photosites around the click, over this many ticks around the tick
+PICK_HALF, PICK_TICKS = 12, 200
+
+
+def neutral_gains(source: SpikeSource, tick: int, x: int, y: int, half: int = PICK_HALF,
+                  ticks: int = PICK_TICKS) -> np.ndarray:
+    """Fixed colour-cast gains ``(R, G, B)`` that make the patch around frame pixel ``(x, y)`` neutral (the app's
+    white-balance picker; ``--white-balance R,G,B``): per channel, the patch's mean rate over ``ticks`` ticks around
+    ``tick``, inverted, scaled as gray-world's gains are (1 / the frame's mean rate over those ticks).
+
+    Raises:
+        ParameterError: a monochrome capture, a point outside the frame, or a patch with a channel without spikes.
+    """
+    from spikeview.cfa import channel_map
+    from spikeview.classical.tfp import window_counts
+    from spikeview.errors import ParameterError
+
+    if source.cfa is None:
+        raise ParameterError("a monochrome capture has no colour to balance.")
+    h, w = source.height, source.width
+    if not (0 <= x < w and 0 <= y < h):
+        raise ParameterError(f"({x}, {y}) is outside the {w}x{h} frame: click on the image.")
+    a = max(0, int(tick) - ticks // 2)
+    b = min(source.n_frames, a + ticks)
+    counts = np.asarray(window_counts(source, a, b), dtype=np.float64) / max(1, b - a)
+    ch = channel_map(source.cfa, h, w)
+    y0, y1, x0, x1 = max(0, y - half), min(h, y + half + 1), max(0, x - half), min(w, x + half + 1)
+    patch, pch = counts[y0:y1, x0:x1], ch[y0:y1, x0:x1]
+    means = np.array([patch[pch == c].mean() if (pch == c).any() else 0.0 for c in range(3)])
+    if not (means > 0).all():
+        raise ParameterError("the picked patch has a colour without spikes: pick a brighter white or gray surface.")
+    frame = float(counts.mean())
+    return (means.mean() / means) / max(frame, 1e-12)

@@ -49,6 +49,8 @@ class StreamPanel(QtWidgets.QWidget):
 
     #: frame pixels per screen pixel changed (zoom or resize): the images should be this coarse
     display_factor_changed = QtCore.Signal(int)
+    #: a sentence for the user (a white balance refused)
+    error = QtCore.Signal(str)
 
     def __init__(self, session: Session, parent: QtWidgets.QWidget | None = None):
         super().__init__(parent)
@@ -140,7 +142,24 @@ class StreamPanel(QtWidgets.QWidget):
         self.demosaic = ParamCombo(session, "demosaic", {"bilinear": "Bilinear", "malvar2004": "Malvar 2004", "menon2007": "Menon 2007"})
         self.cast = ParamCheck(session, "colour_cast", "Colour cast")
         #: controls that act only through a colour filter, with their tooltips for a colour capture
-        self.colour_only = {c: c.toolTip() for c in (self.demosaic, self.cast)}
+        # --- white balance: the recipe's classical.white_balance (an estimator, or fixed gains R,G,B shown and
+        # editable here); Pick takes the gains that make a clicked neutral patch neutral (session.core.neutral_gains)
+        from spikeview.classical.white_balance import CHOICES
+
+        self.wb = QtWidgets.QComboBox(objectName="white_balance")
+        self.wb.setEditable(True)
+        self.wb.addItems(list(CHOICES))
+        self.wb.setToolTip("White balance: how the colour-cast gains are estimated (auto, gray-world, gray-edge, ...), "
+                           "or fixed gains R,G,B: type them, or press Pick and click a white or gray surface.")
+        self.wb.lineEdit().editingFinished.connect(lambda: self._set_wb(self.wb.currentText()))
+        self.wb.activated.connect(lambda _i: self._set_wb(self.wb.currentText()))
+        self.wb_pick = QtWidgets.QToolButton(text="Pick", objectName="white_balance_pick", checkable=True)
+        self.wb_pick.setToolTip("Click a white or gray surface on the image: its gains become the white balance.")
+        wb_row = QtWidgets.QHBoxLayout()
+        wb_row.addWidget(QtWidgets.QLabel("White bal."))
+        wb_row.addWidget(self.wb, 1)
+        wb_row.addWidget(self.wb_pick)
+        self.colour_only = {c: c.toolTip() for c in (self.demosaic, self.cast, self.wb, self.wb_pick)}
         curve_row = QtWidgets.QHBoxLayout()
         curve_row.addWidget(self.curve)
         curve_row.addWidget(self.demosaic, 1)
@@ -163,6 +182,7 @@ class StreamPanel(QtWidgets.QWidget):
         lay.addWidget(self.black)
         lay.addWidget(self.white)
         lay.addLayout(curve_row)
+        lay.addLayout(wb_row)
         self._stretch = QtWidgets.QWidget()  # takes the spare height while the images are hidden
         lay.addWidget(self._stretch, 0)
 
@@ -216,7 +236,43 @@ class StreamPanel(QtWidgets.QWidget):
             a, b = self.session.play_range()
             self.marks_label.setText(f"range {a}–{b} ({b - a + 1} ticks)")
 
+    def _set_wb(self, text: str) -> None:
+        """The typed or chosen white balance, checked as the CLI checks --white-balance (refused: said, and the
+        control shows the setting again)."""
+        from spikeview.classical.white_balance import parse_white_balance
+        from spikeview.errors import ParameterError
+
+        text = text.strip()
+        if text == str(self.session.get("white_balance")):
+            return
+        try:
+            wb = parse_white_balance(text, "White balance")
+        except ParameterError as e:
+            self.wb.setEditText(str(self.session.get("white_balance")))
+            self.error.emit(str(e))
+            return
+        self.session.set("white_balance", wb if isinstance(wb, str) else ",".join(f"{v:.4g}" for v in wb))
+
+    def pick_white(self, x: int, y: int) -> str | None:
+        """Set the white balance to the gains that make the patch around frame pixel ``(x, y)`` neutral; returns the
+        refusal sentence when there is one (a monochrome capture, a dark patch)."""
+        from spikeview.errors import ParameterError
+        from spikeview.session import core
+
+        self.wb_pick.setChecked(False)
+        s = self.session
+        if s.source is None:
+            return "Open a capture first."
+        try:
+            g = core.neutral_gains(s.source, s.tick, int(x), int(y))
+        except ParameterError as e:
+            return str(e)
+        s.set("white_balance", ",".join(f"{v:.4g}" for v in g))
+        return None
+
     def _on_param(self, name: str, value: Any) -> None:
+        if name == "white_balance" and self.wb.currentText() != str(value):
+            self.wb.setEditText(str(value))
         if name == "window":
             self.scrub.setPageStep(max(1, int(value)))
             self._update_window_note()
