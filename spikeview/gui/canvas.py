@@ -23,7 +23,7 @@ from PySide6 import QtCore, QtWidgets
 
 from spikeview.session import core
 from spikeview.session.model import Session
-from spikeview.gui.widgets import ElidedLabel, ImagePane, subscribe, tool_button
+from spikeview.gui.widgets import ElidedLabel, ImagePane, RoiRect, subscribe, tool_button
 
 #: what the canvas can show (key → menu text)
 SOURCES = {
@@ -176,7 +176,7 @@ class ImageCanvas(QtWidgets.QWidget):
         self.line.sigPositionChanged.connect(lambda *_: self._update_clip())
         self.a.vb.addItem(self.line)
         self._line_placed = False
-        self.roi_item: pg.RectROI | None = None
+        self.roi_rect = RoiRect(session, self.a.vb, z=30)
         #: the pixel :meth:`point_at` reads out (a screenshot has no cursor to show it)
         self.marker = pg.ScatterPlotItem(size=18, symbol="+", pen=pg.mkPen((255, 230, 0), width=2), brush=None)
         self.marker.setZValue(40)
@@ -482,26 +482,12 @@ class ImageCanvas(QtWidgets.QWidget):
 
     # ------------------------------------------------------------------------------ ROI
     def _on_roi(self, roi: tuple[int, int, int, int] | None) -> None:
-        if roi is None:
-            if self.roi_item is not None:
-                self.a.vb.removeItem(self.roi_item)
-                self.roi_item = None
-            return
-        x, y, w, h = roi
-        if self.roi_item is None:
-            self.roi_item = pg.RectROI((x, y), (w, h), pen=pg.mkPen((255, 200, 0), width=2), snapSize=2.0,
-                                       translateSnap=True, scaleSnap=True)
-            self.roi_item.setZValue(30)
-            self.roi_item.sigRegionChangeFinished.connect(self._roi_moved)
-            self.a.vb.addItem(self.roi_item)
-        else:
-            with QtCore.QSignalBlocker(self.roi_item):
-                self.roi_item.setPos((x, y), update=False, finish=False)
-                self.roi_item.setSize((w, h), update=True, finish=False)
+        self.roi_rect.show(roi)
 
-    def _roi_moved(self, item: Any) -> None:
-        pos, size = item.pos(), item.size()
-        self.session.set_roi((pos.x(), pos.y(), size.x(), size.y()))
+    @property
+    def roi_item(self) -> Any:
+        """The ROI's rectangle on pane A (``None`` without an ROI)."""
+        return self.roi_rect.item
 
     # ------------------------------------------------------------------------------ readout
     def _check_factor(self) -> None:

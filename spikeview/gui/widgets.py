@@ -231,6 +231,40 @@ class ImagePane(QtWidgets.QWidget):
 # --------------------------------------------------------------------------------- parameters
 
 
+class RoiRect:
+    """The session's region of interest drawn as a draggable rectangle on one view box: :meth:`show` follows the
+    session's ROI (without echoing it back), a drag sets it (2-pixel snaps: one Bayer period)."""
+
+    def __init__(self, session: Any, vb: Any, z: float | None = None):
+        self.session, self.vb, self.z = session, vb, z
+        self.item: Any = None
+
+    def show(self, roi: tuple[int, int, int, int] | None) -> None:
+        import pyqtgraph as pg
+
+        if roi is None:
+            if self.item is not None:
+                self.vb.removeItem(self.item)
+                self.item = None
+            return
+        x, y, w, h = roi
+        if self.item is None:
+            self.item = pg.RectROI((x, y), (w, h), pen=pg.mkPen((255, 200, 0), width=2), snapSize=2.0,
+                                   translateSnap=True, scaleSnap=True)
+            if self.z is not None:
+                self.item.setZValue(self.z)
+            self.item.sigRegionChangeFinished.connect(self._moved)
+            self.vb.addItem(self.item)
+        else:
+            with QtCore.QSignalBlocker(self.item):
+                self.item.setPos((x, y), update=False, finish=False)
+                self.item.setSize((w, h), update=True, finish=False)
+
+    def _moved(self, item: Any) -> None:
+        pos, size = item.pos(), item.size()
+        self.session.set_roi((pos.x(), pos.y(), size.x(), size.y()))
+
+
 def subscribe(widget: QtCore.QObject, event: Any, callback: Any) -> None:
     """Connect ``callback`` to a session ``event`` for as long as ``widget`` lives."""
     event.connect(callback)

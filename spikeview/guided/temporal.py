@@ -18,7 +18,7 @@ tile by tile.
 **Decide.** A neighbour's tile is accepted when the SSD of its *unsmoothed* super-pixel counts at the
 chosen shift is within :data:`TILE_CHI` times what the noise alone gives (64 independent values
 per tile; counts' variance ``κ·g(1 − g/cap)``, binomial-shaped because an integrate-and-fire pixel
-is far from Poisson, with the scale κ measured on the centre window, :func:`count_dispersion`;
+is far from Poisson, with the scale κ measured on the centre window, :func:`dispersion_curve`, by level;
 adjacent windows' counts anti-correlate, :data:`ADJACENT_DISPERSION`). Inside an accepted tile
 every photosite is checked too: the 3×3 sum of same-colour photosites of the aligned neighbour must
 agree within :data:`PIXEL_Z` standard deviations with what was pooled so far (the centre window and
@@ -189,20 +189,6 @@ def _binvar(g: np.ndarray, cap: float) -> np.ndarray:
     return np.maximum(g * (1.0 - g / cap), 0.0)
 
 
-def count_dispersion(raw: np.ndarray, cap: float, keep: float = 0.9) -> float:
-    """Scale κ of the counts' variance ``κ · g (1 − g/cap)`` (``cap``: the most spikes a value can hold), in [0.05, 4].
-
-    Integrate-and-fire counts are far from Poisson: a bright photosite fires almost regularly. Per
-    2×2 block of ``raw`` the finest diagonal Haar detail ``HH = (a − b − c + d)/2`` has the counts'
-    variance and is nearly blind to smooth content; ``κ = Σ HH² / Σ m (1 − m/cap)`` over the blocks
-    (``m`` their mean), leaving out the ``1 − keep`` of blocks with the largest ratio (edges) and
-    corrected for that trimming as in :func:`spikeview.guided.observation.haar_noise_variance`.
-    One κ for the whole frame: :func:`dispersion_curve` gives κ as a function of the level.
-    """
-    curve = dispersion_curve(raw, cap, keep, bins=1)
-    return float(curve[1][0])
-
-
 #: levels of :func:`dispersion_curve` (quantile bins of the super-pixel level)
 DISPERSION_BINS = 6
 
@@ -213,8 +199,11 @@ def dispersion_curve(raw: np.ndarray, cap: float, keep: float = 0.9, bins: int =
     A dark photosite of an integrate-and-fire sensor fires far less regularly than a bright one (its
     count is closer to Poisson): one κ for the frame, measured mostly on the bright majority, made a
     static scene's dark tiles fail the match test (a static 256² camera scene pooled 75 % of its
-    photosites). Here the blocks of :func:`count_dispersion` are split into ``bins`` quantile bins of
-    their level ``m``, each with its own trimmed estimate (at least 64 blocks a bin).
+    photosites). Per 2×2 block of ``raw`` the finest diagonal Haar detail ``HH = (a − b − c + d)/2`` has the counts'
+    variance and is nearly blind to smooth content; the blocks are split into ``bins`` quantile bins of their level
+    ``m``, each with its own ``κ = Σ HH² / Σ m (1 − m/cap)``, leaving out the ``1 − keep`` of blocks with the largest
+    ratio (edges) and corrected for that trimming as in :func:`spikeview.guided.observation.haar_noise_variance`
+    (at least 64 blocks a bin).
     """
     from spikeview.classical.noise import trim_factor as _trim_factor
 
@@ -492,7 +481,7 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     rest_cost = np.mean([chi0[k] for k in offsets], axis=0)
     dim = _tile_sum(raw0, tile_g) / (4.0 * tile_g * tile_g) < DIM_COUNT  # spikes per photosite in the own window
     searched = np.logical_and.reduce([np.all(motion[k] == 0, axis=-1) for k in offsets])
-    pan = _global_motion(raw0, raws, frame, factors, tile_g, cap, curve)
+    pan = _global_motion(frame, zero_g.shape[0] * zero_g.shape[1], len(offsets), tile_g)
     # a panning frame's dim tiles keep their own search (held at rest, a pan's dim tiles were blurred)
     at_rest = searched | ((rest_cost <= REST_CHI) & dim) if pan is None else searched
     for k in offsets:
@@ -501,12 +490,17 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     cap9 = 9.0 * window  # a 3×3 same-colour sum holds at most 9 × window spikes per window
     lv = 4.0 / 9.0  # a 3×3 same-colour sum's level in the curve's super-pixel (2×2) units
 
-    def pixel_ok(nk_aligned_box: np.ndarray, factor: float) -> np.ndarray:
-        """The per-photosite test: the 3×3 same-colour sum of the aligned neighbour against the pooled reference."""
-        box_total = _box_same_colour(total, cfa)
+    def reference() -> tuple[np.ndarray, np.ndarray]:
+        """What was pooled so far as a 3×3 same-colour sum per window, and that mean's variance (once per step: both
+        sides of a distance are tested against the same reference)."""
         box_n = _box_same_colour(1.0 + pooled, cfa)
-        ref = 9.0 * box_total / box_n  # 3×3 same-colour sum per window of the reference
-        var = _countvar(ref, cap9, curve, lv) * 9.0 / box_n + _countvar(nk_aligned_box, cap9, curve, lv)
+        ref = 9.0 * _box_same_colour(total, cfa) / box_n
+        return ref, _countvar(ref, cap9, curve, lv) * 9.0 / box_n
+
+    def pixel_ok(refs: tuple[np.ndarray, np.ndarray], nk_aligned_box: np.ndarray, factor: float) -> np.ndarray:
+        """The per-photosite test: the 3×3 same-colour sum of the aligned neighbour against the pooled reference."""
+        ref, ref_var = refs
+        var = ref_var + _countvar(nk_aligned_box, cap9, curve, lv)
         return (ref - nk_aligned_box) ** 2 / (factor * var + 1.0) <= PIXEL_Z ** 2
 
     # nearest windows first; a photosite takes window k only if it took every window between k and the
@@ -515,6 +509,7 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     chain = {-1: np.ones((h, w), dtype=bool), 1: np.ones((h, w), dtype=bool)}
     for d in sorted({abs(k) for k in offsets}):
         oks = {}
+        refs = reference()
         for k in (-d, d):  # both sides against the same reference (what the nearer windows pooled)
             if k not in counts:
                 continue
@@ -540,7 +535,7 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
             # the centre window's photosite sees: such photosites are left out unless the shift is zero
             margin = (ys >= 2) & (ys < h - 2) & (xs >= 2) & (xs < w - 2)
             zero = (best_px[..., 0] == 0) & (best_px[..., 1] == 0)
-            weight = chain[1 if k > 0 else -1] & tile_ok_px & inside & (margin | zero) & pixel_ok(boxk, factors[k])
+            weight = chain[1 if k > 0 else -1] & tile_ok_px & inside & (margin | zero) & pixel_ok(refs, boxk, factors[k])
             chain[1 if k > 0 else -1] = weight
             oks[k] = (weight, aligned)
         for k, (weight, aligned) in oks.items():
@@ -550,7 +545,7 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     far = max(abs(k) for k in offsets)
     ext: tuple[int, ...] = ()
     if pan is None:  # a panning frame does not grow its support at rest
-        ext = _extend_at_rest(source, a, b, cfa, cache, total, pooled, chain, at_rest, curve, cap, tile_g, pixel_ok,
+        ext = _extend_at_rest(source, a, b, cfa, cache, total, pooled, chain, at_rest, curve, cap, tile_g, reference, pixel_ok,
                               far, radius, accepted, max(factors[k] for k in offsets if abs(k) == far))
     for k in ext:
         shifts[k] = np.zeros((th, tw, 2), np.int64)
@@ -567,12 +562,12 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
 PAN_Z = 4.0
 
 
-def _global_motion(raw0: np.ndarray, raws: dict[int, np.ndarray], frame: dict[tuple[float, float], float],
-                   factors: dict[int, float], tile_g: int, cap: float,
-                   curve: tuple[np.ndarray, np.ndarray]) -> tuple[float, float] | None:
+def _global_motion(frame: dict[tuple[float, float], float], tiles: int, neighbours: int,
+                   tile_g: int) -> tuple[float, float] | None:
     """The frame's common velocity (guide pixels per window) when it pans, else ``None``.
 
-    ``frame``: the search's cost of each velocity (smoothed guides) averaged over the whole frame. Its best velocity
+    ``frame``: the search's cost of each velocity (smoothed guides) averaged over the frame's ``tiles`` tiles and its
+    ``neighbours`` windows. Its best velocity
     ``v`` other than zero is tested against ``−v``: a static scene matches both alike, a pan matches ``v`` clearly
     better (:data:`PAN_Z` standard deviations of the difference, ``sqrt(4 / (n_eff · tiles · neighbours))`` relative,
     ``n_eff`` = a smoothed tile's independent values ≈ 5). Zero itself is not compared: an integrate-and-fire photosite's
@@ -587,15 +582,14 @@ def _global_motion(raw0: np.ndarray, raws: dict[int, np.ndarray], frame: dict[tu
     back = frame.get((-vy, -vx))
     if back is None:
         return None
-    tiles = -(-raw0.shape[0] // tile_g) * -(-raw0.shape[1] // tile_g)
     n_eff = max(1.0, tile_g * tile_g / (4.0 * np.pi * SMOOTH ** 2))  # a smoothed tile's independent values
-    margin = PAN_Z * float(np.sqrt(4.0 / (n_eff * tiles * max(1, len(raws)))))
+    margin = PAN_Z * float(np.sqrt(4.0 / (n_eff * max(1, tiles) * max(1, neighbours))))
     return (vy, vx) if moving[(vy, vx)] < back * (1.0 - margin) else None
 
 
 def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowCache, total: np.ndarray,
                     pooled: np.ndarray, chain: dict[int, np.ndarray], at_rest: np.ndarray,
-                    curve: tuple[np.ndarray, np.ndarray], cap: float, tile_g: int, pixel_ok: Any, reached: int,
+                    curve: tuple[np.ndarray, np.ndarray], cap: float, tile_g: int, reference: Any, pixel_ok: Any, reached: int,
                     radius: int, accepted: dict[int, np.ndarray], factor: float) -> tuple[int, ...]:
     """Pool windows ``reached + 1 …`` at zero shift on static tiles whose pooled count is below
     :data:`LOW_LIGHT_COUNT` per photosite (in place on ``total``, ``pooled``, ``chain``), up to
@@ -627,6 +621,10 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
         if not ks or not (need & (chain[-1] | chain[1])).any():
             break
         oks = {}
+        refs = reference()  # both sides against what was pooled so far
+        pt, pn = _guide_raw(total, cfa), _guide_raw(1.0 + pooled, cfa)
+        ref = 4.0 * pt / np.maximum(pn, 1.0)
+        ref_var = _countvar(ref, cap, curve) * 4.0 / np.maximum(pn, 1.0)
         for k in ks:
             side = 1 if k > 0 else -1
             cand = need & chain[side]
@@ -635,10 +633,8 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
             check_cancelled("while pooling the neighbouring windows")
             nk = cache.counts(source, a + k * window, b + k * window)
             # the tile test against what was pooled so far (a mean per window: its variance shrinks with the windows)
-            pt, pn = _guide_raw(total, cfa), _guide_raw(1.0 + pooled, cfa)
-            ref = 4.0 * pt / np.maximum(pn, 1.0)
             rk = _guide_raw(nk, cfa)
-            var = _countvar(ref, cap, curve) * 4.0 / np.maximum(pn, 1.0) + _countvar(rk, cap, curve)
+            var = ref_var + _countvar(rk, cap, curve)
             dd = ref - rk
             chi = _tile_sum(dd * dd, tile_g) / (factor * _tile_sum(var, tile_g) + 1e-6)
             # the side as a whole (its accepted windows and this one, where the photosite is a candidate) against the core
@@ -649,7 +645,7 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
             vv = np.where(has, core_var + _countvar(sm, cap, curve) * 4.0 / np.maximum(sn_, 1.0), 0.0)
             chi_side = _tile_sum(dv * dv, tile_g) / (factor * _tile_sum(vv, tile_g) + 1e-6)
             ok_tile = _fit_tiles((chi <= REST_CHI) & (chi_side <= SIDE_CHI), th, tw)[ty_of][:, tx_of]
-            weight = cand & ok_tile & pixel_ok(_box_same_colour(nk, cfa), factor)
+            weight = cand & ok_tile & pixel_ok(refs, _box_same_colour(nk, cfa), factor)
             chain[side] = weight
             if weight.any():
                 oks[k] = (weight, nk)

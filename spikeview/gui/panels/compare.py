@@ -11,8 +11,6 @@ the plot).
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets

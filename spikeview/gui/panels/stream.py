@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from typing import Any
 
-import pyqtgraph as pg
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from spikeview.session.model import Session, format_us
 from spikeview.gui.widgets import (
     ImagePane,
+    RoiRect,
     ParamCheck,
     ParamCombo,
     ParamSlider,
@@ -62,7 +62,7 @@ class StreamPanel(QtWidgets.QWidget):
         self.tfi = ImagePane("TFI")
         self.tfp.link(self.raw)
         self.tfi.link(self.raw)
-        self.roi_item: pg.RectROI | None = None
+        self.roi_rect = RoiRect(session, self.tfp.vb)
         self.tfi_tick: int | None = None
         self._factor = 1
         self._factor_timer = QtCore.QTimer(self, singleShot=True, interval=150)
@@ -323,22 +323,9 @@ class StreamPanel(QtWidgets.QWidget):
     def _on_roi(self, roi: tuple[int, int, int, int] | None) -> None:
         with QtCore.QSignalBlocker(self.roi_btn):
             self.roi_btn.setChecked(roi is not None)
-        if roi is None:
-            if self.roi_item is not None:
-                self.tfp.vb.removeItem(self.roi_item)
-                self.roi_item = None
-            return
-        x, y, w, h = roi
-        if self.roi_item is None:
-            self.roi_item = pg.RectROI((x, y), (w, h), pen=pg.mkPen((255, 200, 0), width=2), snapSize=2.0,
-                                       translateSnap=True, scaleSnap=True)
-            self.roi_item.sigRegionChangeFinished.connect(self._roi_moved)
-            self.tfp.vb.addItem(self.roi_item)
-        else:
-            with QtCore.QSignalBlocker(self.roi_item):
-                self.roi_item.setPos((x, y), update=False, finish=False)
-                self.roi_item.setSize((w, h), update=True, finish=False)
+        self.roi_rect.show(roi)
 
-    def _roi_moved(self, item: Any) -> None:
-        pos, size = item.pos(), item.size()
-        self.session.set_roi((pos.x(), pos.y(), size.x(), size.y()))
+    @property
+    def roi_item(self) -> Any:
+        """The ROI's rectangle on the TFP pane (``None`` without an ROI)."""
+        return self.roi_rect.item
