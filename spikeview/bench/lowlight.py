@@ -67,9 +67,12 @@ def _spikeview(*argv: str) -> None:
     import subprocess
     import sys
 
+    from spikeview.errors import ParameterError
+
     r = subprocess.run([sys.executable, "-m", "spikeview", *argv], capture_output=True, text=True)
-    if r.returncode != 0:
-        raise RuntimeError(f"spikeview {' '.join(argv[:2])} failed: {r.stderr.strip()}")
+    if r.returncode != 0:  # the command's own sentence, not a traceback
+        said = r.stderr.strip().splitlines()[-1] if r.stderr.strip() else f"exit status {r.returncode}"
+        raise ParameterError(f"spikeview {' '.join(argv[:2])} failed: {said.removeprefix('spikeview: error: ')}")
 
 
 def _reconstruct(path: str, method: str, at: int, out: Path, extra: list[str] | None = None) -> np.ndarray:
