@@ -231,11 +231,15 @@ def test_cli_calibrate_info_and_reconstruct_with_camera(tmp_path, capsys, cfa):
     assert ("colour response" in out.out) == (cfa != "none")
     assert main(["info", str(tmp_path / "cap.dat"), "--camera", str(prof)]) == 0
     assert "camera:      camera profile cam.toml" in capsys.readouterr().out
-    wb = ["--white-balance", "profile"] if cfa != "none" else []
-    res = tmp_path / "x.npy"
-    assert main(["reconstruct", str(tmp_path / "cap.dat"), "--camera", str(prof), *wb, "--at", "50", "--out", str(res)]) == 0
+    res = tmp_path / "x.npy"  # the default white balance (auto) takes the profile's colour response
+    assert main(["reconstruct", str(tmp_path / "cap.dat"), "--camera", str(prof), "--at", "50", "--out", str(res)]) == 0
     err = capsys.readouterr().err
-    assert ("white balance profile" in err) == (cfa != "none")
+    assert ("auto → profile" in err) == (cfa != "none"), err
+    if cfa != "none":  # ... the same gains, the same pixels as asking for it
+        assert main(["reconstruct", str(tmp_path / "cap.dat"), "--camera", str(prof), "--white-balance", "profile",
+                     "--at", "50", "--out", str(tmp_path / "p.npy")]) == 0
+        assert "white balance profile" in capsys.readouterr().err
+        np.testing.assert_array_equal(np.load(tmp_path / "p.npy"), np.load(res))
     rec = Recipe.load(str(res) + ".preset.toml")
     assert rec.stream.camera == str(prof.absolute())
     assert main(["reconstruct", str(tmp_path / "cap.dat"), "--preset", str(res) + ".preset.toml", "--out",

@@ -63,3 +63,71 @@ def test_a_monochrome_capture_disables_the_white_balance_with_the_reason(qtbot, 
     qtbot.waitUntil(lambda: window.session.stream is not None and window.session.stream.label == "mono", timeout=60000)
     panel = window.stream_panel
     assert not panel.wb.isEnabled() and not panel.wb_pick.isEnabled() and panel.wb.toolTip()
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", "none"])
+def test_a_camera_profile_chosen_in_stream_settings_corrects_and_is_recorded(qtbot, window, tmp_path, cfa):
+    """Stream settings ▸ Camera profile (``--camera`` in the CLI): the profile is attached, auto white balance takes
+    its colour response (Bayer), the preset records it and gives the CLI's pixels; a profile of another geometry is
+    refused in the dialog in one sentence and the stream stays as it was."""
+    from spikeview.cli.main import main
+    from spikeview.session.presets import save_preset
+    from spikeview.sim import SimConfig, simulate_to_file
+    from spikeview.sim.scenes import StaticScene
+
+    def cfg(ticks):
+        return SimConfig(n_ticks=ticks, seed=5, cfa=cfa, spectral_gains=(0.55, 1.0, 0.45), hot_pixels=0.01, gt_every=5)
+
+    n = 32
+    for name, value, ticks in (("dark", 0.0, 1500), ("flat", 0.8, 800)):
+        simulate_to_file(StaticScene(np.full((n, n, 3), value, np.float32), srgb=False), cfg(ticks), tmp_path / f"{name}.dat")
+    rng = np.random.default_rng(3)
+    img = np.kron(rng.random((8, 8, 3)), np.ones((4, 4, 1))).astype(np.float32)
+    simulate_to_file(StaticScene(img, srgb=False), cfg(80), tmp_path / "cap.dat")
+    simulate_to_file(StaticScene(np.zeros((n, n + 8, 3), np.float32), srgb=False), cfg(20), tmp_path / "wide.dat")
+    prof, wide = tmp_path / "cam.toml", tmp_path / "wide.toml"
+    assert main(["calibrate", "--dark", str(tmp_path / "dark.dat"), "--flat", str(tmp_path / "flat.dat"), "--out", str(prof)]) == 0
+    assert main(["calibrate", "--dark", str(tmp_path / "wide.dat"), "--out", str(wide)]) == 0
+
+    window.set_stream(core.open_file(tmp_path / "cap.dat"))
+    s = window.session
+    qtbot.waitUntil(lambda: s.stream is not None and s.stream.label == "cap.dat", timeout=60000)
+    assert getattr(s.source.info.camera, "path", None) is None  # no profile: the capture's own hot pixels at most
+    qtbot.waitUntil(lambda: window.controller.capture_white is not None, timeout=60000)
+    white0 = window.controller.capture_white
+    dlg = window.stream_settings()
+    assert dlg.camera.text() == ""
+    dlg.camera.setText(str(wide))
+    dlg.update_preview()
+    ok = dlg.buttons.button(dlg.buttons.StandardButton.Ok)
+    assert not ok.isEnabled() and "wide.toml" in dlg.error.text() and "\n" not in dlg.error.text().strip()
+    dlg.camera.setText(str(prof))
+    dlg.update_preview()
+    assert ok.isEnabled() and dlg.error.text() == ""
+    dlg.accept()
+    qtbot.waitUntil(lambda: getattr(s.source.info.camera, "path", None) is not None, timeout=60000)
+    assert s.source.info.camera.path.resolve() == prof.resolve()
+    # the exposure is re-estimated on the corrected rates, as the CLI estimates it
+    qtbot.waitUntil(lambda: window.controller.capture_white != white0
+                    and s.get("white") == window.controller.capture_white, timeout=60000)
+    s.set_tick(40)
+    preset = tmp_path / "app.preset.toml"
+    save_preset(s, preset)
+    from spikeview.recipe import Recipe
+
+    assert Recipe.load(preset).stream.camera == str(prof.absolute())
+    assert main(["reconstruct", str(tmp_path / "cap.dat"), "--preset", str(preset), "--out", str(tmp_path / "a.npy")]) == 0
+    assert main(["reconstruct", str(tmp_path / "cap.dat"), "--camera", str(prof), "--at", "40",
+                 "--out", str(tmp_path / "b.npy")]) == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy"))
+    if cfa != "none":
+        from spikeview.classical.colour_cast import sequence_white_balance
+
+        _, _, why = sequence_white_balance(s.source, Recipe.load(preset).classical, warn=False)
+        assert "auto → profile" in why
+    dlg = window.stream_settings()  # the dialog shows the attached profile; clearing it detaches it
+    assert dlg.camera.text() == str(prof.absolute())
+    dlg.camera.setText("")
+    dlg.update_preview()
+    dlg.accept()
+    qtbot.waitUntil(lambda: getattr(s.source.info.camera, "path", None) is None, timeout=60000)

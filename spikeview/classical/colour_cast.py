@@ -306,6 +306,11 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
     if choice == "profile" and (camera is None or camera.colour_response is None):
         raise ParameterError("--white-balance profile needs a camera profile with a colour response: pass --camera "
                              "PROFILE.toml made by `spikeview calibrate --flat FLAT` (or choose auto).")
+    if choice == "auto" and camera is not None and camera.colour_response is not None:
+        # a measured neutral beats every blind estimator (none of them can tell a tinted scene from a tinted sensor)
+        choice, why = "profile", "auto → profile: the camera profile measured this sensor's response to a neutral"
+    else:
+        why = None
     window = min(config.alpha_window, source.n_frames)
     tiny = min(source.height, source.width) < 2  # no 2×2 cell: nothing but the channel means
     if tiny and choice != "profile":
@@ -317,8 +322,8 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
         img, halves, ticks, means = sequence_images(source, window, config.alpha_max_windows,
                                                     None if camera is None else camera.correct)
         how = wb.choose(img, choice, halves, ticks) if choice != "profile" else wb.WhiteBalance(
-            "profile", camera.colour_response, f"white balance profile: the colour response of {camera.name} "
-                                               "(measured on a flat capture)")
+            "profile", camera.colour_response, why or f"white balance profile: the colour response of {camera.name} "
+                                                      "(measured on a flat capture)")
     empty = not (np.isfinite(means) & (means > 0)).all()
     if how.method not in ("gray-world", "profile") and empty:  # a channel without spikes: gray-world's rule, its note
         how = wb.WhiteBalance("gray-world", means, f"white balance {choice} → gray-world: a channel has no spikes")

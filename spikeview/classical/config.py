@@ -45,8 +45,9 @@ class ClassicalConfig(Config):
         eta: range parameter η: after correction each channel's sequence mean is ``1/η``.
         alpha: fixed gray-world gains ``[α_R, α_G, α_B]``; ``None`` estimates them once per
             sequence with :func:`estimate_alpha`.
-        white_balance: how the gains are estimated when ``alpha`` is unset: ``auto`` (gray-world where the scene
-            averages to gray, else an estimator that does not assume it, with the reason printed), ``gray-world``,
+        white_balance: how the gains are estimated when ``alpha`` is unset: ``auto`` (the camera profile's colour
+            response when one is attached; else gray-world where the scene averages to gray, else an estimator that
+            does not assume it, with the reason printed), ``gray-world``,
             ``gray-edge``, ``gray-edge-2``, ``shades-of-gray``, ``white-patch``, ``combined``, ``profile`` (the
             camera profile's colour response) or fixed gains ``"R,G,B"``
             (:mod:`spikeview.classical.white_balance`).
@@ -74,8 +75,9 @@ class ClassicalConfig(Config):
                        help="Range parameter η of the colour cast: after correction each channel's sequence mean is 1/η "
                             "(2 → 0.5).")
     white_balance: str = param("auto", key="white_balance", label="White balance",
-                               help="How the colour-cast gains are estimated once per sequence: auto (gray-world where the "
-                                    "scene averages to gray, else combined; the reason is printed), gray-world, gray-edge, "
+                               help="How the colour-cast gains are estimated once per sequence: auto (the camera profile's "
+                                    "colour response when it has one; else gray-world where the scene averages to gray, "
+                                    "else combined; the reason is printed), gray-world, gray-edge, "
                                     "gray-edge-2, shades-of-gray, white-patch, combined, profile (the --camera profile's "
                                     "colour response) or fixed gains R,G,B.")
     alpha: list[float] | None = None

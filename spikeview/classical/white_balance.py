@@ -18,7 +18,7 @@ side (:func:`spikeview.classical.colour_cast.sequence_images`; no demosaicking).
   is the sum of the channels each divided by its mean, so that no channel's response favours its colour).
 * ``combined`` — the geometric mean of the gray-edge, white-patch and shades-of-gray illuminants (each of unit
   length): three different assumptions, so one scene rarely fools all three the same way.
-* ``auto`` — gray-world unless it disagrees with ``combined`` by more than :data:`AGREE_DEG` degrees **and** by more
+* ``auto`` — the camera profile's colour response (``profile``) when a profile with one is attached; else gray-world unless it disagrees with ``combined`` by more than :data:`AGREE_DEG` degrees **and** by more
   than twice the estimators' own uncertainty (the angle between ``combined`` on the even and on the odd sampled
   windows: a dark or fast-changing scene's edges and highlights are noisy) and the sampled windows hold at least
   :data:`MIN_SPIKES` spikes per photosite (fewer: a dark scene, whose edges are noise); then ``combined``.

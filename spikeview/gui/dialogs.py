@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -98,6 +99,16 @@ class StreamSettingsDialog(QtWidgets.QDialog):
         self.cfa.addItem("none (monochrome)", "none")
         self.flip = QtWidgets.QCheckBox("Rows stored upside down (vertical flip)", objectName="flip")
         self.flip.setToolTip("The .dat ecosystem stores rows bottom-up; simulator files often do not")
+        # the camera profile (``--camera``, made by ``spikeview calibrate``): dark rate, flat field, hot pixels, colour
+        self.camera = QtWidgets.QLineEdit(objectName="camera")
+        self.camera.setPlaceholderText("none: the capture's own hot pixels are filled")
+        self.camera.setToolTip("A camera profile made by `spikeview calibrate` from a dark and/or flat capture of this "
+                               "sensor: its dark rate, flat field and hot pixels correct the rates every method sees, "
+                               "and White bal. auto uses its colour response. Recorded in exports and presets.")
+        self.camera.setClearButtonEnabled(True)
+        self.camera.editingFinished.connect(lambda: self._timer.start())
+        self.camera_browse = QtWidgets.QPushButton("Browse…", objectName="camera_browse")
+        self.camera_browse.clicked.connect(self._browse_camera)
         self.remember = QtWidgets.QCheckBox("Remember these settings next to the file (write a sidecar)", objectName="remember")
         self.remember.setToolTip("Writes <file>.toml, which the app and the command line read next time")
         self.remember.setVisible(remember)
@@ -128,6 +139,10 @@ class StreamSettingsDialog(QtWidgets.QDialog):
             form.addRow("Width × height", size)
         form.addRow("CFA (top-left 2×2 after flip)", self.cfa)
         form.addRow("", self.flip)
+        cam = QtWidgets.QHBoxLayout()
+        cam.addWidget(self.camera, 1)
+        cam.addWidget(self.camera_browse)
+        form.addRow("Camera profile", cam)
         previews = QtWidgets.QHBoxLayout()
         previews.addWidget(self.preview)
         previews.addWidget(self.mosaic)
@@ -157,6 +172,15 @@ class StreamSettingsDialog(QtWidgets.QDialog):
         cfa = s.get("cfa") or "none"
         self.cfa.setCurrentIndex(max(self.cfa.findData(str(cfa).upper() if cfa != "none" else "none"), 0))
         self.flip.setChecked(bool(s.get("flip_vertical", True)))
+        self.camera.setText(str(s.get("camera") or ""))
+
+    def _browse_camera(self) -> None:
+        start = self.camera.text().strip() or str(Path.home())
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Camera profile (spikeview calibrate)", start,
+                                                        "Camera profiles (*.toml);;All files (*)")
+        if path:
+            self.camera.setText(path)
+            self._timer.start()
 
     def _pick_candidate(self, idx: int) -> None:
         wh = self.candidates.itemData(idx)
@@ -168,7 +192,8 @@ class StreamSettingsDialog(QtWidgets.QDialog):
 
     def current_settings(self) -> dict[str, Any]:
         fmt = self.format.currentData()
-        out: dict[str, Any] = {"cfa": self.cfa.currentData(), "flip_vertical": self.flip.isChecked()}
+        out: dict[str, Any] = {"cfa": self.cfa.currentData(), "flip_vertical": self.flip.isChecked(),
+                               "camera": self.camera.text().strip() or None}
         if fmt != "auto":
             out["format"] = fmt
         if self.width_spin.value() > 0:

@@ -557,8 +557,8 @@ class MainWindow(QtWidgets.QMainWindow):
         initial = dict(st.open_kwargs)
         initial.setdefault("cfa", st.source.cfa or "none")
         initial.setdefault("flip_vertical", st.source.info.flip_vertical)
-        dlg = StreamSettingsDialog(f"Stream settings — {st.label}", lambda **kw: st.reopen(**_only(kw, "cfa", "flip_vertical")),
-                                   initial, message="Change how the capture is interpreted; the preview shows the result.",
+        dlg = StreamSettingsDialog(f"Stream settings — {st.label}", lambda **kw: st.reopen(**_only(kw, "cfa", "flip_vertical", "camera")),
+                                   initial, message="Change how the capture is interpreted (colour filter, flip, camera profile); the preview shows the result.",
                                    geometry=False, parent=self)
         dlg.accepted.connect(lambda: dlg.stream is not None and self.session.open_stream(dlg.stream, keep_position=True))
         dlg.finished.connect(lambda *_: setattr(self, "settings_dialog", None))

@@ -102,7 +102,8 @@ def demo_stream(size: int = DEMO_SIZE, n_ticks: int = DEMO_TICKS) -> OpenedStrea
 
 
 def open_file(path: str | Path, **kwargs: Any) -> OpenedStream:
-    """Open a capture with :func:`spikeview.io.open_source` (sidecar, detection, or ``kwargs``).
+    """Open a capture with :func:`spikeview.io.open_source` (sidecar, detection, or ``kwargs``); ``camera=PATH``
+    attaches a camera profile (:func:`spikeview.classical.calibration.attach`, as ``--camera`` does).
 
     Raises :class:`~spikeview.errors.GeometryError` (with ``candidates``) when the geometry is
     unknown, and other :class:`~spikeview.errors.SpikeviewError` for bad files.
@@ -111,10 +112,21 @@ def open_file(path: str | Path, **kwargs: Any) -> OpenedStream:
 
     path = Path(path)
     kwargs = {k: v for k, v in kwargs.items() if v is not None}
+    camera = kwargs.pop("camera", None)
+    if camera is not None:
+        camera = str(Path(camera).expanduser().absolute())
     src = open_source(path, **kwargs)
     from spikeview.classical.calibration import attach
 
-    attach(src, None)  # the capture's own hot photosites, filled as the CLI fills them (spikeview.classical.defects)
+    try:
+        # the camera profile's corrections (``--camera``), or without one the capture's own hot photosites, filled as
+        # the CLI fills them (spikeview.classical.defects)
+        attach(src, camera)
+    except BaseException:
+        src.close()
+        raise
+    if camera is not None:
+        kwargs["camera"] = camera
     info = src.info
 
     def reopen(**settings: Any) -> OpenedStream:
@@ -126,7 +138,7 @@ def open_file(path: str | Path, **kwargs: Any) -> OpenedStream:
 
     gt = _file_ground_truth(path, info, kwargs)
     open_kwargs = {**kwargs, "width": info.width, "height": info.height, "format": info.format,
-                   "cfa": info.cfa or "none", "flip_vertical": info.flip_vertical}
+                   "cfa": info.cfa or "none", "flip_vertical": info.flip_vertical}  # ``camera``: the profile's path
     return OpenedStream(source=LockedSource(src), label=path.name, path=path, reopen=reopen, ground_truth=gt,
                         open_kwargs=open_kwargs)
 
