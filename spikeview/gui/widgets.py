@@ -224,6 +224,14 @@ class ImagePane(QtWidgets.QWidget):
                 group.append(p)
             p._group = group
 
+    def unlink(self) -> None:
+        """Zoom and pan on its own again (the others of its group stay linked to each other)."""
+        self.vb.setXLink(None)
+        self.vb.setYLink(None)
+        if self in self._group:
+            self._group.remove(self)
+        self._group = [self]
+
     def set_title(self, text: str) -> None:
         self.title.setText(text)
 

@@ -50,9 +50,6 @@ class DegradationPanel(QtWidgets.QWidget):
         self.panes = {k: ImagePane(t, min_size=90) for k, t in TITLES.items()}
         self.grid = grid = QtWidgets.QGridLayout()
         grid.setSpacing(2)
-        for k in TITLES:
-            if k != "x":
-                self.panes[k].link(self.panes["x"])
         self.layout_combo = QtWidgets.QComboBox(objectName="degradation_layout")
         for key, (text, _keys) in LAYOUTS.items():
             self.layout_combo.addItem(text, key)
@@ -118,13 +115,22 @@ class DegradationPanel(QtWidgets.QWidget):
             self.panes[k].setVisible(True)
         for c in range(3):
             self.grid.setColumnStretch(c, 1 if c < cols else 0)
+        # the shown panes zoom and pan together; a hidden one is left out (its stale geometry, linked, broke Fit in
+        # the two-pane views without X) and fits its image when shown again
+        for p in self.panes.values():
+            p.unlink()
+        for k in keys[1:]:
+            self.panes[k].link(self.panes[keys[0]])
+        self._shown = keys
         with QtCore.QSignalBlocker(self.layout_combo):
             self.layout_combo.setCurrentIndex(self.layout_combo.findData(key))
         self.reset_zoom()
 
     def reset_zoom(self) -> None:
         """Show the whole image in every pane again (after the user zoomed or panned)."""
-        self.panes["x"].reset_zoom()
+        for p in self.panes.values():
+            p.fit = True
+        self.panes[self._shown[0]].reset_zoom()
         for b in self.bands:
             b.reset_zoom()
 
