@@ -96,7 +96,7 @@ class StreamTable(Config):
     tick_rate: float | None = _stream("readouts per second (default 20000)")
     layout: str | None = _stream("axis order of .npy/.npz arrays", choices=("thw", "hwt"))
     camera: str | None = _stream("camera profile from spikeview calibrate: its dark, flat-field and hot-pixel corrections "
-                                 "apply to the rates (and --white-balance profile uses its colour response)",
+                                 "apply to the rates (and --white-balance auto or profile uses its colour response)",
                                  metavar="PROFILE.toml")
 
     @classmethod

@@ -246,3 +246,45 @@ def test_screenshot_options_without_screenshot_are_refused(capsys):
     assert main(["app", "--run", "guided", "--truth", "gt.png"]) == 1
     assert "--run, --truth only act with --screenshot OUT.png" in capsys.readouterr().err
 
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", "none"])
+def test_a_loaded_ground_truth_belongs_to_its_capture(window, qtbot, tmp_path, cfa):
+    """Loaded for a capture file, the ground truth comes back when that file is opened again (another file in between,
+    a new window: the user's settings store), not when it is read the other way up; a truth file since deleted is
+    said once and forgotten."""
+    from PIL import Image
+
+    from spikeview.session import core as session_core
+
+    w = window
+    rng = np.random.default_rng(4)
+    a, b = tmp_path / "a.npy", tmp_path / "b.npy"
+    for p in (a, b):
+        np.save(p, (rng.random((40, 24, 32)) < 0.3).astype(np.uint8))
+    truth = tmp_path / "a_truth.png"
+    Image.fromarray((rng.random((24, 32, 3)) * 255).astype(np.uint8)).save(truth)
+
+    def open_(path, **kw):
+        w.set_stream(session_core.open_file(path, cfa=cfa, **kw))
+        qtbot.waitUntil(lambda: w.session.stream is not None and w.session.stream.path == path, timeout=WAIT_MS)
+        return w.session.stream
+
+    assert open_(a).ground_truth is None
+    assert w.load_truth(truth)
+    assert open_(b).ground_truth is None  # another capture: not its truth
+    st = open_(a)
+    assert st.ground_truth is not None and st.ground_truth(5).shape[:2] == (24, 32)
+    assert "a_truth.png" in w.statusBar().currentMessage()
+    from spikeview.gui.main_window import MainWindow
+
+    again = MainWindow(settings=w.settings)  # a new launch, the same user settings
+    qtbot.addWidget(again)
+    again.set_stream(session_core.open_file(a, cfa=cfa))
+    assert again.session.stream.ground_truth is not None
+    again.close()
+    assert open_(a, flip_vertical=not st.source.info.flip_vertical).ground_truth is None  # the other way up
+    truth.unlink()
+    assert open_(a).ground_truth is None and "no longer exists" in w.notice.text()
+    open_(b)
+    assert open_(a).ground_truth is None  # forgotten: said once

@@ -280,7 +280,7 @@ class ShortcutsDialog(QtWidgets.QDialog):
             "The ROI button draws a region on the canvas used by the rates, the degradation preview and guided runs. "
             "Hover the canvas to read a pixel (rate, shown values, the ground truth's) in the status bar. "
             "Wrong colours or unequal greens in the rates panel usually mean a wrong CFA or flip "
-            "(File ▸ Stream settings (CFA, flip)…)."
+            "(File ▸ Stream settings (CFA, flip, camera profile)…)."
         )
         tips.setWordWrap(True)
         box = QtWidgets.QDialogButtonBox(QtWidgets.QDialogButtonBox.StandardButton.Close)

@@ -31,6 +31,8 @@ from spikeview.gui.panels.stream import StreamPanel
 from spikeview.gui.widgets import app_words
 from spikeview.gui.workers import Worker, configure_runtime
 
+#: captures whose loaded ground truth is remembered (the most recent ones)
+MAX_TRUTHS = 50
 MAX_RECENT = 10
 #: bump when the dock layout changes incompatibly (older saved states are ignored)
 LAYOUT_VERSION = 2
@@ -346,7 +348,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.act_open = self._action(f, "&Open…", self.open_dialog, K.Open, "Open a spike capture", name="act_open")
         self._action(f, "Open the &demo capture", lambda: self.open_demo(), tip="The built-in simulated capture")
         self.recent_menu = f.addMenu("Open &recent")
-        self._action(f, "Stream &settings (CFA, flip)…", self.stream_settings, "Ctrl+Shift+G", "Re-interpret the open capture")
+        self._action(f, "Stream &settings (CFA, flip, camera profile)…", self.stream_settings, "Ctrl+Shift+G", "Re-interpret the open capture")
         self._action(f, "Load &ground truth…", self.load_truth_dialog, tip="An image of the scene to score against "
                      "(a capture without .gt.npz, e.g. a Spike-Zoo clip's PNG)", name="act_load_truth")
         f.addSeparator()
@@ -517,6 +519,7 @@ class MainWindow(QtWidgets.QMainWindow):
             label = f"{stream.label}: "
             text = " ".join(w[len(label):] if w.startswith(label) else w for w in warnings)
             self.notice.show_message(app_words(label + text), "warning")
+        self._restore_truth(stream)  # after the "Opened" line: its own line says which truth came back
         self.stream_opened.emit(stream)
 
     def ask_stream_settings(self, path: Path, initial: dict[str, Any] | None = None,
@@ -560,7 +563,8 @@ class MainWindow(QtWidgets.QMainWindow):
         dlg = StreamSettingsDialog(f"Stream settings — {st.label}", lambda **kw: st.reopen(**_only(kw, "cfa", "flip_vertical", "camera")),
                                    initial, message="Change how the capture is interpreted (colour filter, flip, camera profile); the preview shows the result.",
                                    geometry=False, parent=self)
-        dlg.accepted.connect(lambda: dlg.stream is not None and self.session.open_stream(dlg.stream, keep_position=True))
+        dlg.accepted.connect(lambda: dlg.stream is not None and (self.session.open_stream(dlg.stream, keep_position=True),
+                                                                  self._restore_truth(dlg.stream)))
         dlg.finished.connect(lambda *_: setattr(self, "settings_dialog", None))
         self.settings_dialog = dlg
         dlg.open()
@@ -785,10 +789,11 @@ class MainWindow(QtWidgets.QMainWindow):
         c.set_enabled("degradation", self.docks["degradation"].isVisible() or any(k.startswith("deg:") for k in shown))
         c.set_enabled("compare", self.docks["compare"].isVisible() or mode != "single" or a == "truth")
 
-    def load_truth(self, path: str | os.PathLike[str]) -> bool:
+    def load_truth(self, path: str | os.PathLike[str], remember: bool = True) -> bool:
         """Use an image file as the open capture's ground truth (every tick): the canvas shows it, and the Compare
         panel and the guided runs score against it. Refused in one sentence (nothing changes) for an unreadable
-        file or one of another size."""
+        file or one of another size. It belongs to the capture: remembered (QSettings ``truth_for``) and loaded again
+        when the same file is opened again in the same orientation (:meth:`_restore_truth`)."""
         st = self.session.stream
         if st is None:
             self.show_error("Open a capture first, then load its ground truth.")
@@ -800,12 +805,48 @@ class MainWindow(QtWidgets.QMainWindow):
             return False
         st.ground_truth = lambda tick, _img=img: _img
         self.settings.setValue("last_truth_dir", str(Path(path).parent))
-        self.statusBar().showMessage(f"Ground truth: {Path(path).name} (for every tick of {st.label}).", 8000)
+        if remember and st.path is not None:  # the capture's own setting: loaded again when it is opened again
+            self._remember_truth(st, str(Path(path).resolve()))
+        self.statusBar().showMessage(f"Ground truth: {Path(path).name} (for every tick of {st.label}"
+                                     f"{'; remembered for this capture' if st.path is not None else ''}).", 8000)
         self.canvas.forget("truth")
         self._update_compare_wanted()
         self.controller.request_compare()
         self.compare_panel.redraw()
         return True
+
+    def _truths(self) -> dict[str, dict[str, Any]]:
+        try:
+            items = json.loads(self.settings.value("truth_for", "{}", str))
+        except (TypeError, ValueError):
+            return {}
+        return items if isinstance(items, dict) else {}
+
+    def _remember_truth(self, st: OpenedStream, truth: str | None) -> None:
+        items = self._truths()
+        key = str(Path(st.path).resolve())
+        items.pop(key, None)
+        if truth is not None:
+            items[key] = {"truth": truth, "flip_vertical": bool(st.source.info.flip_vertical),
+                          "flip_horizontal": bool(st.source.info.flip_horizontal)}
+        self.settings.setValue("truth_for", json.dumps(dict(list(items.items())[-MAX_TRUTHS:])))
+
+    def _restore_truth(self, st: OpenedStream) -> None:
+        """The ground truth loaded earlier for this capture file (same orientation), when it has none of its own."""
+        if st.path is None or st.ground_truth is not None:
+            return
+        item = self._truths().get(str(Path(st.path).resolve()))
+        if not isinstance(item, dict) or "truth" not in item:
+            return
+        info = st.source.info
+        if (item.get("flip_vertical"), item.get("flip_horizontal")) != (bool(info.flip_vertical), bool(info.flip_horizontal)):
+            return  # read the other way up: the image no longer lies on its pixels
+        if not Path(item["truth"]).is_file():
+            self._remember_truth(st, None)
+            self.notice.show_message(f"The ground truth remembered for {st.label} ({item['truth']}) no longer exists; "
+                                     "load it again with File ▸ Load ground truth….", "warning")
+            return
+        self.load_truth(item["truth"], remember=False)
 
     def load_truth_dialog(self) -> None:
         st = self.session.stream

@@ -30,7 +30,7 @@ _APP_WORDS = (
     ("check --format", "check the file format"),
     ("read as monochrome (--cfa none)", "read as monochrome (CFA none)"),
     ("as behind a colour filter: pass --cfa ", "as behind a colour filter: choose CFA "),
-    (" (or --cfa ", " in File ▸ Stream settings (CFA, flip)… (or "),
+    (" (or --cfa ", " in File ▸ Stream settings (CFA, flip, camera profile)… (or "),
     ("--tag-check lenient (tag_check='lenient')", "lenient tag checking (tag_check = \"lenient\" in the sidecar)"),
 )
 

@@ -140,7 +140,7 @@ def cfa_hint(means: dict[str, float]) -> str:
         return ""
     if abs(gr - gb) / g > 0.25:
         return (f"The two green sites differ by {100 * abs(gr - gb) / g:.0f} %: the CFA phase or the vertical flip is "
-                "probably wrong (File ▸ Stream settings (CFA, flip)…).")
+                "probably wrong (File ▸ Stream settings (CFA, flip, camera profile)…).")
     if g < min(r, b):
-        return "The green sites are darker than red and blue: the CFA is probably wrong (try another pattern in File ▸ Stream settings (CFA, flip)…)."
+        return "The green sites are darker than red and blue: the CFA is probably wrong (try another pattern in File ▸ Stream settings (CFA, flip, camera profile)…)."
     return ""
