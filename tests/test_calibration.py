@@ -264,3 +264,37 @@ def test_cli_calibrate_info_and_reconstruct_with_camera(tmp_path, capsys, cfa):
         text = capsys.readouterr().err.strip()
         assert text.startswith("spikeview: error:") and needle in text and "Traceback" not in text, text
         assert len(text.splitlines()) == 1, text
+
+
+def test_the_plan_turns_q_off_on_rates_a_profile_moved_off_the_tfp_grid(sensor):
+    """Q rounds to the 1/Δτ levels of raw counts; a dark rate or flat field moves the corrected rates between them
+    (a colour shift of 3.8° and −2 dB on a calibrated capture): the plan turns Q off and says why; a profile of hot
+    pixels only (the capture's own) moves nothing; a hand-set Q stays."""
+    from spikeview.classical.calibration import capture_profile
+    from spikeview.guided.config import GuidedConfig
+    from spikeview.guided.window import observe_window
+
+    cfa, _pat, _dark, _flat, prof = sensor
+    assert prof.moves_rates() == "dark rate and flat field"
+    from spikeview.sim import MotionScene, simulate
+
+    rng = np.random.default_rng(3)
+    img = np.kron(rng.random((8, 8, 3)), np.ones((4, 4, 1))).astype(np.float32) * 0.12 + 0.02  # a dark scene
+    cap = simulate(MotionScene(img, size=(N, N), pan=(0.0, 0.0)), _cfg(cfa, 60))
+    hot_only = capture_profile(cap)
+    assert hot_only is None or hot_only.moves_rates() is None
+    alpha = None if cfa == "none" else np.ones(3)
+    low = GuidedConfig(temporal_radius=0)  # one 10-tick window: a low count, where Q is on by the rate rule
+    plain = observe_window(cap, 30, low, alpha).plan
+    assert plain.quantise and "low rate" in plain.reasons["quantise"]
+    attach(cap, prof)
+    try:
+        w = observe_window(cap, 30, low, alpha)
+        assert w.whole.corrected and not w.plan.quantise
+        assert "camera profile" in w.plan.reasons["quantise"] and "dark rate and flat field" in w.plan.reasons["quantise"]
+        forced = observe_window(cap, 30, GuidedConfig(temporal_radius=0, quantise=True), alpha).plan
+        assert forced.quantise
+        roi = observe_window(cap, 30, low, alpha, roi=(8, 8, 16, 16))
+        assert roi.obs.corrected and not roi.plan.quantise  # a region of it too
+    finally:
+        cap.info = cap.info.replace(camera=None)

@@ -171,6 +171,13 @@ class CameraProfile:
             self._fill = (ys, xs, np.stack(ny, axis=1), np.stack(nx, axis=1), w, w.sum(axis=1))
         return self._fill
 
+    def moves_rates(self) -> str | None:
+        """What of the correction shifts or scales the rates (``"dark rate"``, ``"flat field"``, both), or ``None``
+        (a profile of hot pixels only, such as the capture's own)."""
+        parts = [name for name, on in (("dark rate", bool((self.dark != 0).any())),
+                                       ("flat field", bool((self.gain != 1).any()))) if on]
+        return " and ".join(parts) or None
+
     def correct(self, rates: np.ndarray) -> np.ndarray:
         """``(r − dark) / gain`` per photosite (not clipped), hot photosites filled from their channel's neighbours.
 
@@ -475,9 +482,15 @@ def correct_observation(source: Any, obs: Any) -> Any:
     """A guided :class:`~spikeview.guided.observation.Observation` of ``source`` (and its previous and own windows) with
     its rates corrected in place by :func:`correct_rates` (clipped to [0, 1], as observations are); unchanged without a
     camera profile."""
-    if camera_of(source) is None:
+    cam = camera_of(source)
+    if cam is None:
         return obs
+    # a dark rate or a flat field moves the rates off the TFP's 1/Δτ grid that the sampler's Q models (hot pixels
+    # alone do not: they are filled from their neighbours' counts)
+    moved = cam.moves_rates()
     for o in (obs, obs.previous, obs.own):
         if o is not None:
             o.y = np.clip(correct_rates(source, o.y), 0.0, 1.0).astype(np.float32)
+            if moved:
+                o.corrected = f"the camera profile {cam.name}'s {moved}"
     return obs

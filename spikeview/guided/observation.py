@@ -100,6 +100,8 @@ class Observation:
             ``None`` = ``window`` everywhere.
         pooling: what the temporal support pooled (:class:`spikeview.guided.temporal.Pooling`), or ``None``.
         own: the centre window alone (a pooled observation's reuse test compares own windows).
+        corrected: what moved ``y`` off the TFP's 1/Δτ grid (a camera profile's dark rate and flat field:
+            :func:`spikeview.classical.calibration.correct_observation`), or ``None``; the plan's Q rule reads it.
     """
 
     y: np.ndarray
@@ -113,6 +115,7 @@ class Observation:
     dtau: np.ndarray | None = field(default=None, repr=False)
     pooling: Any = field(default=None, repr=False)
     own: "Observation | None" = field(default=None, repr=False)
+    corrected: str | None = None
 
     def __post_init__(self) -> None:
         y = np.asarray(self.y)
@@ -219,7 +222,7 @@ class Observation:
         d = None if self.dtau is None else self.dtau[y0:y1, x0:x1]
         pool = None if self.pooling is None else self.pooling.crop(y0, y1, x0, x1)
         return Observation(self.y[y0:y1, x0:x1], self.cfa, self.window, self.alpha, self.eta, self.ticks, self.center,
-                           None, d, pool)
+                           None, d, pool, corrected=self.corrected)
 
     @property
     def channels(self) -> int:

@@ -20,7 +20,8 @@ diffusion     skipped when the data-derived noise σ of the corrected TFP estima
 quantise (Q)  DPS: on; HQS: on at low rates (mean spikes per photosite per window below   ``quantise``
               ``Q_COUNT`` = 1.1: small integer counts, where Q gains), off above; a
               pooled observation counts per Δτ-tick window (its rate × Δτ: the pooled
-              value is the mean of its windows' TFP values, each on Q's 1/Δτ grid)
+              value is the mean of its windows' TFP values, each on Q's 1/Δτ grid); off
+              when a camera profile's dark rate or flat field moved the rates off that grid
 demosaic      ``auto``: Malvar-2004 for an estimate the prior denoises (diffusion start,  ``demosaic``
               one-pass input) unless counts are sparse (< ``SPARSE_COUNT`` = 0.3 spikes per
               photosite per window: bilinear); the TFP fallback: bilinear where the noise
@@ -256,6 +257,12 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     # --- Q
     if p.quantise is not None:
         quantise, r["quantise"] = bool(p.quantise), f"set by quantise={p.quantise}"
+    elif obs.corrected:
+        # Q rounds to the 1/Δτ levels of raw counts; the corrected rates (y − dark) / gain lie between them, and a Q
+        # that rounds them biases each channel by its own offset (a colour shift: 3.8° and −2 dB on a calibrated
+        # simulated capture, benchmarks/results/colour.md)
+        quantise, r["quantise"] = False, (f"{obs.corrected} moved the rates off the TFP's 1/Δτ grid that Q models; "
+                                          "--quantise on forces it")
     elif p.guidance == "dps" or p.prior == "sd":
         quantise, r["quantise"] = True, "DPS guidance: the residual of the non-squared loss sees the TFP's 1/Δτ steps"
     else:
