@@ -67,9 +67,10 @@ def test_bench_real_scores_the_guided_default_on_a_real_dark_capture(capsys):
 
 @pytest.mark.skipif(not REAL.exists(), reason="tests/data/uhsr.npz is missing")
 def test_the_real_dark_capture_pools_its_static_scene_and_the_plan_says_why():
-    """≥ 95 % of the real capture's photosites pool every neighbour (its darkest tiles once kept their own window:
-    16×16 blocks of raw noise), the support grows at rest in the low light, and diffusion runs: its noise, small
-    in absolute units, is judged against the frame's white."""
+    """The real capture's photosites pool every neighbour of ±3 windows (its darkest tiles once kept their own window:
+    16×16 blocks of raw noise) on ≥ 90 % of them; its scene drifts (5 photosites down over the 200 ticks, measured
+    on the whole frame), so the low-light support stops at ±3 windows instead of smearing the rotor blades over ±9;
+    and diffusion runs: its noise, small in absolute units, is judged against the frame's white."""
     from spikeview.guided.config import GuidedConfig
     from spikeview.guided.observation import Observation
     from spikeview.guided.plan import make_plan
@@ -78,8 +79,11 @@ def test_the_real_dark_capture_pools_its_static_scene_and_the_plan_says_why():
     src = open_source(str(REAL))
     obs = Observation.from_source(src, 100, 10, eta=2.0, radius=3)
     nb = obs.dtau / 10 - 1
-    assert (nb >= 6).mean() >= 0.95
-    assert obs.pooling.kind == "static" and obs.pooling.extended
+    assert (nb >= 6).mean() >= 0.90
+    assert obs.pooling.kind == "static" and not obs.pooling.extended
+    vy, vx = obs.pooling.drift
+    assert vy == pytest.approx(0.36, abs=0.06) and abs(vx) < 0.06  # 5 photosites over 140 ticks, downwards
+    assert "drifts 0.3" in obs.pooling.reason and "stops at ±3 windows" in obs.pooling.reason
     plan = make_plan(obs, GuidedConfig())
     assert plan.diffusion and plan.exposure > 4, plan.reasons["diffusion"]
     assert "relative to the frame's white" in plan.reasons["diffusion"]

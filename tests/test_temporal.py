@@ -50,8 +50,13 @@ def test_static_scene_pools_every_neighbour_with_zero_shift(cfa):
     total = src.count(10, 80).astype(np.float32)
     np.testing.assert_array_equal(counts[full], total[full])
     obs = Observation.from_source(src, 45, 10, radius=3, eta=2.0)
-    np.testing.assert_allclose(obs.y, counts / pool.dtau, rtol=1e-6)
-    assert obs.mean_count() == pytest.approx(float(counts.mean()), rel=1e-5)
+    # at rest, the rate comes from the spikes' intervals over the support, calibrated per level to the counts
+    from spikeview.guided.temporal import interval_rates
+
+    yi = interval_rates(src, pool.support, cfa, counts / pool.dtau)
+    assert np.isfinite(yi[full]).mean() > 0.95
+    np.testing.assert_allclose(obs.y, np.clip(np.where(np.isfinite(yi), yi, counts / pool.dtau), 0, 1), rtol=1e-6)
+    assert obs.mean_count() == pytest.approx(float(counts.mean()), rel=0.03)
     plan = make_plan(obs, GuidedConfig(temporal_radius=3))
     assert plan.temporal == "static" and "static: ±3 windows" in str(plan)
 
@@ -271,3 +276,48 @@ def test_library_reconstruct_frame_pools_as_its_config_says(cfa):
     np.testing.assert_array_equal(got, want)
     single = np.asarray(reconstruct_frame(src, 45, p.replace(temporal_radius=0)))
     assert np.abs(single - got).mean() > 1 / 255
+
+
+@pytest.mark.parametrize("cfa", CFAS)
+def test_the_interval_rate_beats_the_count_on_an_evenly_firing_pixel_and_keeps_a_random_ones_level(cfa):
+    """Integrate-and-fire photosites of a static scene fire evenly: the rate from their spikes' intervals over the
+    pooled support is several times closer to the truth than their count (which loses up to a spike to the phase
+    at each end); random (Bernoulli) firing keeps its level (the per-level calibration to the counts)."""
+    from spikeview.guided.temporal import interval_rates
+
+    rng = np.random.default_rng(5)
+    truth = np.clip(_texture()[8:56, 8:56] * 0.08, 0.01, None)  # 0.01-0.08 spikes a tick: a dark scene
+    phase = rng.random(truth.shape)
+    t = np.arange(200)[:, None, None]
+    even = (np.floor(phase + truth * (t + 1)) - np.floor(phase + truth * t)).astype(np.uint8)  # integrate and fire
+    random = _spikes(np.repeat(truth[None], 200, axis=0), seed=6)
+    for spikes, better in ((even, True), (random, False)):
+        src = ArraySource(spikes, cfa=cfa)
+        counts, pool = pool_counts(src, 95, 105, 3, cfa)
+        rate_c = counts / pool.dtau
+        yi = interval_rates(src, pool.support, cfa, rate_c)
+        ok = np.isfinite(yi)
+        assert ok.mean() > 0.7  # pooled at rest with 2 spikes or more
+        err_i = float(np.abs(yi[ok] - truth[ok]).mean())
+        err_c = float(np.abs(rate_c[ok] - truth[ok]).mean())
+        if better:
+            assert err_i < 0.5 * err_c, (err_i, err_c)
+        y = np.where(ok, yi, rate_c)  # as the observation takes it
+        assert float(y.mean()) == pytest.approx(float(rate_c.mean()), rel=1e-4)  # the counts' level is kept
+        assert float(y.mean()) == pytest.approx(float(truth.mean()), rel=0.05)
+
+
+def test_frame_drift_measures_a_sub_pixel_shift_of_the_whole_frame_and_refuses_noise():
+    from scipy.ndimage import shift as nd_shift
+
+    from spikeview.guided.temporal import frame_drift
+
+    rng = np.random.default_rng(2)
+    tex = _texture(96, 96, 3)
+    for dy, dx in ((2.5, 0.0), (-1.25, 3.0), (0.0, 0.0)):
+        moved = nd_shift(tex, (dy, dx), order=1, mode="nearest")
+        a = rng.poisson(tex * 20.0).astype(float)  # sums of many windows (a few spikes each)
+        b = rng.poisson(np.clip(moved, 0, None) * 20.0).astype(float)
+        d = frame_drift(a, b)
+        assert d is not None and d[0] == pytest.approx(dy, abs=0.3) and d[1] == pytest.approx(dx, abs=0.3), (dy, dx, d)
+    assert frame_drift(rng.poisson(1.0, (96, 96)).astype(float), rng.poisson(1.0, (96, 96)).astype(float)) is None

@@ -23,8 +23,10 @@ Methods: TFP-10 (the window alone), TFI, and the guided default.
   clean linear frame at the window's centre.
 
 The reference of a real capture is its **long exposure**: the methods reconstruct the middle of the capture's
-first 45 % from that part alone, and the reference is the mean rate of its last 45 % (the scene is static: the
-same scene with independent noise; the mean of the ticks around a window would share spikes with a method that
+first 45 % from that part alone, and the reference is the mean rate of its last 45 %, moved back by the frame's
+measured drift to the scored tick (:func:`drift_compensated_mean`; the real dark capture drifts 5 px over its 200
+ticks, so an uncompensated reference was blurred and displaced, and rewarded a blur) — the same scene with
+independent noise; the mean of the ticks around a window would share spikes with a method that
 pools them, and the counts of adjacent spans anti-correlate for a regularly firing pixel). The reference's own
 noise lowers every method's ``detail`` by the same factor: compare methods, not captures. It carries the
 sensor's fixed pattern, which TFP shares and a denoiser removes, so it favours TFP-like frames a little: read
@@ -98,6 +100,35 @@ def score_frame(x: np.ndarray, ref: np.ndarray, truth: bool) -> dict[str, float]
 REAL_SPLIT = (0.45, 0.55)
 
 
+#: ticks per slice of the reference when it follows a drift (:func:`drift_compensated_mean`)
+REF_SLICE = 10
+
+
+def drift_compensated_mean(src, a0: int, a1: int, b0: int, b1: int, at: int) -> np.ndarray:
+    """The mean rate of ticks ``[b0, b1)`` as the scene stood at tick ``at``: the frame's drift (px per tick) is measured
+    between the means of ``[a0, a1)`` and ``[b0, b1)`` (:func:`spikeview.guided.temporal.frame_drift`, the whole frame),
+    and each :data:`REF_SLICE`-tick slice is moved back by it before the mean (bilinear, sub-pixel). A capture whose
+    scene drifts (the real dark one: 0.036 px a tick, 5 px over the capture) would otherwise be scored against a
+    reference blurred and displaced by that drift, which rewards a blur."""
+    from scipy.ndimage import shift as nd_shift
+
+    from spikeview.guided.temporal import frame_drift
+
+    first = np.asarray(src.read(a0, a1), dtype=np.float64).mean(axis=0)
+    late = np.asarray(src.read(b0, b1), dtype=np.float64)
+    d = frame_drift(first, late.mean(axis=0))
+    span = (b0 + b1) / 2.0 - (a0 + a1) / 2.0
+    if d is None or span <= 0 or float(np.hypot(*d)) < 0.5:
+        return late.mean(axis=0)
+    vy, vx = d[0] / span, d[1] / span
+    out = np.zeros(late.shape[1:], np.float64)
+    for t in range(0, late.shape[0], REF_SLICE):
+        part = late[t:t + REF_SLICE].sum(axis=0)
+        dt = b0 + t + min(REF_SLICE, late.shape[0] - t) / 2.0 - at
+        out += nd_shift(part, (-vy * dt, -vx * dt), order=1, mode="nearest")
+    return out / late.shape[0]
+
+
 def run_real(files: list[str]) -> list[dict]:
     """Every method on the first part of every real capture (:data:`REAL_SPLIT`), at its middle tick, scored against
     the mean rate of the last part (the reference shares no spike with anything a method may read)."""
@@ -112,7 +143,7 @@ def run_real(files: list[str]) -> list[dict]:
             half, rest = int(REAL_SPLIT[0] * n), int(REAL_SPLIT[1] * n)
             first = t / f"{Path(f).stem}_first_part.npy"
             np.save(first, np.asarray(src.read(0, half), dtype=np.uint8))
-            ref = np.asarray(src.read(rest, n), dtype=np.float64).mean(axis=0)
+            ref = drift_compensated_mean(src, 0, half, rest, n, half // 2)
             cfa = ["--cfa", src.cfa if src.cfa else "none"]
             at = half // 2
             for m in METHODS:

@@ -57,6 +57,9 @@ def exposed_eta(eta: float, white: float, level: float = EXPOSURE_LEVEL) -> floa
     return float(eta) * float(white) / float(level)
 
 
+#: a pooled observation's rate at rest from the intervals between spikes, not their count
+#: (:func:`spikeview.guided.temporal.interval_rates`)
+INTERVAL_RATES = True
 #: clip range of the data-derived scale of the binomial variance model
 KAPPA_RANGE = (1e-4, 4.0)
 #: pseudo-count of the binomial model (Jeffreys), see :func:`spikeview.ops.noise.tfp_variance`
@@ -188,7 +191,13 @@ class Observation:
             counts, pool = pool_counts(source, a, b, radius, parse_cfa(source.cfa), cache, device=dev)
             if pool.dtau is not None:
                 own = cls(counts_to_sfr(count(a, b), b - a), source.cfa, b - a, alpha, eta, (a, b), int(center))
-                return cls(counts / pool.dtau, source.cfa, b - a, alpha, eta, (a, b), int(center), prev, pool.dtau, pool, own)
+                y = counts / pool.dtau
+                if INTERVAL_RATES and pool.support is not None:
+                    from spikeview.guided.temporal import interval_rates
+
+                    yi = interval_rates(source, pool.support, parse_cfa(source.cfa), y)
+                    y = np.where(np.isfinite(yi), yi, y)
+                return cls(y, source.cfa, b - a, alpha, eta, (a, b), int(center), prev, pool.dtau, pool, own)
             return cls(counts / float(b - a), source.cfa, b - a, alpha, eta, (a, b), int(center), prev, None, pool)
         from spikeview.guided.temporal import Pooling, neighbour_offsets
 

@@ -118,6 +118,11 @@ class Pooling:
     reason: str = ""
     #: windows pooled beyond ``radius`` at rest on static low-light tiles (:data:`LOW_LIGHT_RADIUS`), nearest first
     extended: tuple[int, ...] = ()
+    #: ``(lo, hi)``: ``(H, W)`` int64 tick range each photosite pooled **at rest** (every window it took at zero
+    #: shift, contiguous around its own); ``lo = hi = -1`` where it took a shifted window (:func:`interval_rates`)
+    support: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    #: the frame's drift (photosites a window, y, x) that bounded the low-light extension (:func:`frame_drift`)
+    drift: tuple[float, float] | None = None
 
     @property
     def active(self) -> bool:
@@ -127,8 +132,9 @@ class Pooling:
     def crop(self, y0: int, y1: int, x0: int, x1: int) -> "Pooling":
         """The same pooling on the photosites ``[y0:y1, x0:x1]`` (tile maps kept whole)."""
         d = None if self.dtau is None else self.dtau[y0:y1, x0:x1]
+        sup = None if self.support is None else tuple(x[y0:y1, x0:x1] for x in self.support)
         return Pooling(self.radius, self.window, self.offsets, d, self.shifts, self.accepted, self.kind, self.reason,
-                       self.extended)
+                       self.extended, sup)
 
 
 #: run the torch alignment (:func:`_align_torch`) on the CPU too (tests hold the GPU path to the numpy one with it)
@@ -507,6 +513,9 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     # centre (motion grows with the distance), and window k is compared with what was pooled so far
     # (the centre and the accepted nearer windows: a less noisy reference than the centre alone)
     chain = {-1: np.ones((h, w), dtype=bool), 1: np.ones((h, w), dtype=bool)}
+    # how many windows each photosite took on each side (contiguous: the chain), and whether all at zero shift
+    sides = {-1: np.zeros((h, w), np.int64), 1: np.zeros((h, w), np.int64)}
+    still = np.ones((h, w), dtype=bool)
     for d in sorted({abs(k) for k in offsets}):
         oks = {}
         refs = reference()
@@ -537,6 +546,8 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
             zero = (best_px[..., 0] == 0) & (best_px[..., 1] == 0)
             weight = chain[1 if k > 0 else -1] & tile_ok_px & inside & (margin | zero) & pixel_ok(refs, boxk, factors[k])
             chain[1 if k > 0 else -1] = weight
+            sides[1 if k > 0 else -1] += weight
+            still &= ~weight | zero
             oks[k] = (weight, aligned)
         for k, (weight, aligned) in oks.items():
             total += np.where(weight, aligned, 0.0).astype(np.float32)
@@ -544,17 +555,95 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     # low light: static tiles go on pooling at rest beyond ±radius while their pooled count is low
     far = max(abs(k) for k in offsets)
     ext: tuple[int, ...] = ()
+    drift: list = []  # the frame's drift that bounded the extension (photosites a window)
     if pan is None:  # a panning frame does not grow its support at rest
         ext = _extend_at_rest(source, a, b, cfa, cache, total, pooled, chain, at_rest, curve, cap, tile_g, reference, pixel_ok,
-                              far, radius, accepted, max(factors[k] for k in offsets if abs(k) == far))
+                              far, radius, accepted, max(factors[k] for k in offsets if abs(k) == far), sides, drift)
     for k in ext:
         shifts[k] = np.zeros((th, tw, 2), np.int64)
-    pool = Pooling(radius, window, offsets, (window * (1.0 + pooled)).astype(np.float32), shifts, accepted, extended=ext)
+    lo = np.where(still, a - window * sides[-1], -1)
+    hi = np.where(still, b + window * sides[1], -1)
+    pool = Pooling(radius, window, offsets, (window * (1.0 + pooled)).astype(np.float32), shifts, accepted, extended=ext,
+                   support=(lo, hi))
+    if drift:
+        pool.drift = drift[0]
     pool.kind, pool.reason = describe(pool)
     if pan is not None:
         pool.reason += (f"; the frame pans (about {f * pan[0]:+.2g}, {f * pan[1]:+.2g} photosites a window, y, x): its dim "
                         "tiles are not held at rest and the support does not grow")
     return total, pool
+
+
+#: the interval estimate (:func:`interval_rates`) needs this many spikes of a photosite in its support
+INTERVAL_MIN_SPIKES = 2
+#: rows of the frame :func:`interval_rates` handles at once (bounds its temporary arrays)
+INTERVAL_STRIP = 64
+
+
+def interval_rates(source: Any, support: tuple[np.ndarray, np.ndarray], cfa: str | None = None,
+                   count_rates: np.ndarray | None = None) -> np.ndarray:
+    """The rate of each photosite from the **intervals** between its spikes over the ticks it pooled at rest:
+    ``(n − 1) / (t_n − t_1)`` for its first and last spike ``t_1 < t_n`` in ``[lo, hi)`` (``support``,
+    :attr:`Pooling.support`), ``NaN`` where it took a shifted window or holds fewer than
+    :data:`INTERVAL_MIN_SPIKES` spikes there.
+
+    Why: a pixel integrates light and fires when its charge crosses the threshold, so on a static scene its spikes are
+    nearly evenly spaced (real pixels fire with 0.1–0.5× the variance of binomial counts, DOMAIN.md). A count over
+    the support loses up to one spike to the phase at each end (±1 of 6 spikes is 17 % at 0.03 spikes per tick); the
+    spacing of the spikes inside it does not (a tick of 160 is 0.6 %). This is TFI's information (one interval) taken
+    over every interval of the support: the interval rate of issue 25's deliverable 1.
+
+    ``(n − 1) / (t_n − t_1)`` is exact for a pixel that fires evenly, but reads high for one that fires at random
+    (Poisson-like: by about one spike in the support). With ``count_rates`` (the pooled counts over the support, which
+    are unbiased either way) the estimate is calibrated per level (:data:`INTERVAL_LEVELS` quantile bins of the
+    same-colour 3×3 mean rate): in each, its mean is scaled to the counts' mean. So the level of each part of the
+    frame is the counts', and only the pixel-to-pixel noise is the intervals'."""
+    lo, hi = support
+    ok = lo >= 0
+    out = np.full(lo.shape, np.nan, np.float32)
+    if not ok.any():
+        return out
+    t0, t1 = int(lo[ok].min()), int(hi[ok].max())
+    spikes = source.read(t0, t1)
+    n_t = t1 - t0
+    t = np.arange(n_t, dtype=np.int64)[:, None, None]
+    for r0 in range(0, lo.shape[0], INTERVAL_STRIP):
+        sl = slice(r0, r0 + INTERVAL_STRIP)
+        okr = ok[sl]
+        if not okr.any():
+            continue
+        m = (spikes[:, sl] > 0) & (t >= (lo[sl] - t0)[None]) & (t < (hi[sl] - t0)[None])
+        n = m.sum(axis=0)
+        first = m.argmax(axis=0)
+        last = n_t - 1 - m[::-1].argmax(axis=0)
+        good = okr & (n >= INTERVAL_MIN_SPIKES) & (last > first)
+        rows = out[sl]
+        rows[good] = ((n[good] - 1) / (last[good] - first[good])).astype(np.float32)
+    if count_rates is not None:
+        _calibrate_levels(out, np.asarray(count_rates, np.float32), cfa)
+    return out
+
+
+#: quantile bins of the local rate in which :func:`interval_rates` matches the counts' mean
+INTERVAL_LEVELS = 8
+
+
+def _calibrate_levels(est: np.ndarray, counts: np.ndarray, cfa: str | None) -> None:
+    """Scale ``est`` (in place, where finite) so that its mean equals ``counts``' in each level bin (the same-colour
+    3×3 mean of ``counts``: a level that does not follow one pixel's own noise)."""
+    ok = np.isfinite(est)
+    if ok.sum() < 16:
+        return
+    level = _box_same_colour(counts.astype(np.float32), cfa) / 9.0
+    edges = np.unique(np.quantile(level[ok], np.linspace(0.0, 1.0, INTERVAL_LEVELS + 1)))
+    if edges.size < 2:
+        return
+    which = np.clip(np.searchsorted(edges, level, side="right") - 1, 0, edges.size - 2)
+    for i in range(edges.size - 1):
+        sel = ok & (which == i)
+        se = float(est[sel].sum())
+        if se > 0:
+            est[sel] *= float(counts[sel].sum()) / se
 
 
 #: a frame pans when its best velocity matches better than the opposite one by this many standard deviations of
@@ -587,10 +676,89 @@ def _global_motion(frame: dict[tuple[float, float], float], tiles: int, neighbou
     return (vy, vx) if moving[(vy, vx)] < back * (1.0 - margin) else None
 
 
+#: the low-light extension stops where the frame's measured drift (:func:`frame_drift`) has moved the scene by more
+#: than this many photosites since the centre window (a drift no tile's test sees at that light blurs the pool)
+DRIFT_LIMIT = 0.5
+#: a drift estimate is trusted when the correlation peak stands this far above its surroundings (in standard
+#: deviations of the band-passed correlation surface away from it; a static simulated scene at 0.02-0.05 spikes per
+#: tick peaks at 16, the real dark capture's drift at 6.7, a 0.2-photosite-a-window pan at 3.9)
+DRIFT_PEAK = 3.0
+
+
+def frame_drift(first: np.ndarray, second: np.ndarray, sigma: float = 1.0) -> tuple[float, float] | None:
+    """The sub-pixel shift ``(dy, dx)`` that moves ``first`` onto ``second`` (two sums of counts of one frame, in the
+    same units), from the peak of their cross-correlation after a Gaussian of ``sigma`` (a parabola through the peak
+    and its neighbours, each axis); ``None`` when the peak is not clear (:data:`DRIFT_PEAK`): a flat or too dark
+    frame. The whole frame is one measurement, so a drift of a third of a photosite a window that no 16-px tile
+    shows above its noise at 0.03 spikes per tick is measured to a few hundredths."""
+    from scipy.ndimage import gaussian_filter
+
+    # band-pass (σ and 4σ): the scene's large areas make a broad peak that hides a shift of a few photosites
+    a = gaussian_filter(np.asarray(first, np.float64), sigma) - gaussian_filter(np.asarray(first, np.float64), 4 * sigma)
+    b = gaussian_filter(np.asarray(second, np.float64), sigma) - gaussian_filter(np.asarray(second, np.float64), 4 * sigma)
+    h, w = a.shape
+    if min(h, w) < 16 or not (a.std() > 0 and b.std() > 0):
+        return None
+    win = np.outer(np.hanning(h), np.hanning(w))
+    xc = np.fft.ifft2(np.conj(np.fft.fft2(a * win)) * np.fft.fft2(b * win)).real
+    xc = np.fft.fftshift(xc)
+    cy, cx = h // 2, w // 2
+    r = 8  # shifts beyond ±8 photosites are not a drift (the search handles motion)
+    sub = xc[cy - r:cy + r + 1, cx - r:cx + r + 1]
+    iy, ix = np.unravel_index(int(np.argmax(sub)), sub.shape)
+    if iy in (0, 2 * r) or ix in (0, 2 * r):
+        return None
+    far = np.ones_like(sub, bool)
+    far[max(0, iy - 3):iy + 4, max(0, ix - 3):ix + 4] = False
+    spread = float(sub[far].std())
+    if spread <= 0 or (sub[iy, ix] - sub[far].mean()) / spread < DRIFT_PEAK:
+        return None
+
+    def vertex(m: float, c: float, p: float) -> float:
+        d = m - 2 * c + p
+        return 0.0 if d >= 0 else 0.5 * (m - p) / d
+
+    dy = iy - r + vertex(sub[iy - 1, ix], sub[iy, ix], sub[iy + 1, ix])
+    dx = ix - r + vertex(sub[iy, ix - 1], sub[iy, ix], sub[iy, ix + 1])
+    return float(dy), float(dx)
+
+
+def _extension_drift(source: Any, a: int, b: int, cache: WindowCache, core: np.ndarray, reached: int,
+                     cfa: str | None = None) -> tuple[float, float] | None:
+    """The frame's drift in photosites per window over the windows the extension may pool: the sum of the far
+    windows on one side against the other (or against the core when one side lies outside the capture), divided by
+    their distance in windows; ``None`` when it cannot be measured."""
+    window = b - a
+    n = int(source.n_frames)
+    sides = {s: [k for k in range(s * (reached + 1), s * (LOW_LIGHT_RADIUS + 1), s)
+                 if a + k * window >= 0 and b + k * window <= n] for s in (-1, 1)}
+    # a Bayer mosaic is compared as 2×2 super-pixels (its colour pattern would correlate with itself at even shifts)
+    view = (lambda x: _guide_raw(x, cfa)) if cfa is not None else (lambda x: x)
+    unit = 2.0 if cfa is not None else 1.0
+    core = view(core)
+    sums = {s: (view(sum(cache.counts(source, a + k * window, b + k * window).astype(np.float64) for k in ks)),
+                float(np.mean(ks))) for s, ks in sides.items() if ks}
+    if -1 in sums and 1 in sums:
+        (left, kl), (right, kr) = sums[-1], sums[1]
+        scale = len(sides[-1]) / len(sides[1])
+        d = frame_drift(left, right * scale)
+        span = kr - kl
+    elif sums:
+        s, (far, kf) = next(iter(sums.items()))
+        d = frame_drift(core, far) if s > 0 else frame_drift(far, core)
+        span = abs(kf)
+    else:
+        return None
+    if d is None or span <= 0:
+        return None
+    return unit * d[0] / span, unit * d[1] / span
+
+
 def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowCache, total: np.ndarray,
                     pooled: np.ndarray, chain: dict[int, np.ndarray], at_rest: np.ndarray,
                     curve: tuple[np.ndarray, np.ndarray], cap: float, tile_g: int, reference: Any, pixel_ok: Any, reached: int,
-                    radius: int, accepted: dict[int, np.ndarray], factor: float) -> tuple[int, ...]:
+                    radius: int, accepted: dict[int, np.ndarray], factor: float,
+                    sides: dict[int, np.ndarray] | None = None, drift_out: list | None = None) -> tuple[int, ...]:
     """Pool windows ``reached + 1 …`` at zero shift on static tiles whose pooled count is below
     :data:`LOW_LIGHT_COUNT` per photosite (in place on ``total``, ``pooled``, ``chain``), up to
     :data:`LOW_LIGHT_RADIUS` windows a side. A tile takes window ``k`` when it was at rest and matched every
@@ -614,11 +782,23 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
     core_var = _countvar(core, cap, curve) * 4.0 / np.maximum(core_n, 1.0)
     side_t = {-1: np.zeros_like(total), 1: np.zeros_like(total)}
     side_n = {-1: np.zeros_like(total), 1: np.zeros_like(total)}
+    deepest = LOW_LIGHT_RADIUS
     for d in range(reached + 1, LOW_LIGHT_RADIUS + 1):
         need_tile = _tile_sum(total, TILE) < LOW_LIGHT_COUNT * _tile_sum(np.ones_like(total), TILE)
         need = need_tile[ty_of][:, tx_of] & rest_px
         ks = [k for k in (-d, d) if a + k * window >= 0 and b + k * window <= int(source.n_frames)]
         if not ks or not (need & (chain[-1] | chain[1])).any():
+            break
+        if d == reached + 1:
+            # a slow drift of the whole frame that no tile shows at this light, measured on the whole frame, bounds
+            # the support: beyond DRIFT_LIMIT photosites of drift since the centre, pooling at rest is a blur (the real
+            # dark capture drifts 0.36 photosites a window: ±9 windows at rest smeared its rotor blades)
+            v = _extension_drift(source, a, b, cache, total, reached, cfa)
+            if v is not None and float(np.hypot(*v)) * LOW_LIGHT_RADIUS > DRIFT_LIMIT:
+                deepest = int(np.floor(DRIFT_LIMIT / float(np.hypot(*v)) + 1e-9))
+                if drift_out is not None:
+                    drift_out.append(v)
+        if d > deepest:
             break
         oks = {}
         refs = reference()  # both sides against what was pooled so far
@@ -652,6 +832,8 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
                 accepted[k] = _tile_sum(weight.astype(np.float32), TILE) > 0
                 side_t[side] += np.where(weight, nk, 0.0).astype(np.float32)
                 side_n[side] += weight
+                if sides is not None:
+                    sides[side] += weight
         for k, (weight, nk) in oks.items():
             total += np.where(weight, nk, 0.0).astype(np.float32)
             pooled += weight
@@ -762,6 +944,11 @@ def describe(pool: Pooling) -> tuple[str, str]:
         eff = (f"Δτ_eff {float(pool.dtau.mean()):.0f} ticks on average, up to {float(pool.dtau.max()):.0f}: low light, "
                f"{100 * more:.0f}% of photosites (static tiles under {LOW_LIGHT_COUNT:g} spikes) went on at rest "
                f"to ±{far} windows, the bound is ±{LOW_LIGHT_RADIUS}")
+    if pool.drift is not None:
+        v = float(np.hypot(*pool.drift))
+        depth = max(pool.radius, int(np.floor(DRIFT_LIMIT / v + 1e-9)) if v > 0 else LOW_LIGHT_RADIUS)
+        eff += (f"; the whole frame drifts {v:.2f} photosites a window ({pool.drift[0]:+.2f}, {pool.drift[1]:+.2f}, y, x), "
+                f"so the support stops at ±{depth} windows (beyond, the scene has moved more than {DRIFT_LIMIT:g} photosite)")
     if full >= 0.9 and moving <= 0.05:
         still = "" if smax == 0 else f"; {100 * moving:.0f}% of the tiles aligned, shifts up to {smax} px"
         return "static", f"static: {span} pooled on {100 * full:.0f}% of photosites ({eff}{still})"
