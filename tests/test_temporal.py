@@ -53,7 +53,7 @@ def test_static_scene_pools_every_neighbour_with_zero_shift(cfa):
     # at rest, the rate comes from the spikes' intervals over the support, calibrated per level to the counts
     from spikeview.guided.temporal import interval_rates
 
-    yi = interval_rates(src, pool.support, cfa, counts / pool.dtau)
+    yi = interval_rates(src, pool.support, cfa, counts / pool.dtau, min_ticks=70)
     assert np.isfinite(yi[full]).mean() > 0.95
     np.testing.assert_allclose(obs.y, np.clip(np.where(np.isfinite(yi), yi, counts / pool.dtau), 0, 1), rtol=1e-6)
     assert obs.mean_count() == pytest.approx(float(counts.mean()), rel=0.03)
@@ -295,7 +295,7 @@ def test_the_interval_rate_beats_the_count_on_an_evenly_firing_pixel_and_keeps_a
         src = ArraySource(spikes, cfa=cfa)
         counts, pool = pool_counts(src, 95, 105, 3, cfa)
         rate_c = counts / pool.dtau
-        yi = interval_rates(src, pool.support, cfa, rate_c)
+        yi = interval_rates(src, pool.support, cfa, rate_c, min_ticks=70)
         ok = np.isfinite(yi)
         assert ok.mean() > 0.7  # pooled at rest with 2 spikes or more
         err_i = float(np.abs(yi[ok] - truth[ok]).mean())

@@ -195,7 +195,9 @@ class Observation:
                 if INTERVAL_RATES and pool.support is not None:
                     from spikeview.guided.temporal import interval_rates
 
-                    yi = interval_rates(source, pool.support, parse_cfa(source.cfa), y)
+                    # photosites that pooled every neighbouring window at rest (the whole ±radius, or more)
+                    yi = interval_rates(source, pool.support, parse_cfa(source.cfa), y,
+                                        min_ticks=(b - a) * (1 + len(pool.offsets)))
                     y = np.where(np.isfinite(yi), yi, y)
                 return cls(y, source.cfa, b - a, alpha, eta, (a, b), int(center), prev, pool.dtau, pool, own)
             return cls(counts / float(b - a), source.cfa, b - a, alpha, eta, (a, b), int(center), prev, None, pool)

@@ -581,11 +581,13 @@ INTERVAL_STRIP = 64
 
 
 def interval_rates(source: Any, support: tuple[np.ndarray, np.ndarray], cfa: str | None = None,
-                   count_rates: np.ndarray | None = None) -> np.ndarray:
+                   count_rates: np.ndarray | None = None, min_ticks: int = 0) -> np.ndarray:
     """The rate of each photosite from the **intervals** between its spikes over the ticks it pooled at rest:
     ``(n − 1) / (t_n − t_1)`` for its first and last spike ``t_1 < t_n`` in ``[lo, hi)`` (``support``,
-    :attr:`Pooling.support`), ``NaN`` where it took a shifted window or holds fewer than
-    :data:`INTERVAL_MIN_SPIKES` spikes there.
+    :attr:`Pooling.support`), ``NaN`` where it took a shifted window, pooled fewer than ``min_ticks`` ticks (a
+    photosite whose neighbouring windows did not all match is near motion: its rate changes within the support, and
+    with one or two intervals the estimate is TFI's own noise; on a sequence with rotating fans they cost 0.8 dB) or
+    holds fewer than :data:`INTERVAL_MIN_SPIKES` spikes there.
 
     Why: a pixel integrates light and fires when its charge crosses the threshold, so on a static scene its spikes are
     nearly evenly spaced (real pixels fire with 0.1–0.5× the variance of binomial counts, DOMAIN.md). A count over
@@ -599,7 +601,7 @@ def interval_rates(source: Any, support: tuple[np.ndarray, np.ndarray], cfa: str
     same-colour 3×3 mean rate): in each, its mean is scaled to the counts' mean. So the level of each part of the
     frame is the counts', and only the pixel-to-pixel noise is the intervals'."""
     lo, hi = support
-    ok = lo >= 0
+    ok = (lo >= 0) & (hi - lo >= min_ticks)
     out = np.full(lo.shape, np.nan, np.float32)
     if not ok.any():
         return out
