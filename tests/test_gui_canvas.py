@@ -288,3 +288,37 @@ def test_a_loaded_ground_truth_belongs_to_its_capture(window, qtbot, tmp_path, c
     assert open_(a).ground_truth is None and "no longer exists" in w.notice.text()
     open_(b)
     assert open_(a).ground_truth is None  # forgotten: said once
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", None])
+def test_zoom_and_pan_are_shared_by_every_view_of_the_frame(window, qtbot, cfa):
+    """A zoom in the canvas shows the same frame pixels in the Stream panel's panes and the degradation panes (views of
+    the whole frame), and back; Fit in one fits them all (issue 27: zoom shared by every view of the capture)."""
+    from spikeview.io.source import ArraySource
+    from spikeview.session import core as session_core
+
+    w = window
+    rng = np.random.default_rng(1)
+    label = f"zoom-{cfa}"
+    w.set_stream(session_core.memory_stream(ArraySource((rng.random((60, 64, 64)) < 0.3).astype(np.uint8), cfa=cfa), label))
+    qtbot.waitUntil(lambda: w.session.stream is not None and w.session.stream.label == label, timeout=WAIT_MS)
+    w.stream_panel.set_images_visible(True)
+    w.docks["degradation"].show()
+    w.docks["degradation"].raise_()
+    canvas, raw, deg = w.canvas.a, w.stream_panel.raw, w.degradation_panel.panes["x"]
+    qtbot.waitUntil(lambda: raw._shape == (64, 64) and canvas._shape == (64, 64) and raw.isVisible(), timeout=WAIT_MS)
+    qtbot.waitUntil(lambda: deg._shape == (64, 64) and deg.isVisible(), timeout=WAIT_MS)
+
+    def centre(p):
+        (x0, x1), (y0, y1) = p.vb.viewRange()
+        return (x0 + x1) / 2, (y0 + y1) / 2
+
+    canvas.vb.scaleBy((0.25, 0.25), center=(16, 16))
+    canvas.vb.sigRangeChangedManually.emit(None)
+    for p in (raw, deg):
+        assert not p.covers_image() and np.allclose(centre(p), centre(canvas), atol=1.0), (p.title.text(), centre(p))
+    raw.vb.translateBy(x=8, y=0)  # a pan in the Stream panel: the canvas follows
+    raw.vb.sigRangeChangedManually.emit(None)
+    assert np.allclose(centre(canvas), centre(raw), atol=1.0)
+    w.canvas.fit()  # Fit in one fits them all
+    qtbot.waitUntil(lambda: all(p.covers_image() for p in (canvas, raw, deg)), timeout=WAIT_MS)

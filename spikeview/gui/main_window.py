@@ -159,6 +159,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self.setCentralWidget(self.canvas)
         self.compare_panel = ComparePanel(s, self.canvas)
         self.stream_panel.set_images_visible(False)  # the canvas shows the spikes, TFP and TFI
+        # every view of the capture's frame zooms and pans with the others (ZoomSync; within a panel, its link)
+        from spikeview.gui.widgets import ZoomSync
+
+        self.zoom_sync = ZoomSync([self.canvas.a, self.stream_panel.raw, *self.degradation_panel.panes.values()], self)
         self.docks: dict[str, QtWidgets.QDockWidget] = {}  # the panels default_layout places
         self.file_menu: QtWidgets.QMenu | None = None
         self.view_menu: QtWidgets.QMenu | None = None

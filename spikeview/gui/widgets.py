@@ -100,6 +100,9 @@ class ElidedLabel(QtWidgets.QLabel):
 
 
 class ImagePane(QtWidgets.QWidget):
+    #: :meth:`reset_zoom` ran (Fit, double-click): a :class:`ZoomSync` fits the views of the same frame elsewhere
+    zoom_reset = QtCore.Signal()
+
     """A titled pyqtgraph view of one uint8 image with fixed levels (0, 255), zoom and pan.
 
     Images are row-major ``(H, W)`` or ``(H, W, 3)`` uint8 and are shown as they are: levels are
@@ -173,6 +176,7 @@ class ImagePane(QtWidgets.QWidget):
             p.fit = True
         for p in self._group:
             p.fit_view()
+        self.zoom_reset.emit()
 
     def covers_image(self) -> bool:
         """Whether the view shows the whole image and the image fills at least half of it (tests, asserts)."""
@@ -534,3 +538,53 @@ def tool_button(text: str, tip: str, slot: Any, *, icon: QtGui.QIcon | None = No
     if slot is not None:
         (b.toggled if checkable else b.clicked).connect(slot)
     return b
+
+
+class ZoomSync(QtCore.QObject):
+    """Zoom and pan shared by the views of one frame in different widgets (the canvas, the Stream panel's panes, the
+    degradation panes): a zoom or pan by the user in one shows the same rectangle of frame pixels in the others that
+    show an image of the same size (an ROI-sized degradation stage does not follow the whole frame), and Fit in one
+    fits them all. Not pyqtgraph's view link, which lines views up by their place on the screen: fine for the panes
+    of one grid (:meth:`ImagePane.link`), wrong for views in different docks."""
+
+    def __init__(self, panes: Any, parent: QtCore.QObject | None = None):
+        super().__init__(parent)
+        self.panes: list[ImagePane] = list(panes)
+        self._busy = False
+        for p in self.panes:
+            p.vb.sigRangeChangedManually.connect(lambda *_, p=p: self._follow(p))
+            p.zoom_reset.connect(lambda p=p: self._fit(p))
+
+    def _others(self, src: ImagePane) -> list[ImagePane]:
+        """One shown pane per zoom group other than ``src``'s, with an image of ``src``'s size."""
+        out, groups = [], [src._group]
+        for p in self.panes:
+            if any(p._group is g for g in groups) or p._shape is None or p._shape != src._shape or not p.isVisible():
+                continue
+            groups.append(p._group)
+            out.append(p)
+        return out
+
+    def _follow(self, src: ImagePane) -> None:
+        if self._busy:
+            return
+        self._busy = True
+        try:
+            rect = src.vb.viewRect()
+            for p in self._others(src):
+                for q in p._group:
+                    q.fit = False
+                p.vb.setRange(rect, padding=0)
+        finally:
+            self._busy = False
+
+    def _fit(self, src: ImagePane) -> None:
+        if self._busy:
+            return
+        self._busy = True
+        try:
+            for p in self.panes:
+                if p._group is not src._group and not all(q.fit for q in p._group):
+                    p.reset_zoom()
+        finally:
+            self._busy = False
