@@ -185,7 +185,9 @@ class ExportPanel(QtWidgets.QWidget):
         if self.guided_seen and s.get("export_method") != "guided":
             self.count.setText(self.count.text() + f" by {s.get('export_method').upper()}, not the guided result: "
                                "Method Guided exports it")
-        if not self.cancel_btn.isEnabled():  # idle: the bar reads 0 / the frames this export would write
+        if not self.cancel_btn.isEnabled() and getattr(self, "_done_ticks", None) != tuple(ticks):
+            # idle: the bar reads 0 / the frames this export would write (a finished export of these frames stays full
+            # until they change: a refresh right after it had emptied the bar)
             self.progress.setRange(0, max(n, 1))
             self.progress.setValue(0)
         try:
@@ -236,12 +238,14 @@ class ExportPanel(QtWidgets.QWidget):
         self.status.setStyleSheet("color: #ff6060;" if state == "failed" else "")
         if running:
             self.progress.setValue(0)
+            self._done_ticks = None
             self._started = time.monotonic()
 
     def set_progress(self, done: int, total: int) -> None:
         """Frames done of ``total``, with the time taken, the time left and the ETA (as the CLI's progress bar)."""
         self.progress.setRange(0, max(total, 1))
         self.progress.setValue(done)
+        self._done_ticks = tuple(self.ticks()) if done >= total else None
         started = getattr(self, "_started", None)
         if started is not None and self.cancel_btn.isEnabled():
             self.status.setText(progress_text(done, total, time.monotonic() - started, time.time()))
