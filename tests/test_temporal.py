@@ -57,6 +57,7 @@ def test_static_scene_pools_every_neighbour_with_zero_shift(cfa):
     assert np.isfinite(yi[full]).mean() > 0.95
     np.testing.assert_allclose(obs.y, np.clip(np.where(np.isfinite(yi), yi, counts / pool.dtau), 0, 1), rtol=1e-6)
     assert obs.mean_count() == pytest.approx(float(counts.mean()), rel=0.03)
+    assert "from the intervals between their spikes" in obs.pooling.reason  # the plan says it
     plan = make_plan(obs, GuidedConfig(temporal_radius=3))
     assert plan.temporal == "static" and "static: ±3 windows" in str(plan)
 

@@ -198,7 +198,11 @@ class Observation:
                     # photosites that pooled every neighbouring window at rest (the whole ±radius, or more)
                     yi = interval_rates(source, pool.support, parse_cfa(source.cfa), y,
                                         min_ticks=(b - a) * (1 + len(pool.offsets)))
-                    y = np.where(np.isfinite(yi), yi, y)
+                    took = np.isfinite(yi)
+                    y = np.where(took, yi, y)
+                    if took.any():  # the plan's temporal row says it
+                        pool.reason += (f"; the rate of {100 * float(took.mean()):.0f}% of photosites (pooled at rest) from "
+                                        "the intervals between their spikes")
                 return cls(y, source.cfa, b - a, alpha, eta, (a, b), int(center), prev, pool.dtau, pool, own)
             return cls(counts / float(b - a), source.cfa, b - a, alpha, eta, (a, b), int(center), prev, None, pool)
         from spikeview.guided.temporal import Pooling, neighbour_offsets
