@@ -56,6 +56,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any
 
+import numba
 import numpy as np
 
 #: tile size (pixels) of the alignment
@@ -576,8 +577,6 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
 
 #: the interval estimate (:func:`interval_rates`) needs this many spikes of a photosite in its support
 INTERVAL_MIN_SPIKES = 2
-#: rows of the frame :func:`interval_rates` handles at once (bounds its temporary arrays)
-INTERVAL_STRIP = 64
 
 
 def interval_rates(source: Any, support: tuple[np.ndarray, np.ndarray], cfa: str | None = None,
@@ -596,7 +595,8 @@ def interval_rates(source: Any, support: tuple[np.ndarray, np.ndarray], cfa: str
     over every interval of the support: the interval rate of issue 25's deliverable 1.
 
     ``(n − 1) / (t_n − t_1)`` is exact for a pixel that fires evenly, but reads high for one that fires at random
-    (Poisson-like: by about one spike in the support). With ``count_rates`` (the pooled counts over the support, which
+    (Poisson-like: by about one spike in the support), and is noisier than the count there: when the photosites'
+    intervals vary (:data:`INTERVAL_MAX_CV2`) every value is ``NaN`` and the counts stay. With ``count_rates`` (the pooled counts over the support, which
     are unbiased either way) the estimate is calibrated per level (:data:`INTERVAL_LEVELS` quantile bins of the
     same-colour 3×3 mean rate): in each, its mean is scaled to the counts' mean. So the level of each part of the
     frame is the counts', and only the pixel-to-pixel noise is the intervals'."""
@@ -606,24 +606,52 @@ def interval_rates(source: Any, support: tuple[np.ndarray, np.ndarray], cfa: str
     if not ok.any():
         return out
     t0, t1 = int(lo[ok].min()), int(hi[ok].max())
-    spikes = source.read(t0, t1)
-    n_t = t1 - t0
-    t = np.arange(n_t, dtype=np.int64)[:, None, None]
-    for r0 in range(0, lo.shape[0], INTERVAL_STRIP):
-        sl = slice(r0, r0 + INTERVAL_STRIP)
-        okr = ok[sl]
-        if not okr.any():
-            continue
-        m = (spikes[:, sl] > 0) & (t >= (lo[sl] - t0)[None]) & (t < (hi[sl] - t0)[None])
-        n = m.sum(axis=0)
-        first = m.argmax(axis=0)
-        last = n_t - 1 - m[::-1].argmax(axis=0)
-        good = okr & (n >= INTERVAL_MIN_SPIKES) & (last > first)
-        rows = out[sl]
-        rows[good] = ((n[good] - 1) / (last[good] - first[good])).astype(np.float32)
+    spikes = np.ascontiguousarray(source.read(t0, t1), dtype=np.uint8)
+    lo_r = np.where(ok, lo - t0, 0).astype(np.int64)
+    hi_r = np.where(ok, hi - t0, 0).astype(np.int64)
+    n, first, last, s1, s2 = _interval_stats(spikes, lo_r, hi_r)
+    many = n >= 4  # three intervals or more: their spread says how evenly the photosites fire
+    if many.sum() >= 16:
+        mean = s1[many] / (n[many] - 1)
+        cv2 = (s2[many] / (n[many] - 1) - mean * mean) / (mean * mean)
+        if float(np.median(cv2)) > INTERVAL_MAX_CV2:
+            return out  # photosites that fire at random: the counts are the better estimate
+    good = ok & (n >= INTERVAL_MIN_SPIKES) & (last > first)
+    out[good] = ((n[good] - 1) / (last[good] - first[good])).astype(np.float32)
     if count_rates is not None:
         _calibrate_levels(out, np.asarray(count_rates, np.float32), cfa)
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _interval_stats(spikes: np.ndarray, lo: np.ndarray, hi: np.ndarray):  # pragma: no cover - compiled
+    """One pass over ``spikes`` ``(T, H, W)`` (time outermost, so the reads are sequential): per photosite, within
+    ``[lo, hi)``, the spike count, the first and last spike's tick, and the sum and sum of squares of the intervals."""
+    tt, h, w = spikes.shape
+    n = np.zeros((h, w), np.int64)
+    first = np.full((h, w), -1, np.int64)
+    last = np.full((h, w), -1, np.int64)
+    s1 = np.zeros((h, w), np.float64)
+    s2 = np.zeros((h, w), np.float64)
+    for t in range(tt):
+        for i in range(h):
+            for j in range(w):
+                if spikes[t, i, j] != 0 and lo[i, j] <= t and t < hi[i, j]:
+                    if n[i, j] == 0:
+                        first[i, j] = t
+                    else:
+                        d = t - last[i, j]
+                        s1[i, j] += d
+                        s2[i, j] += d * d
+                    last[i, j] = t
+                    n[i, j] += 1
+    return n, first, last, s1, s2
+
+
+#: the interval rate is used while the photosites' intervals vary this little: the median over photosites with three
+#: intervals or more of their squared coefficient of variation (an integrate-and-fire pixel: ~0.001, the real dark
+#: capture and the simulator alike; random, Bernoulli firing: ~0.7, where the counts are the better estimate)
+INTERVAL_MAX_CV2 = 0.25
 
 
 #: quantile bins of the local rate in which :func:`interval_rates` matches the counts' mean
