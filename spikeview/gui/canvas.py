@@ -448,15 +448,31 @@ class ImageCanvas(QtWidgets.QWidget):
             self._redisplay_timer.start()
 
     def _redisplay(self) -> None:
-        """The guided results again with the display levels as they are now (as the stream images are)."""
+        """The guided results again with the display levels as they are now (as the stream images are): converted by
+        ``redisplay_request(items, params)`` in a worker when the window wires one (the result comes back through
+        :meth:`apply_redisplay`; a 1000² conversion is tens of ms the event loop must not wait), else here."""
         if self.display_params is None:
             return
-        params = None
-        for img in self.images.values():
-            if img.data is not None:
-                params = params or self.display_params()
-                img.image = core.show(img.data, params)
-        if params is not None:
+        items = {k: img.data for k, img in self.images.items() if img.data is not None}
+        if not items:
+            return
+        params = self.display_params()
+        request = getattr(self, "redisplay_request", None)
+        if request is not None:
+            request(items, params)
+            return
+        self.apply_redisplay({k: (data, core.show(data, params)) for k, data in items.items()})
+
+    def apply_redisplay(self, result: dict[str, Any]) -> None:
+        """``{key: (data, uint8 image)}`` converted for the current levels; an image whose data changed meanwhile (a
+        newer result) keeps its own."""
+        changed = False
+        for k, (data, image) in result.items():
+            img = self.images.get(k)
+            if img is not None and img.data is data:
+                img.image = image
+                changed = True
+        if changed:
             self._refresh()
 
     def forget(self, *keys: str) -> None:

@@ -81,6 +81,7 @@ class Controller(QtCore.QObject):
     rates_ready = QtCore.Signal(object)  # core.RatesResult
     alpha_history = QtCore.Signal(object)  # (ticks, alphas (N, C)) sorted by tick
     degradation_ready = QtCore.Signal(object)  # jobs.DegradationView
+    redisplayed = QtCore.Signal(object)  # {key: (data, uint8 image)}: the canvas's results at new display levels
     guided_update = QtCore.Signal(object)  # jobs.GuidedUpdate
     guided_done = QtCore.Signal(object)  # jobs.GuidedResult
     guided_state = QtCore.Signal(str, str)  # state ("running", "done", "cancelled", "failed", "idle"), message
@@ -98,7 +99,7 @@ class Controller(QtCore.QObject):
         self.session = session
         # Every worker runs at a lower OS priority (nice 5) than the GUI thread: on a loaded machine they
         # otherwise took the cores from it and the window froze for 100+ ms (benchmarks/bench_gui.py --stall).
-        self.preview = Worker("spikeview-preview", priority=("frames", "degradation", "rates", "alpha"), parent=self,
+        self.preview = Worker("spikeview-preview", priority=("frames", "redisplay", "degradation", "rates", "alpha"), parent=self,
                               nice=WORKER_NICE)
         # the sampler uses every core, as the CLI does, at a lower OS priority than the window: its torch
         # threads are started by the worker thread and inherit its nice value, so the GUI thread takes a
@@ -362,6 +363,12 @@ class Controller(QtCore.QObject):
         req = self._request(tick=f.tick)
         self.preview.submit("rates", lambda ctx, r=req, m=f.mosaic: jobs.rates_job(r, m, ctx))
 
+    def request_redisplay(self, items: dict[str, Any], params: dict[str, Any]) -> None:
+        """Convert the canvas's float results for new display levels in the preview worker (:attr:`redisplayed`)."""
+        from spikeview.session import core
+
+        self.preview.submit("redisplay", lambda ctx, i=items, p=params: {k: (d, core.show(d, p)) for k, d in i.items()})
+
     def request_degradation(self) -> None:
         if self.session.source is None or not (self.enabled["degradation"] or self.enabled["pooling"]):
             return
@@ -543,6 +550,8 @@ class Controller(QtCore.QObject):
             self.alpha_ready.emit(self.alpha)
             self.request_frames()
             self.request_degradation()
+        elif channel == "redisplay":
+            self.redisplayed.emit(result)
         elif channel == "degradation":
             self.last_degradation = result
             self.degradation_ready.emit(result)

@@ -425,6 +425,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.canvas.clicked.connect(self._on_canvas_click)
         self.stream_panel.error.connect(self.show_error)
         self.canvas.display_params = c.display_params
+        self.canvas.redisplay_request = c.request_redisplay  # converted off the GUI thread
+        c.redisplayed.connect(self.canvas.apply_redisplay)
         self.canvas.display_factor_changed.connect(c.set_display_factor)
         self.canvas.changed.connect(self._update_compare_wanted)
         self.docks["compare"].visibilityChanged.connect(lambda _v: self._update_compare_wanted())
