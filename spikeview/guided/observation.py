@@ -57,9 +57,6 @@ def exposed_eta(eta: float, white: float, level: float = EXPOSURE_LEVEL) -> floa
     return float(eta) * float(white) / float(level)
 
 
-#: a pooled observation's rate at rest from the intervals between spikes, not their count
-#: (:func:`spikeview.guided.temporal.interval_rates`)
-INTERVAL_RATES = True
 #: clip range of the data-derived scale of the binomial variance model
 KAPPA_RANGE = (1e-4, 4.0)
 #: pseudo-count of the binomial model (Jeffreys), see :func:`spikeview.ops.noise.tfp_variance`
@@ -192,7 +189,7 @@ class Observation:
             if pool.dtau is not None:
                 own = cls(counts_to_sfr(count(a, b), b - a), source.cfa, b - a, alpha, eta, (a, b), int(center))
                 y = counts / pool.dtau
-                if INTERVAL_RATES and pool.support is not None:
+                if pool.support is not None:  # at rest: the rate from the intervals between spikes (interval_rates)
                     from spikeview.guided.temporal import interval_rates
 
                     # photosites that pooled every neighbouring window at rest (the whole ±radius, or more)

@@ -433,7 +433,8 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
 
     from spikeview.errors import check_cancelled
 
-    cache = cache if cache is not None else WindowCache()
+    # room for every window a frame may pool (the low-light extension's, whose drift test reads the far ones first)
+    cache = cache if cache is not None else WindowCache(2 * max(int(radius), LOW_LIGHT_RADIUS) + 3)
     window = int(b - a)
     n0 = cache.counts(source, a, b)
     radius = int(radius)
