@@ -2,14 +2,14 @@
 
 Usage::
 
-    spikeview bench --real uhsr.npz [MORE…]     # real captures: detail, patchiness, residual noise
+    spikeview bench --real uhsr.npz [MORE…]     # real captures: detail, patchiness, residual noise, NIQE
     spikeview bench --low-light                  # simulated static scenes at 3 light levels, mono and RGGB
 
 **What runs is the CLI**: every frame is ``spikeview reconstruct FILE --method M --at T --transfer linear`` run as a
 command (its defaults: the planner, the pooling, the exposure, the white point), read back from the ``.npy`` it writes.
 Methods: TFP-10 (the window alone), TFI, and the guided default.
 
-**Scores** (:mod:`spikeview.metrics`):
+**Scores** (:mod:`spikeview.metrics`; NIQE: :mod:`spikeview.bench.niqe`):
 
 * ``detail``: :func:`~spikeview.metrics.detail_kept`, the correlation of the band-pass (Gaussians of σ 1 and 3 px)
   of the frame with the reference's. A blur and noise both lower it; on the simulated scenes it ranks the truth
@@ -19,6 +19,21 @@ Methods: TFP-10 (the window alone), TFI, and the guided default.
   simulated scenes (the scene's texture cancels), of the frame itself on real captures.
 * ``noise``: a no-reference residual noise level, the RMS of the finest diagonal Haar detail of the frame, in
   /255 of its white (the 99.5th percentile): what is left to see in a smooth region.
+* ``NIQE``: the no-reference score of Mittal, Soundararajan and Bovik (2013; lower is better), with the release's
+  pristine model (packaged: ``spikeview/bench/data``), on the frame as a viewer sees it (white at its 99.5th
+  percentile, sRGB; the luma of a colour frame). Rows ``truth`` (simulated scenes, once per scene: a static scene's
+  truth is the same at every light level) and ``long exposure`` (real captures: the reference) score NIQE alone, so
+  the table shows whether the score ranks the truth first. Checked before relying on it (skimage's camera, coffee and
+  astronaut at 256² and 512², and this bench): it ranks the truth first against Gaussian blurs (σ 0.7 to 3), Poisson
+  noise (5 to 1000 photons at white) and every TFP, TFI and guided frame of every simulated scene here (256²: truth
+  4.3 to 7.3, the best method 8.7 to 18.7; 512²: truth 3.1 and 4.4, the best method 5.6 to 10.8). Where it fails: (1)
+  it reads whole 96×96 blocks only, so a 256² frame is scored on its top-left 192×192, 4 blocks, and is noisy (9 crops
+  of one scene: 3.4 to 4.0); at 256² coffee's truth (7.0) scored worse than the same scene with Poisson noise then
+  smoothed (5.0 to 5.5); (2) it prefers smooth to noisy and does not rank methods as PSNR and detail do: TFP beats TFI
+  on coffee at 0.02 and 0.3 spikes per tick, the guided frame of the fast pan (detail 0.10, TFI 0.12) beats TFI by 11,
+  and at 512² TFI beats the guided frame on coffee at 0.05; (3) a frame of isolated spikes (TFP on the real capture)
+  is off its scale (~500); on the real capture the denoised frames beat the long exposure, which keeps its own noise.
+  Read it beside ``detail`` and ``noise``, never alone.
 * with truth: PSNR after ONE global gain (:func:`~spikeview.metrics.colour_scores`), the frame against the
   clean linear frame at the window's centre.
 
@@ -30,9 +45,7 @@ independent noise; the mean of the ticks around a window would share spikes with
 pools them, and the counts of adjacent spans anti-correlate for a regularly firing pixel). The reference's own
 noise lowers every method's ``detail`` by the same factor: compare methods, not captures. It carries the
 sensor's fixed pattern, which TFP shares and a denoiser removes, so it favours TFP-like frames a little: read
-``detail`` beside ``noise``. NIQE (a published no-reference model) is not used: its model parameters are not packaged
-offline here; the residual noise and the detail measure together rank a blur (low detail) and raw noise (high
-noise) below a clean frame.
+``detail`` beside ``noise``; NIQE needs no reference at all, but see its caveats above.
 """
 
 from __future__ import annotations
@@ -45,6 +58,8 @@ import numpy as np
 
 #: the methods scored, as ``spikeview reconstruct --method`` names them
 METHODS = ("tfp", "tfi", "guided")
+#: the rows that score a reference itself (NIQE only): a simulated scene's truth, a real capture's long exposure
+TRUTH, REFERENCE = "truth", "long exposure"
 #: simulated light levels (mean spikes per tick of a mid-gray) of ``--low-light``
 LIGHT_LEVELS = (0.02, 0.05, 0.3)
 #: ... and pans (pixels per second at 20 kHz: 400 = 0.2 px a 10-tick window, slow; 2000 = 1 px a window) at 0.03
@@ -85,11 +100,24 @@ def _reconstruct(path: str, method: str, at: int, out: Path, extra: list[str] | 
     return np.squeeze(np.load(dest)).astype(np.float64)
 
 
+def no_reference(x: np.ndarray) -> float:
+    """NIQE of a linear frame (:func:`spikeview.bench.niqe.niqe`, lower is better); NaN for a frame it cannot score
+    (under 96×96 pixels, or without two textured 96×96 blocks): the table prints "—"."""
+    from spikeview.bench.niqe import niqe
+    from spikeview.errors import ParameterError
+
+    try:
+        return niqe(x)
+    except ParameterError:
+        return float("nan")
+
+
 def score_frame(x: np.ndarray, ref: np.ndarray, truth: bool) -> dict[str, float]:
     from spikeview.metrics import colour_scores, detail_kept, patchiness
 
     r = ref / max(float(np.quantile(ref, 0.999)), 1e-9)
-    out = {"detail": detail_kept(x, r), "patchiness": patchiness(x, r, truth=truth), "noise": residual_noise(x)}
+    out = {"detail": detail_kept(x, r), "patchiness": patchiness(x, r, truth=truth), "noise": residual_noise(x),
+           "niqe": no_reference(x)}
     if truth:
         out["psnr"] = colour_scores(x, np.clip(r, 0.0, 1.0) if x.ndim == r.ndim else np.clip(r.mean(axis=-1), 0, 1))["psnr_1gain"]
     return out
@@ -149,6 +177,8 @@ def run_real(files: list[str]) -> list[dict]:
             for m in METHODS:
                 x = _reconstruct(str(first), m, at, t, cfa)
                 rows.append({"capture": os.path.basename(f), "tick": at, "method": m, **score_frame(x, ref, False)})
+            # the reference itself (NIQE only: the other scores are measured against it)
+            rows.append({"capture": os.path.basename(f), "tick": at, "method": REFERENCE, "niqe": no_reference(ref)})
     return rows
 
 
@@ -165,6 +195,7 @@ def run_low_light(size: int = 256, ticks: int = 400) -> list[dict]:
         Image.fromarray(skimage.data.coffee()[:400, 100:500]).save(t / "coffee.png")
         runs = [(scene, cfa, rate, 0.0) for scene, cfa in (("camera", "none"), ("coffee", "RGGB")) for rate in LIGHT_LEVELS]
         runs += [(scene, cfa, 0.03, pan) for pan in PANS for scene, cfa in (("camera", "none"), ("coffee", "RGGB"))]
+        truth_scored = set()
         for scene, cfa, rate, pan in runs:
             cap = t / f"{scene}_{cfa}_{rate}_{pan:g}.dat"
             _spikeview("simulate", str(t / f"{scene}.png"), "--ticks", str(ticks), "--cfa", cfa, "--rate", str(rate),
@@ -175,19 +206,28 @@ def run_low_light(size: int = 256, ticks: int = 400) -> list[dict]:
             i = int(np.argmin(np.abs(g["ticks"] - at)))
             truth = g["frames"][i].astype(np.float64)
             truth = truth.mean(axis=-1) if cfa == "none" else truth
+            moving = f", pan {pan / 20000:g} px/tick" if pan else ""
+            if (scene, pan) not in truth_scored:  # the truth once per scene (a static scene's is the same at every light)
+                truth_scored.add((scene, pan))
+                light = f"{rate:g}/tick" if pan else "every light level"
+                rows.append({"capture": f"{scene} {cfa} {light}{moving}", "tick": at, "method": TRUTH,
+                             "niqe": no_reference(truth)})
             for m in METHODS:
                 x = _reconstruct(str(cap), m, at, t)
-                moving = f", pan {pan / 20000:g} px/tick" if pan else ""
                 rows.append({"capture": f"{scene} {cfa} {rate:g}/tick{moving}", "tick": at, "method": m,
                              **score_frame(x, truth, True)})
     return rows
 
 
 def report(rows: list[dict], title: str) -> str:
+    """A markdown table of ``rows``; a row without a score (the truth, the long exposure: NIQE only) prints "—"."""
     truth = any("psnr" in r for r in rows)
-    head = "| capture | method | " + ("PSNR (1 gain) | " if truth else "") + "detail | patchiness | residual noise /255 |"
-    lines = [f"### {title}", "", head, "|" + "---|" * (head.count("|") - 1)]
+    cols = ([("psnr", "PSNR (1 gain)", "{:.2f}")] if truth else []) + [
+        ("detail", "detail", "{:.3f}"), ("patchiness", "patchiness", "{:.2f}"), ("noise", "residual noise /255", "{:.1f}"),
+        ("niqe", "NIQE (lower is better)", "{:.2f}")]
+    head = "| capture | method | " + " | ".join(c[1] for c in cols) + " |"
+    lines = [f"### {title}", "", head, "|" + "---|" * (len(cols) + 2)]
     for r in rows:
-        ps = f"{r['psnr']:.2f} | " if truth else ""
-        lines.append(f"| {r['capture']} (tick {r['tick']}) | {r['method']} | {ps}{r['detail']:.3f} | {r['patchiness']:.2f} | {r['noise']:.1f} |")
+        cells = [fmt.format(r[k]) if k in r and np.isfinite(r[k]) else "—" for k, _, fmt in cols]
+        lines.append(f"| {r['capture']} (tick {r['tick']}) | {r['method']} | " + " | ".join(cells) + " |")
     return "\n".join(lines)

@@ -14,10 +14,12 @@ def add_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frames", type=int, default=2, help="windows per scene (default 2)")
     p.add_argument("--out", metavar="DIR", help="folder for guided.md, guided.json and guided_pareto.png (default benchmarks/results)")
     p.add_argument("--real", nargs="+", metavar="FILE",
-                   help="score real captures (no truth): detail against the capture's long exposure, patchiness and "
-                        "residual noise of TFP, TFI and the guided default, through `spikeview reconstruct` (spikeview.bench.lowlight)")
+                   help="score real captures (no truth): detail against the capture's long exposure, patchiness, "
+                        "residual noise and NIQE (no-reference, lower is better; the long exposure's too) of TFP, TFI and "
+                        "the guided default, through `spikeview reconstruct` (spikeview.bench.lowlight)")
     p.add_argument("--low-light", action="store_true",
-                   help="simulated static scenes at 3 light levels (mono and RGGB) with truth: PSNR, detail, patchiness (spikeview.bench.lowlight)")
+                   help="simulated scenes at 3 light levels and 2 pans (mono and RGGB) with truth: PSNR, detail, patchiness, "
+                        "residual noise and NIQE, with the truth's NIQE beside them (spikeview.bench.lowlight)")
     p.add_argument("--sequences", action="store_true",
                    help="only the sequences benchmark: back-to-back windows of static, slow and fast scenes, PSNR/SSIM and temporal error (temporal.md)")
 
