@@ -56,6 +56,8 @@ class SequenceState:
     note: str | None = None
     #: which white balance gave α and why (:func:`spikeview.classical.colour_cast.sequence_white_balance`)
     white_balance: str | None = None
+    #: how the white point was found, for the white-point line (:func:`white_point_line`)
+    white_how: str = "the 99.9th percentile of the sequence's rates"
 
     def attrs(self) -> dict[str, Any]:
         """Plain values for metadata (Zarr attributes, logs)."""
@@ -102,13 +104,14 @@ def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> Seque
     the white point. A channel without spikes gets the others' mean gain: a
     :class:`~spikeview.classical.colour_cast.ColourCastWarning` says so (``warn=False``: only
     :attr:`SequenceState.note`, for the app's worker threads, where warnings are unreliable)."""
-    from spikeview.classical.colour_cast import estimate_white, sequence_white_balance
+    from spikeview.classical.colour_cast import ecosystem_white, estimate_white, sequence_white_balance
 
     c = recipe.classical
     a, note, why = sequence_white_balance(source, c, warn=warn)
     # the exposure, once per sequence, on the windows the frames are made of
     white = estimate_white(source, a, window=min(c.window, source.n_frames), max_windows=c.alpha_max_windows, eta=c.eta)
-    return SequenceState(a, white, note, why)
+    white, how = ecosystem_white(white, source, a)
+    return SequenceState(a, white, note, why, how)
 
 
 def recipe_for_state(recipe: Recipe, state: SequenceState, source: Any = None) -> Recipe:

@@ -536,6 +536,35 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
     return white if white > 0 else 1.0 / eta
 
 
+#: the conversion rate of the ecosystem's synthetic data sets (Spike-Zoo's ``BaseDatasetConfig.rate``, its
+#: REDS-based sets alike): a frame of intensity ``I`` in [0, 1] fires ``0.6·I`` spikes per tick, and its tools show
+#: ``rate / 0.6``. Measured on the five clips the ``spikezoo`` wheel ships: mean rate / mean ground truth = 0.598–0.600.
+ECOSYSTEM_RATE = 0.6
+#: how near the estimate must lie to :data:`ECOSYSTEM_RATE` (a factor) for a file without a sidecar to take it: the
+#: 10-tick windows' 99.9th percentile of those clips reads 0.54–0.65 (0.90–1.08×), a scene without full white lower
+ECOSYSTEM_BAND = 1.25
+
+
+def ecosystem_white(white: float, source: SpikeSource, alpha: np.ndarray | None) -> tuple[float, str]:
+    """The white point a file without a sidecar takes, and how it was found: :data:`ECOSYSTEM_RATE` spikes per tick
+    when the estimate (:func:`estimate_white`, plain rates: monochrome, or no colour gains) lies within
+    :data:`ECOSYSTEM_BAND` of it: the capture is then read as one of the ecosystem's synthetic data sets, whose
+    ground truth is ``rate / 0.6`` (its tools divide by it); otherwise, and for spikeview's own captures (they carry a
+    sidecar), the estimate. A real camera's file without a sidecar that happens to lie in the band is shown at most
+    25 % darker or brighter than its estimate would; ``--white`` sets any other."""
+    from spikeview.transfer import DISPLAY_KEY
+
+    how = "the 99.9th percentile of the sequence's rates"
+    extra = getattr(source.info, "extra", None) or {}
+    if (alpha is None and "sidecar" not in extra and extra.get(DISPLAY_KEY) == "linear" and white > 0
+            and 1.0 / ECOSYSTEM_BAND <= white / ECOSYSTEM_RATE <= ECOSYSTEM_BAND):
+        return ECOSYSTEM_RATE, (f"a file without a sidecar whose 99.9th percentile rate, {white:.3g}, is within "
+                                f"{100 * (ECOSYSTEM_BAND - 1):.0f} % of {ECOSYSTEM_RATE:g} spikes per tick: the conversion "
+                                "rate of the ecosystem's synthetic data sets (Spike-Zoo), whose tools show rate / "
+                                f"{ECOSYSTEM_RATE:g}; --white for another")
+    return white, how
+
+
 def _white_corrected(source: SpikeSource, gains: np.ndarray | None, n_ticks: int, max_windows: int, eta: float,
                      percentile: float) -> float:
     """:func:`estimate_white` of a source with a camera profile: the percentile of its corrected TFP values.

@@ -209,7 +209,7 @@ def _run_one(args: argparse.Namespace) -> int:
         recipe = recipe_for_state(recipe, state, src)
         how = "set by --white" if "export.white" in given_flags(args) else (
             "from the preset" if getattr(args, "preset", None) and state.white is not None and
-            recipe.export.white != state.white else "the 99.9th percentile of the sequence's rates")
+            recipe.export.white != state.white else state.white_how)
         print(white_point_line(recipe, state, how), file=sys.stderr)
         line = white_balance_line(state)
         if line is not None:

@@ -221,7 +221,7 @@ def _run_store(input_path, recipe, out: Path, chunk: int, attrs, client, progres
             write_atomic(out.with_name(out.name + ".preset.toml"), recipe_toml, "the preset")
         given = recipe.export.white is not None and recipe.export.white != state.white
         say(white_point_line(recipe, state, "recorded in the store" if attrs is not None else (
-            "set by --white or the preset" if given else "the 99.9th percentile of the sequence's rates")))
+            "set by --white or the preset" if given else state.white_how)))
         job = BatchJob(input=str(Path(src.info.path).absolute()), open_kwargs=kwargs, recipe=settings,
                        centres=tuple(int(c) for c in centres), chunk=chunk, store=str(out),
                        keyframe=int(attrs["keyframe"]) if attrs else DEFAULT_KEYFRAME)

@@ -1,0 +1,104 @@
+"""The exposure of a file without a sidecar: the ecosystem's synthetic data sets fire 0.6 spikes per tick at white
+(Spike-Zoo's conversion rate), and such a file takes that white point; spikeview's own captures, and files whose
+estimate lies far from it, keep the estimate (:func:`spikeview.classical.colour_cast.ecosystem_white`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from spikeview.classical.colour_cast import ECOSYSTEM_RATE, ecosystem_white
+from spikeview.cli.main import main
+from spikeview.io.plain import write_plain
+
+
+def _integrate_and_fire(rate: np.ndarray, ticks: int, seed: int = 3) -> np.ndarray:
+    """Regularly firing photosites (the ecosystem's simulators): one spike each time ``rate`` per tick sums past 1."""
+    v = np.random.default_rng(seed).random(rate.shape)
+    out = np.zeros((ticks,) + rate.shape, np.uint8)
+    for t in range(ticks):
+        v += rate
+        fire = v >= 1.0
+        out[t] = fire
+        v[fire] -= 1.0
+    return out
+
+
+def _capture(tmp_path, peak: float, sidecar: bool, cfa: str | None = None):
+    """64×96, a left-to-right ramp of intensity up to 1 (the last columns white), firing ``peak·I`` per tick."""
+    ramp = np.linspace(0.05, 1.0, 96)
+    ramp = np.minimum(ramp / 0.97, 1.0)  # a few columns at full white, as a frame with highlights has
+    intensity = np.broadcast_to(ramp[None, :], (64, 96))
+    path = tmp_path / f"cap_{peak:g}_{int(sidecar)}_{cfa}.dat"
+    write_plain(path, _integrate_and_fire(peak * intensity, 300), sidecar=sidecar, cfa=cfa)
+    return path, intensity
+
+
+def _run(path, tmp_path, capsys, *extra: str):
+    out = tmp_path / (path.stem + ".npy")
+    geom = [] if (path.parent / (path.name + ".toml")).exists() else ["--width", "96", "--height", "64"]
+    assert main(["reconstruct", str(path), *geom, "--method", "tfp", "--window", "30", "--at", "150",
+                 "--transfer", "linear", "--out", str(out), "--overwrite", *extra]) == 0
+    return np.squeeze(np.load(out)).astype(np.float64), capsys.readouterr().err
+
+
+def test_mono_file_without_sidecar_takes_the_ecosystem_conversion_rate(tmp_path, capsys):
+    path, intensity = _capture(tmp_path, ECOSYSTEM_RATE, sidecar=False)
+    x, err = _run(path, tmp_path, capsys, "--cfa", "none")
+    assert "white point 0.6 " in err and "Spike-Zoo" in err
+    # the frame is rate / 0.6: the intensity it was made from (30-tick windows: a step of 1/18 at most)
+    assert abs(float(x.mean()) - float(intensity.mean())) < 0.01
+    assert np.abs(x - intensity)[:, 2:-2].mean() < 0.03
+
+
+@pytest.mark.parametrize("peak", [0.3, 0.9])
+def test_a_file_far_from_the_conversion_rate_keeps_its_estimate(tmp_path, capsys, peak):
+    path, _ = _capture(tmp_path, peak, sidecar=False)
+    x, err = _run(path, tmp_path, capsys, "--cfa", "none")
+    assert "99.9th percentile of the sequence's rates" in err and "Spike-Zoo" not in err
+    assert 0.9 < float(np.quantile(x, 0.999)) <= 1.0 + 1e-6  # its own white maps to full scale
+
+
+def test_spikeviews_own_capture_keeps_its_estimate(tmp_path, capsys):
+    """A sidecar says the file is not one of the ecosystem's: the estimate stays, even at 0.6 spikes per tick."""
+    path, _ = _capture(tmp_path, ECOSYSTEM_RATE, sidecar=True)
+    _, err = _run(path, tmp_path, capsys)
+    assert "Spike-Zoo" not in err and "99.9th percentile of the sequence's rates" in err
+
+
+def test_bayer_without_sidecar(tmp_path, capsys):
+    """A Bayer file's frames carry the colour gains (Y·α/η), not plain rates: the estimate stays; with the colour cast
+    off its frames are plain rates again, and the conversion rate applies as for a monochrome file."""
+    path, intensity = _capture(tmp_path, ECOSYSTEM_RATE, sidecar=False, cfa="RGGB")
+    _, err = _run(path, tmp_path, capsys, "--cfa", "RGGB")
+    assert "Spike-Zoo" not in err
+    x, err = _run(path, tmp_path, capsys, "--cfa", "RGGB", "--no-colour-cast")
+    assert "white point 0.6 " in err and "Spike-Zoo" in err
+    assert abs(float(x.mean()) - float(intensity.mean())) < 0.02
+
+
+class _Info:
+    def __init__(self, extra):
+        self.extra = extra
+
+
+class _Src:
+    def __init__(self, extra):
+        self.info = _Info(extra)
+
+
+@pytest.mark.parametrize("white, extra, alpha, expect", [
+    (0.55, {"display_transfer": "linear"}, None, ECOSYSTEM_RATE),
+    (0.49, {"display_transfer": "linear"}, None, ECOSYSTEM_RATE),  # inside the band (0.48 .. 0.75)
+    (0.74, {"display_transfer": "linear"}, None, ECOSYSTEM_RATE),
+    (0.47, {"display_transfer": "linear"}, None, 0.47),
+    (0.76, {"display_transfer": "linear"}, None, 0.76),
+    (0.031, {"display_transfer": "linear"}, None, 0.031),  # a dark real capture
+    (0.55, {"display_transfer": "linear", "sidecar": "x.toml"}, None, 0.55),
+    (0.55, {"display_transfer": "srgb"}, None, 0.55),
+    (0.55, {"display_transfer": "linear"}, np.array([1.0, 1.0, 1.0]), 0.55),
+])
+def test_the_rule(white, extra, alpha, expect):
+    got, how = ecosystem_white(white, _Src(extra), alpha)
+    assert got == pytest.approx(expect)
+    assert ("Spike-Zoo" in how) == (got != white)
