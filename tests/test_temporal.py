@@ -326,3 +326,27 @@ def test_frame_drift_measures_a_sub_pixel_shift_of_the_whole_frame_and_refuses_n
         d = frame_drift(a, b)
         assert d is not None and d[0] == pytest.approx(dy, abs=0.3) and d[1] == pytest.approx(dx, abs=0.3), (dy, dx, d)
     assert frame_drift(rng.poisson(1.0, (96, 96)).astype(float), rng.poisson(1.0, (96, 96)).astype(float)) is None
+
+
+@pytest.mark.parametrize("own_share", [0.0, 0.03])
+def test_static_sentence_says_the_share_that_pooled_at_least_one_neighbour(own_share):
+    """A static pooling that took every neighbour on 92 % of photosites says on what share it took at least one (the
+    issue's "pooled"): those on their own window only are left out of that share, and the clause is absent when
+    (nearly) every photosite took every neighbour."""
+    from spikeview.guided.temporal import Pooling, describe
+
+    h = w = 100
+    dtau = np.full((h, w), 70.0, np.float32)
+    flat = dtau.ravel()
+    n_own = int(own_share * h * w)
+    flat[:n_own] = 10.0                      # own window only
+    flat[n_own:n_own + 800 - n_own] = 40.0   # some neighbours: 8 % short of the full support in all
+    offsets = (-1, 1, -2, 2, -3, 3)
+    tiles = np.zeros((2, 2, 2), int)
+    pool = Pooling(radius=3, window=10, offsets=offsets, dtau=dtau, shifts={k: tiles for k in offsets},
+                   accepted={k: np.ones((2, 2), bool) for k in offsets})
+    kind, sentence = describe(pool)
+    assert kind == "static" and "pooled on 92% of photosites" in sentence
+    assert f"at least one neighbour on {100 - round(100 * own_share)}%" in sentence
+    pool.dtau = np.full((h, w), 70.0, np.float32)
+    assert "at least one neighbour" not in describe(pool)[1]

@@ -982,7 +982,8 @@ def describe(pool: Pooling) -> tuple[str, str]:
                 f"so the support stops at ±{depth} windows (beyond, the scene has moved more than {DRIFT_LIMIT:g} photosite)")
     if full >= 0.9 and moving <= 0.05:
         still = "" if smax == 0 else f"; {100 * moving:.0f}% of the tiles aligned, shifts up to {smax} px"
-        return "static", f"static: {span} pooled on {100 * full:.0f}% of photosites ({eff}{still})"
+        some = "" if full >= 0.995 else f", at least one neighbour on {100 * (1.0 - own):.0f}%"
+        return "static", f"static: {span} pooled on {100 * full:.0f}% of photosites{some} ({eff}{still})"
     if own >= 0.75:
         return "fast motion", (f"fast motion: own window only on {100 * own:.0f}% of photosites (the neighbours do not match "
                                f"within their noise; {eff})")
