@@ -350,3 +350,29 @@ def test_static_sentence_says_the_share_that_pooled_at_least_one_neighbour(own_s
     assert f"at least one neighbour on {100 - round(100 * own_share)}%" in sentence
     pool.dtau = np.full((h, w), 70.0, np.float32)
     assert "at least one neighbour" not in describe(pool)[1]
+
+
+@pytest.mark.parametrize("cfa", CFAS)
+@pytest.mark.parametrize("axis", [0, 1])
+def test_a_panning_frame_says_its_measured_velocity(cfa, axis):
+    """The plan's pan velocity is the whole frame's measured shift between the farthest neighbours, not the search's
+    coarse grid (a 0.36-photosite-a-window drift was said as "about +0.67"): vertical and horizontal, both CFAs."""
+    from scipy.ndimage import shift as nd_shift
+
+    rng = np.random.default_rng(4)
+    from scipy.ndimage import gaussian_filter
+
+    tex = gaussian_filter(rng.random((160, 160)), 2.0)
+    tex = 0.1 + 0.8 * (tex - tex.min()) / (tex.max() - tex.min())
+    speed = 0.05  # photosites a tick: 0.5 a 10-tick window
+    rates = np.empty((90, 96, 96), np.float32)
+    for t in range(90):
+        move = [0.0, 0.0]
+        move[axis] = -speed * t  # content moves towards smaller indices: a velocity of −0.5
+        rates[t] = nd_shift(tex, move, order=1)[32:128, 32:128] * 0.6
+    src = ArraySource(_spikes(rates, seed=2), cfa=cfa)
+    _, pool = pool_counts(src, 40, 50, 3, cfa)
+    assert "the frame pans (" in pool.reason
+    said = pool.reason.split("the frame pans (")[1].split(" photosites")[0]
+    v = [float(x) for x in said.split(", ")]
+    assert v[axis] == pytest.approx(-0.5, abs=0.08) and abs(v[1 - axis]) < 0.08, pool.reason

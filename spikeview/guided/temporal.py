@@ -571,8 +571,10 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
         pool.drift = drift[0]
     pool.kind, pool.reason = describe(pool)
     if pan is not None:
-        pool.reason += (f"; the frame pans (about {f * pan[0]:+.2g}, {f * pan[1]:+.2g} photosites a window, y, x): its dim "
-                        "tiles are not held at rest and the support does not grow")
+        v = _pan_measured(counts, cfa)
+        vy, vx = v if v is not None else (f * pan[0], f * pan[1])
+        pool.reason += (f"; the frame pans ({'' if v is not None else 'about '}{vy:+.2f}, {vx:+.2f} photosites a window, "
+                        "y, x): its dim tiles are not held at rest and the support does not grow")
     return total, pool
 
 
@@ -752,6 +754,19 @@ def frame_drift(first: np.ndarray, second: np.ndarray, sigma: float = 1.0) -> tu
     dy = iy - r + vertex(sub[iy - 1, ix], sub[iy, ix], sub[iy + 1, ix])
     dx = ix - r + vertex(sub[iy, ix - 1], sub[iy, ix], sub[iy, ix + 1])
     return float(dy), float(dx)
+
+
+def _pan_measured(counts: dict[int, np.ndarray], cfa: str | None) -> tuple[float, float] | None:
+    """A panning frame's velocity in photosites per window for the plan: the whole frame's shift
+    (:func:`frame_drift`) between the farthest pair of neighbouring windows ``±k`` whose shift it can measure (nearer
+    pairs for a faster pan), divided by ``2k``; ``None`` when no pair gives one (the search's grid velocity is said)."""
+    view = (lambda x: _guide_raw(x, cfa)) if cfa is not None else (lambda x: x)
+    unit = 2.0 if cfa is not None else 1.0
+    for k in sorted((k for k in counts if k > 0 and -k in counts), reverse=True):
+        d = frame_drift(view(counts[-k].astype(np.float64)), view(counts[k].astype(np.float64)))
+        if d is not None:
+            return unit * d[0] / (2 * k), unit * d[1] / (2 * k)
+    return None
 
 
 def _extension_drift(source: Any, a: int, b: int, cache: WindowCache, core: np.ndarray, reached: int,
