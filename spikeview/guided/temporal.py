@@ -995,14 +995,14 @@ def describe(pool: Pooling) -> tuple[str, str]:
         depth = max(pool.radius, int(np.floor(DRIFT_LIMIT / v + 1e-9)) if v > 0 else LOW_LIGHT_RADIUS)
         eff += (f"; the whole frame drifts {v:.2f} photosites a window ({pool.drift[0]:+.2f}, {pool.drift[1]:+.2f}, y, x), "
                 f"so the support stops at ±{depth} windows (beyond, the scene has moved more than {DRIFT_LIMIT:g} photosite)")
+    some = "" if full >= 0.995 else f", at least one neighbour on {100 * (1.0 - own):.0f}%"
     if full >= 0.9 and moving <= 0.05:
         still = "" if smax == 0 else f"; {100 * moving:.0f}% of the tiles aligned, shifts up to {smax} px"
-        some = "" if full >= 0.995 else f", at least one neighbour on {100 * (1.0 - own):.0f}%"
         return "static", f"static: {span} pooled on {100 * full:.0f}% of photosites{some} ({eff}{still})"
     if own >= 0.75:
         return "fast motion", (f"fast motion: own window only on {100 * own:.0f}% of photosites (the neighbours do not match "
                                f"within their noise; {eff})")
     if min(mean_nb, m) >= 0.75 * m:
-        return "aligned", f"moving: {span} aligned (shifts up to {smax} px) and pooled on {100 * full:.0f}% of photosites ({eff})"
+        return "aligned", f"moving: {span} aligned (shifts up to {smax} px) and pooled on {100 * full:.0f}% of photosites{some} ({eff})"
     return "mixed", (f"mixed motion: {min(mean_nb, m):.1f} of {m} neighbouring windows pooled on average, own window only on "
                      f"{100 * own:.0f}% of photosites (shifts up to {smax} px; {eff})")
