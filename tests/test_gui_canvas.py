@@ -240,6 +240,41 @@ def test_reset_layout_restores_the_start_up_layout(window, qtbot):
     assert (w.width(), w.height()) == (1366, 768)
 
 
+@pytest.mark.parametrize("content", [b"hello, this is text\n", b""])
+def test_screenshot_of_an_unreadable_file_says_why_and_exits(tmp_path, capsys, content):
+    """No one is there to read the window's error strip: ``--screenshot`` stops on the error (it waited for a capture
+    that never came, for ten minutes), in one sentence; and without a sidecar it says which geometry it took."""
+    from spikeview.cli.main import main
+
+    bad = tmp_path / "capture.dat"
+    bad.write_bytes(content)
+    assert main(["app", str(bad), "--screenshot", str(tmp_path / "x.png")]) == 1
+    err = capsys.readouterr().err
+    assert "capture.dat:" in err and ("text" in err or "empty" in err) and "Traceback" not in err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_screenshot_without_a_sidecar_says_the_geometry_it_took(tmp_path, capsys):
+    from spikeview.cli.main import main
+    from spikeview.io.plain import write_plain
+
+    rng = np.random.default_rng(0)
+    path = tmp_path / "nosidecar.dat"
+    write_plain(path, (rng.random((40, 48, 64)) < 0.3).astype(np.uint8), sidecar=False)
+    assert main(["app", str(path), "--screenshot", str(tmp_path / "x.png"), "--size", "1024x700"]) == 0
+    err = capsys.readouterr().err
+    assert "nosidecar.dat has no sidecar: opened with the settings dialog's first guess (" in err
+
+
+def test_qt_messages_reach_the_terminal_less_the_offscreen_notice(capsys):
+    from spikeview.gui.app import _qt_message
+
+    _qt_message(None, None, "This plugin does not support propagateSizeHints()")
+    _qt_message(None, None, "QPainter::begin: Paint device returned engine == 0")
+    err = capsys.readouterr().err
+    assert "propagateSizeHints" not in err and "QPainter::begin" in err
+
+
 def test_screenshot_options_without_screenshot_are_refused(capsys):
     from spikeview.cli.main import main
 

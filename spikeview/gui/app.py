@@ -49,6 +49,9 @@ def make_application(argv: list[str] | None = None) -> Any:
 
     app = QtWidgets.QApplication.instance()
     if app is None:
+        from PySide6 import QtCore
+
+        QtCore.qInstallMessageHandler(_qt_message)
         app = QtWidgets.QApplication(argv if argv is not None else [sys.argv[0]])
         app.setOrganizationName("spikeview")
         app.setApplicationName("spikeview")
@@ -56,6 +59,17 @@ def make_application(argv: list[str] | None = None) -> Any:
     configure_pyqtgraph()
     configure_runtime()
     return app
+
+
+#: Qt's messages that say nothing to a user: the off-screen platform (``--screenshot``, headless tests) cannot pass a
+#: window's size hints on, and says so twice a window
+QT_NOISE = ("does not support propagateSizeHints",)
+
+
+def _qt_message(mode: Any, context: Any, message: str) -> None:
+    """Qt's own messages to the terminal, as Qt prints them, less :data:`QT_NOISE`."""
+    if not any(n in message for n in QT_NOISE):
+        print(message, file=sys.stderr)
 
 
 def _excepthook(window: Any) -> Any:

@@ -131,6 +131,8 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def __init__(self, settings: QtCore.QSettings | None = None, session: Session | None = None):
         super().__init__()
+        #: every error the notification strip has shown (:meth:`show_error`), in order
+        self.errors_shown: list[str] = []
         configure_runtime()
         core.preload()  # before any worker thread starts (see core.preload)
         self.setObjectName("spikeview_main")
@@ -744,6 +746,7 @@ class MainWindow(QtWidgets.QMainWindow):
     def show_error(self, message: str, dialog_title: str | None = None) -> None:
         """Show an error in the notification strip (never modal, never a crash) and the status bar."""
         message = app_words(message)
+        self.errors_shown.append(message)  # what --screenshot (no one to read the strip) stops on
         self.notice.show_message(message, "error")
         self.statusBar().showMessage(message.splitlines()[0], 10000)
 

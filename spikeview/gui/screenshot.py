@@ -158,12 +158,22 @@ def _act(app: Any, w: Any, path: Any, run: str | None, view: tuple[str, str | No
         w.open_demo(*(() if demo_size is None else (demo_size,)))
     else:
         w.open_path(path)
-    _wait(app, lambda: s.stream is not None or (w.settings_dialog is not None), "the capture")
+    _wait(app, lambda: s.stream is not None or (w.settings_dialog is not None), "the capture", w.errors_shown)
     if s.stream is None:  # a file without a sidecar: the dialog's first guess, as the user would accept it
         dlg = w.settings_dialog
-        _wait(app, lambda: dlg.stream is not None, "the capture's preview", c.errors)
+        _wait(app, lambda: dlg.stream is not None or bool(dlg.error.text().strip()), "the capture's preview",
+              w.errors_shown)
+        if dlg.stream is None:  # the dialog's first guess does not fit: a user would see why and choose; no one here
+            raise RuntimeError(f"screenshot: {Path(str(path)).name}: {dlg.error.text().strip()}")
+        import sys
+
+        geo = dlg.settings or {}
+        print(f"spikeview: note: {Path(str(path)).name} has no sidecar: opened with the settings dialog's first guess "
+              f"({geo.get('width', '?')}x{geo.get('height', '?')}, CFA {geo.get('cfa') or 'none'}, "
+              f"{'flipped' if geo.get('flip_vertical') else 'not flipped'} vertically); `spikeview info` lists the "
+              "other geometries that fit, and the app's dialog lets you choose one.", file=sys.stderr)
         dlg.accept()
-        _wait(app, lambda: s.stream is not None, "the capture")
+        _wait(app, lambda: s.stream is not None, "the capture", w.errors_shown)
     # the first frames and the capture's exposure (the white point the CLI would use; α too for a colour capture)
     _wait(app, lambda: c.last_frames is not None and getattr(c, "capture_white", None) is not None
           and (c.alpha is not None or s.source.cfa is None), "the first frames", c.errors)
