@@ -490,7 +490,7 @@ def correct_observation(source: Any, obs: Any) -> Any:
     moved = cam.moves_rates()
     for o in (obs, obs.previous, obs.own):
         if o is not None:
-            o.y = np.clip(correct_rates(source, o.y), 0.0, 1.0).astype(np.float32)
+            o.y = np.clip(correct_rates(source, o.y), -1.0 if moved else 0.0, 1.0).astype(np.float32)
             if moved:
                 o.corrected = f"the camera profile {cam.name}'s {moved}"
     return obs

@@ -123,7 +123,7 @@ class Observation:
             raise ParameterError(f"Observation.y must be an (H, W) mosaicked TFP frame, got shape {y.shape}.")
         if y.shape[0] < 2 or y.shape[1] < 2:
             raise ParameterError(f"Observation.y of shape {y.shape} is too small: frames need at least 2x2 pixels.")
-        self.y = np.clip(np.nan_to_num(y.astype(np.float32, copy=False), nan=0.0), 0.0, 1.0)
+        self.y = np.clip(np.nan_to_num(y.astype(np.float32, copy=False), nan=0.0), -1.0 if self.corrected else 0.0, 1.0)
         self.cfa = parse_cfa(self.cfa)
         if isinstance(self.window, bool) or not isinstance(self.window, (int, np.integer)) or self.window < 1:
             raise ParameterError(f"window = {self.window!r} must be a whole number of ticks >= 1.")
