@@ -109,8 +109,15 @@ def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> Seque
     c = recipe.classical
     a, note, why = sequence_white_balance(source, c, warn=warn)
     # the exposure, once per sequence, on the windows the frames are made of
-    white = estimate_white(source, a, window=min(c.window, source.n_frames), max_windows=c.alpha_max_windows, eta=c.eta)
+    span: dict = {}
+    window = min(c.window, source.n_frames)
+    white = estimate_white(source, a, window=window, max_windows=c.alpha_max_windows, eta=c.eta, detail=span)
     white, how = ecosystem_white(white, source, a)
+    if span.get("ticks", window) > window and "Spike-Zoo" not in how:
+        from spikeview.classical.colour_cast import WHITE_LOW_COUNT
+
+        how += (f" over {span['ticks']}-tick windows (a {window}-tick window holds under {WHITE_LOW_COUNT:g} spikes at "
+                "the white: its count levels, not the scene, would set the percentile)")
     return SequenceState(a, white, note, why, how)
 
 

@@ -1,6 +1,8 @@
-"""The exposure of a file without a sidecar: the ecosystem's synthetic data sets fire 0.6 spikes per tick at white
-(Spike-Zoo's conversion rate), and such a file takes that white point; spikeview's own captures, and files whose
-estimate lies far from it, keep the estimate (:func:`spikeview.classical.colour_cast.ecosystem_white`)."""
+"""The white point's two rules beyond the plain percentile: a file without a sidecar near the ecosystem's conversion
+rate takes it (its synthetic data sets fire 0.6 spikes per tick at white; spikeview's own captures, and files whose
+estimate lies far from it, keep the estimate: :func:`spikeview.classical.colour_cast.ecosystem_white`), and a dark
+capture's white is measured over windows long enough to hold a few spikes at the white
+(:func:`spikeview.classical.colour_cast.estimate_white`), mono and Bayer."""
 
 from __future__ import annotations
 
@@ -102,3 +104,35 @@ def test_the_rule(white, extra, alpha, expect):
     got, how = ecosystem_white(white, _Src(extra), alpha)
     assert got == pytest.approx(expect)
     assert ("Spike-Zoo" in how) == (got != white)
+
+
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_a_dark_captures_white_is_its_brightest_rate_not_its_count_levels(cfa):
+    """0.08 spikes per tick at the brightest: a 10-tick window holds 0 to 1 spikes there, and the percentile of the
+    count levels read ~0.15 (frames at half brightness); over windows that hold 4 spikes at the white it reads the
+    rate. A bright capture keeps its 10-tick windows."""
+    from spikeview.classical.colour_cast import estimate_white
+    from spikeview.io.source import ArraySource
+
+    ramp = np.minimum(np.linspace(0.05, 1.0, 96) / 0.9, 1.0)
+    intensity = np.broadcast_to(ramp[None, :], (64, 96))
+    for peak in (0.08, 0.6):
+        src = ArraySource(_integrate_and_fire(peak * intensity, 200), cfa=cfa)
+        alpha = None if cfa is None else np.ones(3)
+        detail: dict = {}
+        white = estimate_white(src, alpha, window=10, eta=1.0, detail=detail)
+        # the top level's spread still lifts it a little (its 10 % of photosites sit on one rate): 10-tick windows
+        # read 0.15 at 0.08 (1.9x)
+        assert peak <= white <= 1.25 * peak, (peak, white)
+        assert (detail["ticks"] > 10) == (peak < 0.5)
+    # the bound: never longer than the 7 windows the guided default pools
+    src = ArraySource(_integrate_and_fire(0.01 * intensity, 200), cfa=cfa)
+    detail = {}
+    estimate_white(src, None if cfa is None else np.ones(3), window=10, eta=1.0, detail=detail)
+    assert detail["ticks"] == 70
+
+
+def test_the_white_point_line_says_the_longer_windows(tmp_path, capsys):
+    path, _ = _capture(tmp_path, 0.04, sidecar=True)
+    _, err = _run(path, tmp_path, capsys)
+    assert "-tick windows (a 30-tick window holds under 3 spikes at the white" in err  # 30 ticks: 1.2 spikes at 0.04

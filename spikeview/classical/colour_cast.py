@@ -442,11 +442,18 @@ def apply_colour_cast_mosaic(mosaic: np.ndarray, cfa: str | None, alpha: np.ndar
 # --- exposure: the white point of a sequence ---------------------------------------------------
 #: default percentile of :func:`estimate_white`: at most 0.1 % of photosites lie above the white point
 WHITE_PERCENTILE = 99.9
+#: :func:`estimate_white` lengthens its windows when the white holds fewer spikes a window than this (a dark
+#: capture: the count levels set the percentile) ...
+WHITE_LOW_COUNT = 3.0
+#: ... until it holds at least this many ...
+WHITE_MIN_COUNT = 6.0
+#: ... up to this many reconstruction windows (the ±3 the guided default pools on a still scene)
+WHITE_MAX_WINDOWS = 7
 
 
 def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, window: int = 10,
                    max_windows: int = DEFAULT_ALPHA_WINDOWS, eta: float = DEFAULT_ETA,
-                   percentile: float = WHITE_PERCENTILE) -> float:
+                   percentile: float = WHITE_PERCENTILE, detail: dict | None = None) -> float:
     """White point of a whole sequence: a robust high percentile of its colour-corrected rates.
 
     Gray-world (:func:`estimate_alpha`) sets the channel **ratios**; this sets the **exposure**.
@@ -458,7 +465,12 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
     ``100 − percentile`` % of the TFP values of such windows at full scale (0.1 % by default) even
     when the level the percentile falls on holds more photosites than that, and it
     is chosen **once per sequence**, so frames do not flicker. Use the reconstruction's own window:
-    shorter windows are noisier and put the percentile higher.
+    shorter windows are noisier and put the percentile higher. Where the white holds fewer than
+    :data:`WHITE_LOW_COUNT` spikes a window (a dark capture: a 10-tick window holds 1 or 2 spikes where it is
+    brightest, and the percentile lands high in that level's spread, up to twice the brightest rate: the real dark
+    capture's frames came out at half brightness), the windows grow until it holds :data:`WHITE_MIN_COUNT`, up to
+    :data:`WHITE_MAX_WINDOWS` reconstruction windows (the span the guided default pools on a still scene, which its
+    frames average too); ``detail["ticks"]`` (when a dict is given) says the length used.
 
     Args:
         source: the sequence (flips applied; ``source.cfa`` names the CFA).
@@ -490,50 +502,71 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
         # plain rates Y (reconstruct_frame applies neither α nor η to them), and so is the white point
         eta = 1.0
     n_ticks = min(int(window), source.n_frames)
-    camera = getattr(source.info, "camera", None)
-    if camera is not None and not camera.from_capture:
-        return _white_corrected(source, gains, n_ticks, max_windows, eta, percentile)
-    # the capture's own hot photosites (spikeview.classical.defects) are left out of the histogram
-    keep_px = None if camera is None else ~camera.hot
-    # a histogram per distinct gain: counts take only n_ticks + 1 values per photosite class
-    hist: dict[float, np.ndarray] = {}
-    for s in sample_starts(source.n_frames, n_ticks, max_windows):
-        if s + n_ticks > source.n_frames:  # a partial last window has other levels: left out
-            continue
-        counts = window_counts(source, s, s + n_ticks)
-        for py in (0, 1):
-            for px in (0, 1):
-                g = 1.0 if gains is None else float(gains[py, px])
-                plane = np.asarray(counts[py::2, px::2])
-                if keep_px is not None:
-                    plane = plane[keep_px[py::2, px::2]]
-                h = np.bincount(plane.ravel(), minlength=n_ticks + 1)[: n_ticks + 1]
-                hist[g] = hist.get(g, 0) + h
-    # TFP values are quantised (multiples of 1/Δτ): a level can hold several percent of the photosites
-    # (3 % of a Spike-Zoo clip sit on its top level), and a white point ON that level would show them
-    # all at full scale. Each count k stands for the rates within half a step of k/Δτ (never above 1
-    # spike per tick), so the percentile is taken of that spread: a level holding the tail is split
-    levels = np.arange(n_ticks + 1, dtype=np.float64)
-    lo = np.concatenate([np.maximum(levels - 0.5, 0.0) / n_ticks * g / eta for g in hist])
-    hi = np.concatenate([np.minimum(levels + 0.5, n_ticks) / n_ticks * g / eta for g in hist])
-    weights = np.concatenate([hist[g] for g in hist]).astype(np.float64)
-    spiking = float(sum(float(h[1:].sum()) for h in hist.values()))
-    keep = weights > 0
-    lo, hi, weights = lo[keep], hi[keep], weights[keep]
-    total = float(weights.sum())
-    if total <= 0 or spiking <= 0:  # no spike at all: any white point shows black; the gray-world mean
-        return 1.0 / eta
-    target = float(percentile) / 100.0 * total
-    a, b = float(lo.min()), float(hi.max())
-    width = np.maximum(hi - lo, 1e-300)
-    for _ in range(60):  # bisection on the piecewise-linear cumulative weight
-        mid = 0.5 * (a + b)
-        if float((weights * np.clip((mid - lo) / width, 0.0, 1.0)).sum()) < target:
-            a = mid
-        else:
-            b = mid
-    white = b
-    return white if white > 0 else 1.0 / eta
+
+    def at(n_ticks: int) -> float:
+        camera = getattr(source.info, "camera", None)
+        if camera is not None and not camera.from_capture:
+            return _white_corrected(source, gains, n_ticks, max_windows, eta, percentile)
+        # the capture's own hot photosites (spikeview.classical.defects) are left out of the histogram
+        keep_px = None if camera is None else ~camera.hot
+        # a histogram per distinct gain: counts take only n_ticks + 1 values per photosite class
+        hist: dict[float, np.ndarray] = {}
+        for s in sample_starts(source.n_frames, n_ticks, max_windows):
+            if s + n_ticks > source.n_frames:  # a partial last window has other levels: left out
+                continue
+            counts = window_counts(source, s, s + n_ticks)
+            for py in (0, 1):
+                for px in (0, 1):
+                    g = 1.0 if gains is None else float(gains[py, px])
+                    plane = np.asarray(counts[py::2, px::2])
+                    if keep_px is not None:
+                        plane = plane[keep_px[py::2, px::2]]
+                    h = np.bincount(plane.ravel(), minlength=n_ticks + 1)[: n_ticks + 1]
+                    hist[g] = hist.get(g, 0) + h
+        # TFP values are quantised (multiples of 1/Δτ): a level can hold several percent of the photosites
+        # (3 % of a Spike-Zoo clip sit on its top level), and a white point ON that level would show them
+        # all at full scale. Each count k stands for the rates within half a step of k/Δτ (never above 1
+        # spike per tick), so the percentile is taken of that spread: a level holding the tail is split
+        levels = np.arange(n_ticks + 1, dtype=np.float64)
+        lo = np.concatenate([np.maximum(levels - 0.5, 0.0) / n_ticks * g / eta for g in hist])
+        hi = np.concatenate([np.minimum(levels + 0.5, n_ticks) / n_ticks * g / eta for g in hist])
+        weights = np.concatenate([hist[g] for g in hist]).astype(np.float64)
+        spiking = float(sum(float(h[1:].sum()) for h in hist.values()))
+        keep = weights > 0
+        lo, hi, weights = lo[keep], hi[keep], weights[keep]
+        total = float(weights.sum())
+        if total <= 0 or spiking <= 0:  # no spike at all: any white point shows black; the gray-world mean
+            return 1.0 / eta
+        target = float(percentile) / 100.0 * total
+        a, b = float(lo.min()), float(hi.max())
+        width = np.maximum(hi - lo, 1e-300)
+        for _ in range(60):  # bisection on the piecewise-linear cumulative weight
+            mid = 0.5 * (a + b)
+            if float((weights * np.clip((mid - lo) / width, 0.0, 1.0)).sum()) < target:
+                a = mid
+            else:
+                b = mid
+        white = b
+        return white if white > 0 else 1.0 / eta
+
+    white = at(n_ticks)
+    # few spikes at the white: the count levels themselves set the percentile (a 10-tick window of a dark capture
+    # holds 1 or 2 spikes where it is brightest, and the percentile lands in that level's spread, up to twice the
+    # brightest rate); longer windows, up to the span the guided default pools, until the white holds enough spikes
+    span = min(source.n_frames, WHITE_MAX_WINDOWS * n_ticks)
+    top = 1.0 if gains is None else float(gains.max()) / eta  # the value of one spike per tick of the least sensitive class
+    for i in range(4):
+        raw = white / top  # spikes per tick at the white, the least sensitive class
+        if raw <= 0 or raw * n_ticks >= (WHITE_LOW_COUNT if i == 0 else WHITE_MIN_COUNT) or n_ticks >= span:
+            break
+        longer = min(span, int(np.ceil(WHITE_MIN_COUNT / raw)))
+        if longer <= n_ticks:
+            break
+        n_ticks = longer
+        white = at(n_ticks)
+    if detail is not None:
+        detail["ticks"] = n_ticks
+    return white
 
 
 #: the conversion rate of the ecosystem's synthetic data sets (Spike-Zoo's ``BaseDatasetConfig.rate``, its
