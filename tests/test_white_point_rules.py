@@ -136,3 +136,14 @@ def test_the_white_point_line_says_the_longer_windows(tmp_path, capsys):
     path, _ = _capture(tmp_path, 0.04, sidecar=True)
     _, err = _run(path, tmp_path, capsys)
     assert "-tick windows (a 30-tick window holds under 3 spikes at the white" in err  # 30 ticks: 1.2 spikes at 0.04
+
+
+def test_reconstruct_says_which_tick_it_took(tmp_path, capsys):
+    """Without --at the CLI takes the window at the middle of the capture, and says so (the preset records it too)."""
+    path, _ = _capture(tmp_path, 0.6, sidecar=True)
+    out = tmp_path / "mid.npy"
+    assert main(["reconstruct", str(path), "--method", "tfp", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "(the window centred on tick 150, the middle of the capture: --at T for another)" in said
+    assert main(["reconstruct", str(path), "--method", "tfp", "--at", "40", "--out", str(out), "--overwrite"]) == 0
+    assert "(the window centred on tick 40) to" in capsys.readouterr().out

@@ -248,7 +248,10 @@ def _run_one(args: argparse.Namespace) -> int:
                         pass
                 raise
         _write_preset(out, recipe, src)
-    print(f"wrote {len(centres)} frame{'s' if len(centres) != 1 else ''} to {out}; settings in {preset_path(out)}")
+    at = "" if len(centres) != 1 else (f" (the window centred on tick {centres[0]}"
+                                       + (", the middle of the capture: --at T for another)" if getattr(args, "at", None) is None
+                                          and not getattr(args, "range", None) and not getattr(args, "preset", None) else ")"))
+    print(f"wrote {len(centres)} frame{'s' if len(centres) != 1 else ''}{at} to {out}; settings in {preset_path(out)}")
     return 0
 
 
