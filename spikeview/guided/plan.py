@@ -104,7 +104,10 @@ class Plan:
 
     def __str__(self) -> str:
         sig = ", ".join(f"{255 * s:.1f}" for s in self.sigma)
-        lines = [f"plan (noise σ of the TFP estimate per channel: {sig} /255 of the image the sampler sees):"]
+        rel = ("" if self.exposure <= 1.0 else
+               f"; {', '.join(f'{255 * s * self.exposure:.1f}' for s in self.sigma)} /255 of the frame's white, "
+               "which the diffusion row judges at its noisiest block")
+        lines = [f"plan (noise σ of the TFP estimate per channel: {sig} /255 of the image the sampler sees{rel}):"]
         values = {
             "mosaic": "on" if self.mosaic else "off",
             "cast": "on" if self.cast else "off",
