@@ -149,3 +149,24 @@ def test_the_open_dialog_warns_about_a_colour_filter_read_as_monochrome(tmp_path
     assert "read as monochrome (CFA none)" in hint and "choose CFA RGGB" in hint and "--cfa" not in hint
     mono = write_capture(tmp_path / "m.dat", 128, 96, 200, cfa=False)
     assert settings_preview(core.open_file(mono, width=128, height=96, cfa="none"))[3] == ""
+
+
+def test_an_ecosystem_file_opens_at_the_ecosystem_conversion_rate(window, qtbot, tmp_path):
+    """A monochrome .dat without a sidecar firing 0.6 spikes per tick at white (a Spike-Zoo clip's convention): the app
+    starts at the white point the command line prints (0.6), not its own estimate."""
+    from spikeview.io.plain import write_plain
+    from spikeview.session import core
+
+    ramp = np.minimum(np.linspace(0.05, 1.0, 64) / 0.97, 1.0)
+    rate = 0.6 * np.broadcast_to(ramp[None, :], (48, 64))
+    v = np.random.default_rng(1).random(rate.shape)
+    spikes = np.zeros((200,) + rate.shape, np.uint8)
+    for t in range(200):
+        v += rate
+        spikes[t] = v >= 1.0
+        v[spikes[t] > 0] -= 1.0
+    path = tmp_path / "zoo_like.dat"
+    write_plain(path, spikes, sidecar=False)
+    window.set_stream(core.open_file(path, width=64, height=48, cfa=None))
+    qtbot.waitUntil(lambda: window.controller.capture_white is not None, timeout=WAIT_MS)
+    assert window.controller.capture_white == pytest.approx(0.6)
