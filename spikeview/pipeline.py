@@ -58,10 +58,22 @@ class SequenceState:
     white_balance: str | None = None
     #: how the white point was found, for the white-point line (:func:`white_point_line`)
     white_how: str = "the 99.9th percentile of the sequence's rates"
+    #: the white the guided sampler's exposure is set from (:func:`sampler_params`, :func:`guided_scale`): the
+    #: percentile over the reconstruction's own windows; ``None``: :attr:`white`. It differs from ``white`` only on a
+    #: dark capture, whose display white is measured over longer windows: the sampler was tuned on the exposure of
+    #: the window-length estimate (measured the other way, exposing a dark Bayer frame at its display white, a 1-px-a-
+    #: window pan at 0.03 spikes per tick lost 1.9 dB and half its detail)
+    exposure_white: float | None = None
+
+    @property
+    def sampler_white(self) -> float | None:
+        """:attr:`exposure_white`, else :attr:`white`."""
+        return self.white if self.exposure_white is None else self.exposure_white
 
     def attrs(self) -> dict[str, Any]:
         """Plain values for metadata (Zarr attributes, logs)."""
-        return {"alpha": None if self.alpha is None else [float(v) for v in self.alpha], "white": self.white}
+        return {"alpha": None if self.alpha is None else [float(v) for v in self.alpha], "white": self.white,
+                "exposure_white": self.exposure_white}
 
 
 def window_centres(recipe: Recipe, n_frames: int) -> tuple[list[int], int]:
@@ -112,13 +124,14 @@ def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> Seque
     span: dict = {}
     window = min(c.window, source.n_frames)
     white = estimate_white(source, a, window=window, max_windows=c.alpha_max_windows, eta=c.eta, detail=span)
+    exposure = span.get("window_white")
     white, how = ecosystem_white(white, source, a)
     if span.get("ticks", window) > window and "Spike-Zoo" not in how:
         from spikeview.classical.colour_cast import WHITE_LOW_COUNT
 
         how += (f" over {span['ticks']}-tick windows (a {window}-tick window holds under {WHITE_LOW_COUNT:g} spikes at "
                 "the white: its count levels, not the scene, would set the percentile)")
-    return SequenceState(a, white, note, why, how)
+    return SequenceState(a, white, note, why, how, exposure if exposure is not None and exposure != white else None)
 
 
 def recipe_for_state(recipe: Recipe, state: SequenceState, source: Any = None) -> Recipe:
@@ -152,11 +165,11 @@ def guided_scale(state: SequenceState) -> float:
     sees the plain rates ``Y`` and its frames are already in the units of the classical frames
     (``Y``, the white point's units then too, :func:`~spikeview.classical.colour_cast.estimate_white`).
     """
-    if state.white is None or state.alpha is None:
+    if state.sampler_white is None or state.alpha is None:
         return 1.0
     from spikeview.guided.observation import EXPOSURE_LEVEL
 
-    return float(state.white) / EXPOSURE_LEVEL
+    return float(state.sampler_white) / EXPOSURE_LEVEL
 
 
 def output_white(recipe: Recipe, state: SequenceState) -> float:
@@ -206,11 +219,11 @@ def sampler_params(recipe: Recipe, state: SequenceState) -> Any:
     sequence's white point sits at :data:`spikeview.guided.observation.EXPOSURE_LEVEL` (the prior and
     the data term see the exposed image, never clipped); ``recipe.guided`` without a white point or
     without gains α (no C to carry the exposure: see :func:`guided_scale`)."""
-    if state.white is None or state.alpha is None:
+    if state.sampler_white is None or state.alpha is None:
         return recipe.guided
     from spikeview.guided.observation import exposed_eta
 
-    return recipe.guided.replace(eta=exposed_eta(recipe.classical.eta, state.white))
+    return recipe.guided.replace(eta=exposed_eta(recipe.classical.eta, state.sampler_white))
 
 
 @dataclass

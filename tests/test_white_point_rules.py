@@ -147,3 +147,36 @@ def test_reconstruct_says_which_tick_it_took(tmp_path, capsys):
     assert "(the window centred on tick 150, the middle of the capture: --at T for another)" in said
     assert main(["reconstruct", str(path), "--method", "tfp", "--at", "40", "--out", str(out), "--overwrite"]) == 0
     assert "(the window centred on tick 40) to" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_the_sampler_keeps_the_exposure_of_the_window_length_white(cfa):
+    """A dark capture's display white comes from longer windows; the guided sampler's exposure stays that of the
+    reconstruction's own windows (what it was tuned on), in the CLI, the app's jobs and a Dask store's state alike."""
+    from spikeview.classical.colour_cast import estimate_white
+    from spikeview.cluster._compute import state_from_attrs, state_to_attrs
+    from spikeview.guided.observation import EXPOSURE_LEVEL, exposed_eta
+    from spikeview.io.source import ArraySource
+    from spikeview.pipeline import guided_scale, prepare_sequence, sampler_params
+    from spikeview.recipe import Recipe
+
+    ramp = np.minimum(np.linspace(0.05, 1.0, 96) / 0.9, 1.0)
+    src = ArraySource(_integrate_and_fire(0.08 * np.broadcast_to(ramp[None, :], (64, 96)), 200), cfa=cfa)
+    recipe = Recipe()
+    state = prepare_sequence(src, recipe, warn=False)
+    detail: dict = {}
+    estimate_white(src, state.alpha, window=10, eta=recipe.classical.eta, detail=detail)
+    assert state.white < 0.8 * detail["window_white"]  # the display white: longer windows, lower
+    assert state.exposure_white == pytest.approx(detail["window_white"])
+    assert state.sampler_white == state.exposure_white
+    if cfa is None:  # monochrome: no C carries an exposure, the sampler sees the plain rates
+        assert guided_scale(state) == 1.0 and sampler_params(recipe, state) is recipe.guided
+    else:
+        assert guided_scale(state) == pytest.approx(state.exposure_white / EXPOSURE_LEVEL)
+        assert sampler_params(recipe, state).eta == pytest.approx(exposed_eta(recipe.classical.eta, state.exposure_white))
+    again = state_from_attrs(state_to_attrs(state))
+    assert again.white == state.white and again.exposure_white == state.exposure_white
+    # a bright capture has one white
+    bright = prepare_sequence(ArraySource(_integrate_and_fire(0.6 * np.broadcast_to(ramp[None, :], (64, 96)), 200),
+                                          cfa=cfa), recipe, warn=False)
+    assert bright.exposure_white is None and "exposure_white" not in state_to_attrs(bright)

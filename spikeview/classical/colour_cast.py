@@ -550,6 +550,8 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
         return white if white > 0 else 1.0 / eta
 
     white = at(n_ticks)
+    if detail is not None:
+        detail["window_white"] = white
     # few spikes at the white: the count levels themselves set the percentile (a 10-tick window of a dark capture
     # holds 1 or 2 spikes where it is brightest, and the percentile lands in that level's spread, up to twice the
     # brightest rate); longer windows, up to the span the guided default pools, until the white holds enough spikes

@@ -61,17 +61,21 @@ def state_to_attrs(state) -> dict[str, Any]:
     """Plain values of a state (Zarr attributes; what travels to the workers): ``alpha`` and ``white_point``."""
     alpha = getattr(state, "alpha", None)
     white = getattr(state, "white", None)
-    return {"alpha": None if alpha is None else [float(v) for v in np.asarray(alpha).ravel()],
-            "white_point": None if white is None else float(white)}
+    exposure = getattr(state, "exposure_white", None)
+    out = {"alpha": None if alpha is None else [float(v) for v in np.asarray(alpha).ravel()],
+           "white_point": None if white is None else float(white)}
+    if exposure is not None:  # a dark capture: the sampler's exposure is set from another white (SequenceState)
+        out["exposure_white"] = float(exposure)
+    return out
 
 
 def state_from_attrs(attrs: dict[str, Any]):
     """The state of :func:`state_to_attrs` values, exactly as :func:`prepare_state` made it (float64 α, float white)."""
     from spikeview.pipeline import SequenceState
 
-    alpha, white = attrs.get("alpha"), attrs.get("white_point")
+    alpha, white, exposure = attrs.get("alpha"), attrs.get("white_point"), attrs.get("exposure_white")
     return SequenceState(None if alpha is None else np.asarray(alpha, dtype=np.float64),
-                         None if white is None else float(white))
+                         None if white is None else float(white), exposure_white=None if exposure is None else float(exposure))
 
 
 def compute_chunk(source, centres: Sequence[int], data: dict[str, Any], state, *,
