@@ -62,7 +62,7 @@ class GuidedPanel(QtWidgets.QWidget):
         self.prior = ParamCombo(session, "prior", {"ffdnet": "FFDNet (embedded)", "sd": "Stable Diffusion (folder)"})
         self.guidance = ParamCombo(session, "guidance", {"hqs": "HQS (DiffPIR, fast)", "dps": "DPS (backprop)"})
         self.quantise = ParamCombo(session, "quantise", {"auto": "auto (the plan decides)", "on": "on", "off": "off"})
-        self.precision = ParamCombo(session, "precision", {"auto": "auto (fastest within the quality budget)",
+        self.precision = ParamCombo(session, "precision", {"auto": "auto (fastest, same quality)",
                                                            "float32": "float32 (reference)",
                                                            "float32-fast": "float32, NNPACK",
                                                            "bfloat16-mixed": "bfloat16 at high noise"})
