@@ -29,6 +29,7 @@ import numpy as np
 
 from spikeview.errors import ParameterError
 from spikeview.recipe import Recipe
+from spikeview.transfer import WHITE_HOW
 
 #: guided reuse / warm-start chains restart every this many windows of a range (see reconstruct_windows)
 KEYFRAME = 16
@@ -57,7 +58,7 @@ class SequenceState:
     #: which white balance gave α and why (:func:`spikeview.classical.colour_cast.sequence_white_balance`)
     white_balance: str | None = None
     #: how the white point was found, for the white-point line (:func:`white_point_line`)
-    white_how: str = "the 99.9th percentile of the sequence's rates"
+    white_how: str = WHITE_HOW
     #: the white the guided sampler's exposure is set from (:func:`sampler_params`, :func:`guided_scale`): the
     #: percentile over the reconstruction's own windows; ``None``: :attr:`white`. It differs from ``white`` only on a
     #: dark capture, whose display white is measured over longer windows: the sampler was tuned on the exposure of
@@ -116,22 +117,20 @@ def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> Seque
     the white point. A channel without spikes gets the others' mean gain: a
     :class:`~spikeview.classical.colour_cast.ColourCastWarning` says so (``warn=False``: only
     :attr:`SequenceState.note`, for the app's worker threads, where warnings are unreliable)."""
-    from spikeview.classical.colour_cast import ecosystem_white, estimate_white, sequence_white_balance
+    from spikeview.classical.colour_cast import WHITE_LOW_COUNT, ecosystem_white, estimate_white, sequence_white_balance
 
     c = recipe.classical
     a, note, why = sequence_white_balance(source, c, warn=warn)
     # the exposure, once per sequence, on the windows the frames are made of
     span: dict = {}
     window = min(c.window, source.n_frames)
-    white = estimate_white(source, a, window=window, max_windows=c.alpha_max_windows, eta=c.eta, detail=span)
-    exposure = span.get("window_white")
-    white, how = ecosystem_white(white, source, a)
-    if span.get("ticks", window) > window and "Spike-Zoo" not in how:
-        from spikeview.classical.colour_cast import WHITE_LOW_COUNT
-
+    estimate = estimate_white(source, a, window=window, max_windows=c.alpha_max_windows, eta=c.eta, detail=span)
+    white, how = ecosystem_white(estimate, source, a)
+    longer = span["ticks"] > window  # a dark capture: the display white came from longer windows
+    if longer and white == estimate:
         how += (f" over {span['ticks']}-tick windows (a {window}-tick window holds under {WHITE_LOW_COUNT:g} spikes at "
                 "the white: its count levels, not the scene, would set the percentile)")
-    return SequenceState(a, white, note, why, how, exposure if exposure is not None and exposure != white else None)
+    return SequenceState(a, white, note, why, how, span["window_white"] if longer else None)
 
 
 def recipe_for_state(recipe: Recipe, state: SequenceState, source: Any = None) -> Recipe:

@@ -15,6 +15,9 @@ import numpy as np
 
 #: the display curves of PNG/MP4 and the app (``export.transfer``; ``"auto"`` = the capture's own, :func:`source_transfer`)
 TRANSFERS = ("srgb", "gamma", "linear")
+#: how the white point (full scale on display) is found, as every run's white-point line says it
+#: (:func:`spikeview.classical.colour_cast.estimate_white`)
+WHITE_HOW = "the 99.9th percentile of the sequence's rates"
 #: where a file source records its display convention (``StreamInfo.extra``; the sidecar's ``[stream] transfer``)
 DISPLAY_KEY = "display_transfer"
 

@@ -74,8 +74,8 @@ class Sequence:
         self.eta = DEFAULT_ETA if eta is None else eta
         recipe = Recipe().with_values({"classical.window": window, "classical.alpha_window": window, "classical.eta": self.eta})
         state = prepare_sequence(source, recipe)
+        self.state = state
         self.alpha, self.white = state.alpha, state.white
-        self.exposure_white = state.exposure_white  # a dark capture's sampler exposure (SequenceState.exposure_white)
 
     def observation(self, center: int, level: float | None = None):
         """The guided sampler's observation, exposed so the white point maps to ``level`` (default
@@ -83,8 +83,7 @@ class Sequence:
         from spikeview.guided.observation import EXPOSURE_LEVEL, exposed_eta
 
         level = EXPOSURE_LEVEL if level is None else level
-        white = self.white if self.exposure_white is None else self.exposure_white
-        eta = self.eta if level == 0 else exposed_eta(self.eta, white, level)
+        eta = self.eta if level == 0 else exposed_eta(self.eta, self.state.sampler_white, level)
         from spikeview.guided.config import GuidedConfig
         from spikeview.guided.window import observe_window
 
@@ -97,12 +96,12 @@ class Sequence:
         ``guided.<name> = value`` for each of ``changes`` (the CLI's own path: :func:`spikeview.pipeline.plan_window`'s
         planning inside :func:`~spikeview.pipeline.reconstruct_windows`, the recipe resolved as the CLI resolves it,
         the white point's mapping of an ``.npy``); ``sampler`` keeps the prior loaded."""
-        from spikeview.pipeline import SequenceState, exposure_mapping, reconstruct_windows, recipe_for_state
+        from spikeview.pipeline import exposure_mapping, reconstruct_windows, recipe_for_state
         from spikeview.recipe import Recipe
 
         values = {"run.method": "guided", "classical.window": self.window, "classical.eta": self.eta}
         values.update({f"guided.{k}": v for k, v in changes.items()})
-        state = SequenceState(self.alpha, self.white, exposure_white=self.exposure_white)
+        state = self.state
         recipe = recipe_for_state(Recipe().with_values(values), state)
         frame = next(reconstruct_windows(self.source, [center], recipe, state, sampler=sampler))
         return exposure_mapping(recipe, state, "x.npy")[1](frame)

@@ -587,9 +587,8 @@ def ecosystem_white(white: float, source: SpikeSource, alpha: np.ndarray | None)
     ground truth is ``rate / 0.6`` (its tools divide by it); otherwise, and for spikeview's own captures (they carry a
     sidecar), the estimate. A real camera's file without a sidecar that happens to lie in the band is shown at most
     25 % darker or brighter than its estimate would; ``--white`` sets any other."""
-    from spikeview.transfer import DISPLAY_KEY
+    from spikeview.transfer import DISPLAY_KEY, WHITE_HOW
 
-    how = "the 99.9th percentile of the sequence's rates"
     extra = getattr(source.info, "extra", None) or {}
     if (alpha is None and "sidecar" not in extra and extra.get(DISPLAY_KEY) == "linear" and white > 0
             and 1.0 / ECOSYSTEM_BAND <= white / ECOSYSTEM_RATE <= ECOSYSTEM_BAND):
@@ -597,7 +596,7 @@ def ecosystem_white(white: float, source: SpikeSource, alpha: np.ndarray | None)
                                 f"{100 * (ECOSYSTEM_BAND - 1):.0f} % of {ECOSYSTEM_RATE:g} spikes per tick: the conversion "
                                 "rate of the ecosystem's synthetic data sets (Spike-Zoo), whose tools show rate / "
                                 f"{ECOSYSTEM_RATE:g}; --white for another")
-    return white, how
+    return white, WHITE_HOW
 
 
 def _white_corrected(source: SpikeSource, gains: np.ndarray | None, n_ticks: int, max_windows: int, eta: float,

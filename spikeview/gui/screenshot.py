@@ -165,8 +165,6 @@ def _act(app: Any, w: Any, path: Any, run: str | None, view: tuple[str, str | No
               w.errors_shown)
         if dlg.stream is None:  # the dialog's first guess does not fit: a user would see why and choose; no one here
             raise RuntimeError(f"screenshot: {Path(str(path)).name}: {dlg.error.text().strip()}")
-        import sys
-
         geo = dlg.settings or {}
         print(f"spikeview: note: {Path(str(path)).name} has no sidecar: opened with the settings dialog's first guess "
               f"({geo.get('width', '?')}x{geo.get('height', '?')}, CFA {geo.get('cfa') or 'none'}, "

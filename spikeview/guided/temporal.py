@@ -756,12 +756,17 @@ def frame_drift(first: np.ndarray, second: np.ndarray, sigma: float = 1.0) -> tu
     return float(dy), float(dx)
 
 
+def _drift_view(cfa: str | None) -> tuple[Any, float]:
+    """How :func:`frame_drift` sees a window's counts, and the photosites one of its pixels spans: a Bayer mosaic as
+    2×2 super-pixels (its colour pattern would correlate with itself at even shifts), a monochrome frame as is."""
+    return ((lambda x: _guide_raw(x, cfa)), 2.0) if cfa is not None else ((lambda x: x), 1.0)
+
+
 def _pan_measured(counts: dict[int, np.ndarray], cfa: str | None) -> tuple[float, float] | None:
     """A panning frame's velocity in photosites per window for the plan: the whole frame's shift
     (:func:`frame_drift`) between the farthest pair of neighbouring windows ``±k`` whose shift it can measure (nearer
     pairs for a faster pan), divided by ``2k``; ``None`` when no pair gives one (the search's grid velocity is said)."""
-    view = (lambda x: _guide_raw(x, cfa)) if cfa is not None else (lambda x: x)
-    unit = 2.0 if cfa is not None else 1.0
+    view, unit = _drift_view(cfa)
     for k in sorted((k for k in counts if k > 0 and -k in counts), reverse=True):
         d = frame_drift(view(counts[-k].astype(np.float64)), view(counts[k].astype(np.float64)))
         if d is not None:
@@ -778,9 +783,7 @@ def _extension_drift(source: Any, a: int, b: int, cache: WindowCache, core: np.n
     n = int(source.n_frames)
     sides = {s: [k for k in range(s * (reached + 1), s * (LOW_LIGHT_RADIUS + 1), s)
                  if a + k * window >= 0 and b + k * window <= n] for s in (-1, 1)}
-    # a Bayer mosaic is compared as 2×2 super-pixels (its colour pattern would correlate with itself at even shifts)
-    view = (lambda x: _guide_raw(x, cfa)) if cfa is not None else (lambda x: x)
-    unit = 2.0 if cfa is not None else 1.0
+    view, unit = _drift_view(cfa)
     core = view(core)
     sums = {s: (view(sum(cache.counts(source, a + k * window, b + k * window).astype(np.float64) for k in ks)),
                 float(np.mean(ks))) for s, ks in sides.items() if ks}
