@@ -132,6 +132,8 @@ class GuidedConfig(Config):
         temporal_radius: neighbouring windows on each side whose photons the observation may
             borrow, aligned and weighted per photosite by how well they match
             (:mod:`spikeview.guided.temporal`); 0 = the window alone (the paper).
+        chroma: colour frames only: σ in pixels of the luma-guided chroma smoothing applied to every
+            frame the guided sequence yields (:mod:`spikeview.guided.chroma`); 0 = off.
         precision: arithmetic of the FFDNet prior (:mod:`spikeview.guided.precision`): ``"auto"``
             (the fastest path within 0.1 dB / 0.005 SSIM of float32 on the bench, for this CPU: bfloat16 only
             where a probe measures it faster), ``"float32"`` (the reference pixels), ``"float32-fast"`` (NNPACK's fast
@@ -213,6 +215,10 @@ class GuidedConfig(Config):
     temporal_radius: int = param(3, label="Temporal radius", unit="windows", lo=0, hi=8, step=1,
                                  help="Neighbouring windows on each side whose spikes a guided frame may borrow, aligned and "
                                       "used only where they match (0 = the window alone).")
+    chroma: float = param(2.0, label="Chroma smoothing", unit="px", lo=0.0, hi=8.0, step=0.5,
+                          help="Colour frames: σ in pixels over which the colour (not the brightness) is smoothed, guided "
+                               "by the luma so that colour stays inside its edges; removes the blotchy colour noise the "
+                               "prior leaves (0 = off).")
     device: str = param("auto", key="", label="Device",
                         help="Where the guided reconstruction runs (prior, data term, tiles, temporal alignment): auto (the "
                              "first CUDA GPU torch sees, else the CPU), cpu, cuda or cuda:N; the app runs on auto (no control).")

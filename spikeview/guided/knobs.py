@@ -16,6 +16,7 @@ control with the sentence as its tooltip. The rules follow the sampler exactly:
 * ``lam``: HQS only;
 * ``temporal_radius``: only when the capture holds a whole window beside this one (it acts on the
   fallback's input too, so also when the plan skips diffusion).
+* ``chroma``: on every colour frame (diffused or not); never on a gray one.
 """
 
 from __future__ import annotations
@@ -26,7 +27,8 @@ from spikeview.guided.config import GuidedConfig
 from spikeview.guided.plan import Plan
 
 #: the knobs reported, by recipe path
-KNOBS = ("guided.s", "guided.k", "guided.levels", "guided.t_start", "guided.lam", "guided.temporal_radius")
+KNOBS = ("guided.s", "guided.k", "guided.levels", "guided.t_start", "guided.lam", "guided.temporal_radius",
+         "guided.chroma")
 
 
 def temporal_status(plan: Plan) -> str | None:
@@ -39,6 +41,11 @@ def temporal_status(plan: Plan) -> str | None:
             "neighbour to borrow spikes from")
 
 
+def chroma_status(plan: Plan) -> str | None:
+    """Why ``guided.chroma`` cannot act on this window (a gray frame), or None."""
+    return None if plan.mosaic else "the frame is gray (monochrome, or M off): it has no colour to smooth"
+
+
 def knob_status(cfg: GuidedConfig, plan: Plan) -> dict[str, str | None]:
     """``{path: None (acts) or the reason it does not}`` for every entry of :data:`KNOBS`."""
     out: dict[str, str | None] = {k: None for k in KNOBS}
@@ -46,8 +53,10 @@ def knob_status(cfg: GuidedConfig, plan: Plan) -> dict[str, str | None]:
         why = f"the plan skips diffusion for this window ({plan.reasons.get('diffusion', '')})"
         out = {k: why for k in KNOBS}
         out["guided.temporal_radius"] = temporal_status(plan)  # pooling changes the fallback's input too
+        out["guided.chroma"] = chroma_status(plan)
         return out
     out["guided.temporal_radius"] = temporal_status(plan)
+    out["guided.chroma"] = chroma_status(plan)
     if cfg.guidance == "hqs" and cfg.data_steps == 0:
         out["guided.s"] = "HQS takes no data step here (data_steps = 0), so there is nothing for s to weigh"
     if not plan.quantise:

@@ -33,6 +33,8 @@ reuse         the previous window's result is reused when the counts of this win
 temporal      what the observation pooled from its aligned neighbouring windows, per      ``temporal_radius``
               photosite (:mod:`spikeview.guided.temporal`: static, aligned, mixed, fast
               motion), or why it could not (capture too short)
+chroma        the finished colour frame's chroma smoothed over ``chroma`` pixels, guided     ``chroma``
+              by its luma (:mod:`spikeview.guided.chroma`); none for a gray frame
 precision     the prior's arithmetic: ``auto`` = the fastest path within 0.1 dB / 0.005    ``precision``
               SSIM of float32 on the bench for this CPU's features (bfloat16 on high-noise
               steps, NNPACK float32, or oneDNN float32: :mod:`spikeview.guided.precision`)
@@ -101,6 +103,8 @@ class Plan:
     exposure: float = 1.0
     #: the σ the diffusion rule compared with ``noise_target``: the worst block's (or the frame's) × ``exposure``
     judged_sigma: float = 0.0
+    #: σ in pixels of the chroma smoothing of the finished frame (0: none; :mod:`spikeview.guided.chroma`)
+    chroma: float = 0.0
 
     def __str__(self) -> str:
         sig = ", ".join(f"{255 * s:.1f}" for s in self.sigma)
@@ -117,6 +121,7 @@ class Plan:
             "diffusion": "on" if self.diffusion else f"off -> {self.fallback}",
             "reuse": "yes" if self.reuse else "no",
             "temporal": self.temporal,
+            "chroma": f"σ {self.chroma:g} px" if self.chroma > 0 else "off",
             "precision": self.precision or "-",
             "device": self.device,
             "tiles": "off" if self.tile_map is None else f"{len(self.tile_map.tiles)}",
@@ -337,6 +342,13 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     pool = obs.pooling
     temporal = "off" if pool is None or pool.kind in ("off", "unavailable") else pool.kind
     r["temporal"] = pool.reason if pool is not None else "off (temporal_radius = 0): the window alone, as in the paper"
+    # --- chroma smoothing of the finished frame (spikeview.guided.chroma)
+    if not mosaic:
+        r["chroma"] = "none: a gray frame has no colour to smooth"
+    elif p.chroma <= 0:
+        r["chroma"] = "off (chroma = 0)"
+    else:
+        r["chroma"] = f"colour smoothed over σ {p.chroma:g} px, guided by the luma (its edges kept); luma untouched"
     # --- per-tile plan (spikeview.guided.tiles): only for a frame larger than one tile that needs diffusion
     tile_map = None
     if p.tile and max(obs.shape) > p.tile and diffusion and p.prior != "sd" and p.guidance == "hqs":
@@ -366,4 +378,4 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
         precision, r["precision"] = resolve_precision(p.precision, device=dev)
     return Plan(mosaic, cast, levels, diffusion, fallback, reuse, changed, sigma, r, quantise, demosaic, temporal,
                 pooling=pool, precision=precision, tile_map=tile_map, device=device_label(dev), exposure=scale,
-                judged_sigma=smax)
+                judged_sigma=smax, chroma=p.chroma if mosaic else 0.0)

@@ -126,12 +126,15 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
     Yields:
         ``(H, W, 3)`` float32 frames in [0, 1] (``(H, W)`` for monochrome).
     """
+    from spikeview.guided.chroma import luma_range, smooth_chroma
+
     p = params if params is not None else GuidedConfig()
     a = resolve_alpha(source, p, alpha) if resolve else (None if alpha is None else np.asarray(alpha, dtype=np.float64))
     smp = sampler if sampler is not None else GuidedSampler(p)
     centers = list(centers)
     n = len(centers)
     prev: np.ndarray | None = None
+    chroma_range: float | None = None
     # neighbouring windows are shared by consecutive frames; in low light a static tile reads up to ±LOW_LIGHT_RADIUS
     from spikeview.guided.temporal import LOW_LIGHT_RADIUS
 
@@ -168,8 +171,10 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
             out = smp.run(obs, p, cb, cancel, init=init, previous=prev, plan=plan)
         if infos is not None:
             infos.append(smp.info)
-        prev = out
-        yield out
+        prev = out  # unsmoothed: a reused or warm-started window smooths exactly once, as a fresh one
+        if chroma_range is None or smp.info.mode != "region":  # a re-sampled region keeps the frame's range
+            chroma_range = luma_range(out) if p.chroma > 0 and out.ndim == 3 else 0.0
+        yield smooth_chroma(out, p.chroma, luma_range=chroma_range)
 
 
 def _on_gpu(p: GuidedConfig) -> bool:

@@ -54,6 +54,8 @@ class GuidedPanel(QtWidgets.QWidget):
         self.t_note = QtWidgets.QLabel()
         self.steps = ParamSpin(session, "steps")
         self.seed = ParamSpin(session, "seed")
+        self.chroma = ParamSpin(session, "chroma")
+        self.chroma.spin.setDecimals(1)
         self.temporal = ParamSpin(session, "temporal_radius")
         self.temporal.setToolTip(SPECS["temporal_radius"].help)
         self.pool_btn = QtWidgets.QToolButton(text="Map", objectName="pooling_map_toggle", checkable=True)
@@ -82,14 +84,17 @@ class GuidedPanel(QtWidgets.QWidget):
         browse.setToolTip("Choose a weights folder or .pth file")
         browse.clicked.connect(self._browse_model)
         mpw = hbox((self.model_path, 1), browse)
-        smallw = hbox(QtWidgets.QLabel("steps"), self.steps, QtWidgets.QLabel("seed"), self.seed)
+        chroma_label = QtWidgets.QLabel("chroma σ")
+        chroma_label.setToolTip(SPECS["chroma"].help)
+        smallw = hbox(QtWidgets.QLabel("steps"), self.steps, QtWidgets.QLabel("seed"), self.seed, chroma_label, self.chroma)
         tw = hbox((self.t_start, 1), self.t_note)
         settings = form([self.s, self.k, self.levels, tw, ("", smallw), ("Prior", self.prior), ("Weights", mpw),
                          ("Guidance", self.guidance), ("Q", self.quantise), ("Precision", hbox((self.precision, 1), self.tiles_btn)),
                          ("Neighbours ±", hbox((self.temporal, 1), self.pool_btn))])
         #: recipe path → the control of that knob (disabled with the plan's reason when it cannot act)
         self.knob_controls = {"guided.s": self.s, "guided.k": self.k, "guided.levels": self.levels,
-                              "guided.t_start": self.t_start, "guided.temporal_radius": self.temporal}
+                              "guided.t_start": self.t_start, "guided.temporal_radius": self.temporal,
+                              "guided.chroma": self.chroma}
 
         self.run_btn, self.cancel_btn, self.progress, self.status = job_controls(
             "guided", "Run", "Reconstruct the current window (the ROI when one is drawn)", self.run_requested,
