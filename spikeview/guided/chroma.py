@@ -19,12 +19,17 @@ noise can be handed in (``luma_range``): a frame whose sampler re-ran only a cha
 (:func:`spikeview.guided.video.reconstruct_sequence`) keeps the previous frame's range, so that outside that region,
 beyond the filter's reach (``REACH × sigma`` pixels), its pixels stay exactly the previous frame's.
 
+It runs in torch on the device the guided path runs on (``device``; the CPU by default): on a GPU the frame goes
+there and back (a 1000×1000 frame is 12 MB), on the CPU it uses torch's threads. The arithmetic is float32.
+
 Monochrome frames are returned unchanged; ``sigma = 0`` turns it off.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import torch
+import torch.nn.functional as F
 
 #: luma → (Y', Cb, Cr) of sRGB-encoded values (BT.601, full range, Cb/Cr centred on 0)
 _YCC = np.array([[0.299, 0.587, 0.114], [-0.168736, -0.331264, 0.5], [0.5, -0.418688, -0.081312]], dtype=np.float32)
@@ -35,62 +40,81 @@ LUMA_RANGE = 2.5
 REACH = 2.0
 
 
-def _robust_sigma(a: np.ndarray) -> float:
-    """1.4826 × the median absolute deviation of ``a`` minus its σ = 1 px Gaussian blur."""
-    from scipy.ndimage import gaussian_filter
-
-    h = a - gaussian_filter(a, 1.0, mode="reflect")
-    return float(1.4826 * np.median(np.abs(h - np.median(h))))
+def _encode(x: torch.Tensor) -> torch.Tensor:
+    """:func:`spikeview.transfer.srgb_encode` in torch."""
+    return torch.where(x <= 0.0031308, 12.92 * x, 1.055 * torch.pow(torch.clamp(x, min=0.0031308), 1 / 2.4) - 0.055)
 
 
-def _luma_chroma(x: np.ndarray) -> np.ndarray:
-    from spikeview.transfer import srgb_encode
-
-    return srgb_encode(np.clip(np.asarray(x, dtype=np.float32), 0.0, 1.0)).astype(np.float32) @ _YCC.T
-
-
-def luma_range(x: np.ndarray) -> float:
-    """The width of the luma weight for frame ``x`` ``(H, W, 3)``: :data:`LUMA_RANGE` × its luma's robust noise."""
-    return LUMA_RANGE * _robust_sigma(np.ascontiguousarray(_luma_chroma(x)[..., 0]))
+def _decode(e: torch.Tensor) -> torch.Tensor:
+    """:func:`spikeview.transfer.srgb_decode` in torch."""
+    return torch.where(e <= 0.04045, e / 12.92, torch.pow((torch.clamp(e, min=0.04045) + 0.055) / 1.055, 2.4))
 
 
-def smooth_chroma(x: np.ndarray, sigma: float, *, luma_range: float | None = None) -> np.ndarray:
+def _luma_chroma(x: torch.Tensor) -> torch.Tensor:
+    """``(H, W, 3)`` linear → ``(3, H, W)`` Y', Cb, Cr of its sRGB encoding (clipped to [0, 1] first)."""
+    m = torch.as_tensor(_YCC, device=x.device)
+    return torch.einsum("hwc,kc->khw", _encode(torch.clamp(x, 0.0, 1.0)), m)
+
+
+def _blur1(y: torch.Tensor) -> torch.Tensor:
+    """σ = 1 px Gaussian of ``(H, W)``, reflected borders (radius 4)."""
+    k = torch.exp(-0.5 * torch.arange(-4, 5, dtype=torch.float32, device=y.device) ** 2)
+    k = k / k.sum()
+    t = F.pad(y[None, None], (4, 4, 4, 4), mode="reflect")
+    t = F.conv2d(t, k.view(1, 1, 1, 9))
+    return F.conv2d(t, k.view(1, 1, 9, 1))[0, 0]
+
+
+def _robust_sigma(y: torch.Tensor) -> float:
+    """1.4826 × the median absolute deviation of ``y`` minus its σ = 1 px blur."""
+    h = (y - _blur1(y)).flatten()
+    return float(1.4826 * torch.median(torch.abs(h - torch.median(h))))
+
+
+def _tensor(x: np.ndarray, device: "str | torch.device | None") -> torch.Tensor:
+    return torch.as_tensor(np.ascontiguousarray(x, dtype=np.float32)).to(device or "cpu")
+
+
+def luma_range(x: np.ndarray, device: "str | torch.device | None" = None) -> float:
+    """The width of the luma weight for frame ``x`` ``(H, W, 3)``: :data:`LUMA_RANGE` × its luma's robust noise
+    (0 for a frame too small to measure it)."""
+    if min(x.shape[:2]) <= 4:
+        return 0.0
+    with torch.no_grad():
+        return LUMA_RANGE * _robust_sigma(_luma_chroma(_tensor(x, device))[0])
+
+
+def smooth_chroma(x: np.ndarray, sigma: float, *, luma_range: float | None = None,
+                  device: "str | torch.device | None" = None) -> np.ndarray:
     """``x`` ``(H, W, 3)`` (linear, in [0, 1]) with its chroma smoothed over ``sigma`` pixels, luma-guided; float32.
 
-    ``luma_range``: the luma weight's width (None: :func:`luma_range` of ``x``). Returns ``x`` itself for
-    monochrome frames, ``sigma <= 0`` or a frame too small for the window.
+    ``luma_range``: the luma weight's width (None: :func:`luma_range` of ``x``). ``device``: where it runs (a torch
+    device; None: the CPU). Returns ``x`` itself for monochrome frames, ``sigma <= 0`` or a frame too small for
+    the window.
     """
-    from spikeview.transfer import srgb_decode
-
     if x.ndim != 3 or x.shape[-1] != 3 or sigma <= 0:
         return x
     r = max(1, int(np.ceil(REACH * sigma)))
     h, w = x.shape[:2]
-    if min(h, w) <= r:
+    if min(h, w) <= max(r, 4):
         return x
-    ycc = _luma_chroma(x)
-    y = np.ascontiguousarray(ycc[..., 0])
-    cb, cr = ycc[..., 1], ycc[..., 2]
-    sy = LUMA_RANGE * _robust_sigma(y) if luma_range is None else float(luma_range)
-    inv = np.float32(-0.5 / max(sy, 1e-6) ** 2)
-    py = np.pad(y, r, mode="reflect")
-    pb = np.pad(cb, r, mode="reflect")
-    pr = np.pad(cr, r, mode="reflect")
-    num_b = np.zeros_like(y)
-    num_r = np.zeros_like(y)
-    den = np.zeros_like(y)
-    d = np.empty_like(y)
-    for i in range(-r, r + 1):
-        for j in range(-r, r + 1):
-            ws = np.float32(np.exp(-(i * i + j * j) / (2.0 * sigma * sigma)))
-            sl = (slice(r + i, r + i + h), slice(r + j, r + j + w))
-            np.subtract(py[sl], y, out=d)
-            np.multiply(d, d, out=d)
-            np.multiply(d, inv, out=d)
-            np.exp(d, out=d)
-            d *= ws
-            den += d
-            num_b += d * pb[sl]
-            num_r += d * pr[sl]
-    out = np.stack([y, num_b / den, num_r / den], axis=-1) @ _RGB.T
-    return srgb_decode(np.clip(out, 0.0, 1.0)).astype(np.float32)
+    with torch.no_grad():
+        ycc = _luma_chroma(_tensor(x, device))
+        y = ycc[0]
+        sy = LUMA_RANGE * _robust_sigma(y) if luma_range is None else float(luma_range)
+        inv = -0.5 / max(sy, 1e-6) ** 2
+        p = F.pad(ycc[None], (r, r, r, r), mode="reflect")[0]
+        num = torch.zeros_like(ycc[1:])
+        den = torch.zeros_like(y)
+        d = torch.empty_like(y)
+        for i in range(-r, r + 1):
+            for j in range(-r, r + 1):
+                ws = float(np.exp(-(i * i + j * j) / (2.0 * sigma * sigma)))
+                q = p[:, r + i:r + i + h, r + j:r + j + w]
+                torch.sub(q[0], y, out=d)
+                d.square_().mul_(inv).exp_().mul_(ws)
+                den += d
+                num.addcmul_(q[1:], d.expand_as(num))
+        out = torch.cat([y[None], num / den], 0)
+        rgb = torch.einsum("khw,ck->hwc", out, torch.as_tensor(_RGB, device=y.device))
+        return _decode(torch.clamp(rgb, 0.0, 1.0)).cpu().numpy().astype(np.float32, copy=False)

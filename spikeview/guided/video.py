@@ -135,6 +135,7 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
     n = len(centers)
     prev: np.ndarray | None = None
     chroma_range: float | None = None
+    chroma_device = _chroma_device(p)
     # neighbouring windows are shared by consecutive frames; in low light a static tile reads up to ±LOW_LIGHT_RADIUS
     from spikeview.guided.temporal import LOW_LIGHT_RADIUS
 
@@ -173,8 +174,17 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
             infos.append(smp.info)
         prev = out  # unsmoothed: a reused or warm-started window smooths exactly once, as a fresh one
         if chroma_range is None or smp.info.mode != "region":  # a re-sampled region keeps the frame's range
-            chroma_range = luma_range(out) if p.chroma > 0 and out.ndim == 3 else 0.0
-        yield smooth_chroma(out, p.chroma, luma_range=chroma_range)
+            chroma_range = luma_range(out, chroma_device) if p.chroma > 0 and out.ndim == 3 else 0.0
+        yield smooth_chroma(out, p.chroma, luma_range=chroma_range, device=chroma_device)
+
+
+def _chroma_device(p: GuidedConfig) -> Any:
+    """Where the chroma smoothing runs: the guided path's GPU, else the CPU (None)."""
+    if not _on_gpu(p):
+        return None
+    from spikeview.guided.device import resolve_device
+
+    return resolve_device(p.device)
 
 
 def _on_gpu(p: GuidedConfig) -> bool:
