@@ -65,6 +65,9 @@ class SequenceState:
     #: the window-length estimate (measured the other way, exposing a dark Bayer frame at its display white, a 1-px-a-
     #: window pan at 0.03 spikes per tick lost 1.9 dB and half its detail)
     exposure_white: float | None = None
+    #: the gains α are gray-world's (chosen, asked for or recorded): the guided frame keeps that balance where Q is on
+    #: (:mod:`spikeview.guided.balance`, :func:`sampler_params`)
+    gray_world: bool = False
 
     @property
     def sampler_white(self) -> float | None:
@@ -74,7 +77,7 @@ class SequenceState:
     def attrs(self) -> dict[str, Any]:
         """Plain values for metadata (Zarr attributes, logs)."""
         return {"alpha": None if self.alpha is None else [float(v) for v in self.alpha], "white": self.white,
-                "exposure_white": self.exposure_white}
+                "exposure_white": self.exposure_white, "gray_world": self.gray_world}
 
 
 def window_centres(recipe: Recipe, n_frames: int) -> tuple[list[int], int]:
@@ -120,7 +123,8 @@ def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> Seque
     from spikeview.classical.colour_cast import WHITE_LOW_COUNT, ecosystem_white, estimate_white, sequence_white_balance
 
     c = recipe.classical
-    a, note, why = sequence_white_balance(source, c, warn=warn)
+    detail: dict = {}
+    a, note, why = sequence_white_balance(source, c, warn=warn, detail=detail)
     # the exposure, once per sequence, on the windows the frames are made of
     span: dict = {}
     window = min(c.window, source.n_frames)
@@ -130,7 +134,8 @@ def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> Seque
     if longer and white == estimate:
         how += (f" over {span['ticks']}-tick windows (a {window}-tick window holds under {WHITE_LOW_COUNT:g} spikes at "
                 "the white: its count levels, not the scene, would set the percentile)")
-    return SequenceState(a, white, note, why, how, span["window_white"] if longer else None)
+    return SequenceState(a, white, note, why, how, span["window_white"] if longer else None,
+                         gray_world=detail["gray_world"])
 
 
 def recipe_for_state(recipe: Recipe, state: SequenceState, source: Any = None) -> Recipe:
@@ -217,12 +222,14 @@ def sampler_params(recipe: Recipe, state: SequenceState) -> Any:
     """The :class:`~spikeview.guided.GuidedConfig` the sampler runs on this sequence: η set so that the
     sequence's white point sits at :data:`spikeview.guided.observation.EXPOSURE_LEVEL` (the prior and
     the data term see the exposed image, never clipped); ``recipe.guided`` without a white point or
-    without gains α (no C to carry the exposure: see :func:`guided_scale`)."""
+    without gains α (no C to carry the exposure: see :func:`guided_scale`). ``balance`` is the state's
+    :attr:`SequenceState.gray_world` (:mod:`spikeview.guided.balance`)."""
     if state.sampler_white is None or state.alpha is None:
         return recipe.guided
     from spikeview.guided.observation import exposed_eta
 
-    return recipe.guided.replace(eta=exposed_eta(recipe.classical.eta, state.sampler_white))
+    return recipe.guided.replace(eta=exposed_eta(recipe.classical.eta, state.sampler_white),
+                                 balance=bool(state.gray_world))
 
 
 @dataclass

@@ -41,8 +41,8 @@ from spikeview.guided.config import GuidedConfig
 #: ``[classical]`` field → the ``GuidedConfig`` field it sets (the observation both methods share)
 SHARED: dict[str, str] = {"window": "window", "demosaic": "demosaic", "eta": "eta", "alpha": "alpha",
                           "alpha_max_windows": "alpha_max_windows"}
-#: ``GuidedConfig`` fields derived from ``[classical]`` (never written in ``[guided]``)
-DERIVED_GUIDED = tuple(SHARED.values()) + ("use_cast",)
+#: ``GuidedConfig`` fields derived from ``[classical]`` or the sequence (never written in ``[guided]``)
+DERIVED_GUIDED = tuple(SHARED.values()) + ("use_cast", "balance")
 METHODS = ("tfp", "tfi", "guided")
 TABLES = ("run", "stream", "classical", "guided", "export")
 

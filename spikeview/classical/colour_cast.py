@@ -280,7 +280,7 @@ def sequence_alpha(source: SpikeSource, config: Any, *, warn: bool = True) -> tu
     return a, note
 
 
-def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = True
+def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = True, detail: dict | None = None
                            ) -> tuple[np.ndarray | None, str | None, str | None]:
     """The sequence's gains α, the note for a channel without spikes, and which white balance gave them and why.
 
@@ -292,16 +292,31 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
     :func:`sequence_channel_means`, :func:`alpha_with_note`), another estimator, or ``auto``. A profile's dark and
     flat correction applies to the rates every estimator sees. α is float64 ``(3,)``. A channel without spikes gets
     the others' mean gain; with ``warn`` the note is also issued as a :class:`ColourCastWarning`.
+
+    ``detail``: a dict that receives ``gray_world``: whether the gains are gray-world's for this stream (the estimator
+    was gray-world, or recorded / fixed gains equal gray-world's within 1e-6; the guided frame then keeps that
+    balance where Q would tint it: :mod:`spikeview.guided.balance`).
     """
     from spikeview.classical import white_balance as wb
 
+    out = detail if detail is not None else {}
+    out["gray_world"] = False
     if source.cfa is None or not config.colour_cast:
         return None, None, None
+    given = None
     if config.alpha is not None:
-        return np.asarray(config.alpha, dtype=np.float64), None, "white balance: the recorded gains classical.alpha"
+        given = np.asarray(config.alpha, dtype=np.float64), "white balance: the recorded gains classical.alpha"
     choice = wb.parse_white_balance(getattr(config, "white_balance", "gray-world"), "classical.white_balance")
-    if not isinstance(choice, str):
-        return np.asarray(choice, dtype=np.float64), None, "white balance: the fixed gains R,G,B given"
+    if given is None and not isinstance(choice, str):
+        given = np.asarray(choice, dtype=np.float64), "white balance: the fixed gains R,G,B given"
+    if given is not None:
+        if detail is not None and getattr(source.info, "camera", None) is None:
+            gw = alpha_with_note(sequence_channel_means(source, window=min(config.alpha_window, source.n_frames),
+                                                        max_windows=config.alpha_max_windows))[0]
+            a = given[0]
+            out["gray_world"] = bool(a.shape == (3,) and a[1] > 0 and gw[1] > 0
+                                     and np.allclose(a / a[1], gw / gw[1], rtol=1e-6, atol=0.0))
+        return given[0], None, given[1]
     camera = getattr(source.info, "camera", None)
     if choice == "profile" and (camera is None or camera.colour_response is None):
         raise ParameterError("--white-balance profile needs a camera profile with a colour response: pass --camera "
@@ -333,6 +348,7 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
         gains, note = wb.gains_from_illuminant(how.illuminant, means), None
     if note is not None and warn:
         warnings.warn(note, ColourCastWarning, stacklevel=3)
+    out["gray_world"] = how.method == "gray-world"
     return np.asarray(gains, dtype=np.float64), note, how.reason
 
 

@@ -132,6 +132,9 @@ class GuidedConfig(Config):
         temporal_radius: neighbouring windows on each side whose photons the observation may
             borrow, aligned and weighted per photosite by how well they match
             (:mod:`spikeview.guided.temporal`); 0 = the window alone (the paper).
+        balance: the sequence's white balance is gray-world: where the plan turns Q on, the frame's channel means
+            are kept at the data's (:mod:`spikeview.guided.balance`); set by the pipeline
+            (:func:`spikeview.pipeline.sampler_params`), never written in a preset.
         chroma: colour frames only: σ in pixels of the luma-guided chroma smoothing applied to every
             frame the guided sequence yields (:mod:`spikeview.guided.chroma`); 0 = off.
         precision: arithmetic of the FFDNet prior (:mod:`spikeview.guided.precision`): ``"auto"``
@@ -223,6 +226,7 @@ class GuidedConfig(Config):
                         help="Where the guided reconstruction runs (prior, data term, tiles, temporal alignment): auto (the "
                              "first CUDA GPU torch sees, else the CPU), cpu, cuda or cuda:N; the app runs on auto (no control).")
     dtype: str = "float32"
+    balance: bool = False
 
     def __post_init__(self) -> None:
         self.check_params()  # the declared ranges and choices (the ones the CLI and the app show)

@@ -33,6 +33,8 @@ reuse         the previous window's result is reused when the counts of this win
 temporal      what the observation pooled from its aligned neighbouring windows, per      ``temporal_radius``
               photosite (:mod:`spikeview.guided.temporal`: static, aligned, mixed, fast
               motion), or why it could not (capture too short)
+balance       with gray-world gains and Q on, the finished frame's channel means kept at the     ``balance`` (set
+              data's (:mod:`spikeview.guided.balance`)                                      by the pipeline)
 chroma        the finished colour frame's chroma smoothed over ``chroma`` pixels, guided     ``chroma``
               by its luma (:mod:`spikeview.guided.chroma`); none for a gray frame
 precision     the prior's arithmetic: ``auto`` = the fastest path within 0.1 dB / 0.005    ``precision``
@@ -121,6 +123,7 @@ class Plan:
             "diffusion": "on" if self.diffusion else f"off -> {self.fallback}",
             "reuse": "yes" if self.reuse else "no",
             "temporal": self.temporal,
+            "balance": "kept" if self.reasons.get("balance", "").startswith("each") else "-",
             "chroma": f"σ {self.chroma:g} px" if self.chroma > 0 else "off",
             "precision": self.precision or "-",
             "device": self.device,
@@ -342,6 +345,15 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     pool = obs.pooling
     temporal = "off" if pool is None or pool.kind in ("off", "unavailable") else pool.kind
     r["temporal"] = pool.reason if pool is not None else "off (temporal_radius = 0): the window alone, as in the paper"
+    # --- the finished frame's colour balance (spikeview.guided.balance)
+    if not mosaic:
+        r["balance"] = "none: a gray frame"
+    elif not (p.balance and quantise and diffusion):
+        r["balance"] = ("as sampled" + ("" if p.balance else " (the gains are not gray-world's)") if mosaic and quantise
+                        else "as sampled (Q off)")
+    else:
+        r["balance"] = ("each channel's mean kept at the data's (gray-world gains, and Q's floor would crush the "
+                        "weaker channels' small counts)")
     # --- chroma smoothing of the finished frame (spikeview.guided.chroma)
     if not mosaic:
         r["chroma"] = "none: a gray frame has no colour to smooth"

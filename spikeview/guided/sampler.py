@@ -20,7 +20,8 @@ Parts (diffusers style, each swappable):
 4. ``steps`` guided steps down a geometric per-channel σ ladder from σ' to ``sigma_end``, then 0;
    after every step ``callback(step, total, preview)`` gets x̂₀ as an image, and the cancel flag is
    checked before every step (:class:`spikeview.errors.Cancelled`);
-5. the last x̂₀, clamped to [0, 1], is the frame.
+5. the last x̂₀, clamped to [0, 1], is the frame (with gray-world gains and Q on, its channel means are kept at
+   the data's: :mod:`spikeview.guided.balance`).
 
 Everything random comes from one ``torch.Generator`` seeded by ``params.seed``: a run is
 deterministic for a seed. Graphs live for one step only (inputs are detached between steps).
@@ -261,10 +262,19 @@ class GuidedSampler:
             self.info = info
             info.mode, info.seconds = "tiled", time.perf_counter() - t0
             info.precision = plan.precision
-            return out
+            return self._balanced(out, observation, p, plan)
         out = self._sample(observation, p, plan, channels, callback, cancel, init, noise)
         info.mode, info.seconds = "diffusion", time.perf_counter() - t0
-        return out
+        return self._balanced(out, observation, p, plan)
+
+    @staticmethod
+    def _balanced(out: np.ndarray, obs: Observation, p: GuidedConfig, plan: Plan) -> np.ndarray:
+        """``out`` with gray-world's colour balance kept where Q is on (:mod:`spikeview.guided.balance`)."""
+        if not (p.balance and plan.quantise and plan.mosaic):
+            return out
+        from spikeview.guided.balance import keep_balance
+
+        return keep_balance(out, obs)
 
     def _sample(self, obs: Observation, p: GuidedConfig, plan: Plan, channels: int, callback: Callback | None,
                 cancel: Any, init: np.ndarray | None, noise: torch.Tensor | None = None) -> np.ndarray:
