@@ -119,5 +119,9 @@ def test_the_bench_report_has_a_niqe_column_and_truth_rows():
              "noise": 30.0, "niqe": 15.2}]
     text = report(rows, "T")
     assert "| NIQE (lower is better) |" in text
-    assert "| camera none (tick 200) | truth | — | — | — | — | 3.57 |" in text
-    assert "| camera none (tick 200) | tfp | 12.00 | 0.100 | 1.20 | 30.0 | 15.20 |" in text
+    assert "| camera none (tick 200) | truth | — | — | — | — | — | — | 3.57 |" in text
+    # a gray frame has no ΔE00 or white balance: "—"; a colour frame shows both
+    assert "| camera none (tick 200) | tfp | 12.00 | — | — | 0.100 | 1.20 | 30.0 | 15.20 |" in text
+    rows.append({"capture": "camera RGGB", "tick": 200, "method": "tfp", "psnr": 11.0, "delta_e00": 9.5, "wb_angle": 3.25,
+                 "detail": 0.1, "patchiness": 1.2, "noise": 30.0, "niqe": 15.2})
+    assert "| camera RGGB (tick 200) | tfp | 11.00 | 9.5 | 3.2° | 0.100 | 1.20 | 30.0 | 15.20 |" in report(rows, "T")

@@ -119,7 +119,10 @@ def score_frame(x: np.ndarray, ref: np.ndarray, truth: bool) -> dict[str, float]
     out = {"detail": detail_kept(x, r), "patchiness": patchiness(x, r, truth=truth), "noise": residual_noise(x),
            "niqe": no_reference(x)}
     if truth:
-        out["psnr"] = colour_scores(x, np.clip(r, 0.0, 1.0) if x.ndim == r.ndim else np.clip(r.mean(axis=-1), 0, 1))["psnr_1gain"]
+        c = colour_scores(x, np.clip(r, 0.0, 1.0) if x.ndim == r.ndim else np.clip(r.mean(axis=-1), 0, 1))
+        out["psnr"] = c["psnr_1gain"]
+        if x.ndim == 3:  # colour: ΔE00 and the white-balance angle (issue 26); a gray frame has neither ("—")
+            out["delta_e00"], out["wb_angle"] = c["delta_e00"], c["wb_angle"]
     return out
 
 
@@ -183,7 +186,7 @@ def run_real(files: list[str]) -> list[dict]:
 
 
 def run_low_light(size: int = 256, ticks: int = 400) -> list[dict]:
-    """Simulated scenes (camera mono, coffee RGGB), static at :data:`LIGHT_LEVELS` and panning (:data:`PANS`) at
+    """Simulated scenes (camera mono and RGGB, coffee RGGB), static at :data:`LIGHT_LEVELS` and panning (:data:`PANS`) at
     0.03 spikes per tick, scored against their truth."""
     import skimage.data
     from PIL import Image
@@ -193,7 +196,8 @@ def run_low_light(size: int = 256, ticks: int = 400) -> list[dict]:
         t = Path(tmp)
         Image.fromarray(skimage.data.camera()).save(t / "camera.png")
         Image.fromarray(skimage.data.coffee()[:400, 100:500]).save(t / "coffee.png")
-        runs = [(scene, cfa, rate, 0.0) for scene, cfa in (("camera", "none"), ("coffee", "RGGB")) for rate in LIGHT_LEVELS]
+        static = (("camera", "none"), ("camera", "RGGB"), ("coffee", "RGGB"))  # a gray scene in colour too: its tint
+        runs = [(scene, cfa, rate, 0.0) for scene, cfa in static for rate in LIGHT_LEVELS]
         runs += [(scene, cfa, 0.03, pan) for pan in PANS for scene, cfa in (("camera", "none"), ("coffee", "RGGB"))]
         truth_scored = set()
         for scene, cfa, rate, pan in runs:
@@ -207,8 +211,8 @@ def run_low_light(size: int = 256, ticks: int = 400) -> list[dict]:
             truth = g["frames"][i].astype(np.float64)
             truth = truth.mean(axis=-1) if cfa == "none" else truth
             moving = f", pan {pan / 20000:g} px/tick" if pan else ""
-            if (scene, pan) not in truth_scored:  # the truth once per scene (a static scene's is the same at every light)
-                truth_scored.add((scene, pan))
+            if (scene, cfa, pan) not in truth_scored:  # the truth once per scene (a static scene's is the same at every light)
+                truth_scored.add((scene, cfa, pan))
                 light = f"{rate:g}/tick" if pan else "every light level"
                 rows.append({"capture": f"{scene} {cfa} {light}{moving}", "tick": at, "method": TRUTH,
                              "niqe": no_reference(truth)})
@@ -222,7 +226,8 @@ def run_low_light(size: int = 256, ticks: int = 400) -> list[dict]:
 def report(rows: list[dict], title: str) -> str:
     """A markdown table of ``rows``; a row without a score (the truth, the long exposure: NIQE only) prints "—"."""
     truth = any("psnr" in r for r in rows)
-    cols = ([("psnr", "PSNR (1 gain)", "{:.2f}")] if truth else []) + [
+    cols = ([("psnr", "PSNR (1 gain)", "{:.2f}"), ("delta_e00", "ΔE00", "{:.1f}"), ("wb_angle", "WB", "{:.1f}°")]
+            if truth else []) + [
         ("detail", "detail", "{:.3f}"), ("patchiness", "patchiness", "{:.2f}"), ("noise", "residual noise /255", "{:.1f}"),
         ("niqe", "NIQE (lower is better)", "{:.2f}")]
     head = "| capture | method | " + " | ".join(c[1] for c in cols) + " |"
