@@ -67,7 +67,6 @@ def test_a_gray_scene_at_a_low_rate_keeps_its_gray(tmp_path, cfa):
     """0.02 spikes per tick at white (0.2 a window), the simulator's sensor (R and B less sensitive): with gray-world
     gains the guided frame was green (Q's floor crushes the smaller R and B counts); it now keeps the data's balance.
     Monochrome: nothing to balance, the same pixels either way."""
-    from spikeview.guided.plan import make_plan
     from spikeview.io import open_source
     from spikeview.metrics import colour_scores
     from spikeview.pipeline import plan_window, prepare_sequence, reconstruct_windows

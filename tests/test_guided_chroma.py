@@ -93,3 +93,16 @@ def test_a_negative_chroma_is_refused_in_one_sentence():
 
     with pytest.raises(ParameterError, match="chroma"):
         GuidedConfig(chroma=-1.0)
+
+
+def test_each_channels_mean_is_kept():
+    # a mostly black frame with colour noise (hubble-like): the sRGB curve would move the channel means
+    rng = np.random.default_rng(4)
+    x = np.clip(0.01 + 0.01 * rng.standard_normal((80, 80, 3)), 0, 1).astype(np.float32)
+    x[30:40, 30:40] = (0.8, 0.6, 0.3)  # one bright, coloured object
+    keep: dict = {}
+    out = smooth_chroma(x, 2.0, keep=keep)
+    np.testing.assert_allclose(out.reshape(-1, 3).mean(axis=0), x.reshape(-1, 3).mean(axis=0), rtol=1e-4)
+    assert set(keep) == {"luma_range", "gains"}
+    # handed back, the same settings give the same pixels
+    assert np.array_equal(smooth_chroma(x, 2.0, keep=dict(keep)), out)

@@ -14,9 +14,12 @@ leak across a luma edge. Y' is kept as it is; the frame goes back through the in
 curve at its own scale. A colour edge without a luma edge (an iso-luminant hue boundary) is softened over about
 ``sigma`` pixels: on the bench's colour wheel this costs 0.3–0.5 dB one-gain PSNR while its ΔE00 falls 1.5.
 
-The frame is taken as it comes from the sampler, in [0, 1] (no normalisation by its own maximum), and the luma's
-noise can be handed in (``luma_range``): a frame whose sampler re-ran only a changed region
-(:func:`spikeview.guided.video.reconstruct_sequence`) keeps the previous frame's range, so that outside that region,
+Each channel's mean over the frame is kept: the result is scaled per channel back to the input's means (the sRGB
+curve would otherwise move them: smoothing a mostly black frame's colour noise moved its white balance by 0.8°).
+
+The frame is taken as it comes from the sampler, in [0, 1] (no normalisation by its own maximum), and the luma's noise
+and the mean-keeping gains can be handed in (``keep``): a frame whose sampler re-ran only a changed region
+(:func:`spikeview.guided.video.reconstruct_sequence`) keeps the previous frame's, so that outside that region,
 beyond the filter's reach (``REACH × sigma`` pixels), its pixels stay exactly the previous frame's.
 
 It runs in torch on the device the guided path runs on (``device``; the CPU by default): on a GPU the frame goes
@@ -75,22 +78,15 @@ def _tensor(x: np.ndarray, device: "str | torch.device | None") -> torch.Tensor:
     return torch.as_tensor(np.ascontiguousarray(x, dtype=np.float32)).to(device or "cpu")
 
 
-def luma_range(x: np.ndarray, device: "str | torch.device | None" = None) -> float:
-    """The width of the luma weight for frame ``x`` ``(H, W, 3)``: :data:`LUMA_RANGE` × its luma's robust noise
-    (0 for a frame too small to measure it)."""
-    if min(x.shape[:2]) <= 4:
-        return 0.0
-    with torch.no_grad():
-        return LUMA_RANGE * _robust_sigma(_luma_chroma(_tensor(x, device))[0])
-
-
-def smooth_chroma(x: np.ndarray, sigma: float, *, luma_range: float | None = None,
+def smooth_chroma(x: np.ndarray, sigma: float, *, keep: dict | None = None,
                   device: "str | torch.device | None" = None) -> np.ndarray:
     """``x`` ``(H, W, 3)`` (linear, in [0, 1]) with its chroma smoothed over ``sigma`` pixels, luma-guided; float32.
 
-    ``luma_range``: the luma weight's width (None: :func:`luma_range` of ``x``). ``device``: where it runs (a torch
-    device; None: the CPU). Returns ``x`` itself for monochrome frames, ``sigma <= 0`` or a frame too small for
-    the window.
+    Each channel's mean over the frame is kept (the sRGB curve would otherwise move it: on a mostly black frame by
+    0.8° of white balance): the result is scaled per channel back to the input's means. ``keep``: a dict that, when
+    it holds ``luma_range`` and ``gains`` (those of an earlier frame), makes this frame use them; when it does not,
+    receives this frame's. ``device``: where it runs (a torch device; None: the CPU). Returns ``x`` itself for
+    monochrome frames, ``sigma <= 0`` or a frame too small for the window.
     """
     if x.ndim != 3 or x.shape[-1] != 3 or sigma <= 0:
         return x
@@ -98,10 +94,12 @@ def smooth_chroma(x: np.ndarray, sigma: float, *, luma_range: float | None = Non
     h, w = x.shape[:2]
     if min(h, w) <= max(r, 4):
         return x
+    given = keep is not None and "luma_range" in keep and "gains" in keep
     with torch.no_grad():
-        ycc = _luma_chroma(_tensor(x, device))
+        xt = torch.clamp(_tensor(x, device), 0.0, 1.0)
+        ycc = _luma_chroma(xt)
         y = ycc[0]
-        sy = LUMA_RANGE * _robust_sigma(y) if luma_range is None else float(luma_range)
+        sy = float(keep["luma_range"]) if given else LUMA_RANGE * _robust_sigma(y)
         inv = -0.5 / max(sy, 1e-6) ** 2
         p = F.pad(ycc[None], (r, r, r, r), mode="reflect")[0]
         num = torch.zeros_like(ycc[1:])
@@ -116,5 +114,12 @@ def smooth_chroma(x: np.ndarray, sigma: float, *, luma_range: float | None = Non
                 den += d
                 num.addcmul_(q[1:], d.expand_as(num))
         out = torch.cat([y[None], num / den], 0)
-        rgb = torch.einsum("khw,ck->hwc", out, torch.as_tensor(_RGB, device=y.device))
-        return _decode(torch.clamp(rgb, 0.0, 1.0)).cpu().numpy().astype(np.float32, copy=False)
+        rgb = _decode(torch.clamp(torch.einsum("khw,ck->hwc", out, torch.as_tensor(_RGB, device=y.device)), 0.0, 1.0))
+        if given:
+            g = torch.as_tensor(np.asarray(keep["gains"], dtype=np.float32), device=y.device)
+        else:
+            before, after = xt.mean(dim=(0, 1)), rgb.mean(dim=(0, 1))
+            g = torch.where(after > 0, before / torch.clamp(after, min=1e-12), torch.ones_like(after))
+            if keep is not None:
+                keep["luma_range"], keep["gains"] = sy, g.cpu().numpy().astype(np.float64)
+        return torch.clamp(rgb * g, 0.0, 1.0).cpu().numpy().astype(np.float32, copy=False)

@@ -126,7 +126,7 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
     Yields:
         ``(H, W, 3)`` float32 frames in [0, 1] (``(H, W)`` for monochrome).
     """
-    from spikeview.guided.chroma import luma_range, smooth_chroma
+    from spikeview.guided.chroma import smooth_chroma
 
     p = params if params is not None else GuidedConfig()
     a = resolve_alpha(source, p, alpha) if resolve else (None if alpha is None else np.asarray(alpha, dtype=np.float64))
@@ -134,7 +134,7 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
     centers = list(centers)
     n = len(centers)
     prev: np.ndarray | None = None
-    chroma_range: float | None = None
+    chroma_keep: dict = {}
     chroma_device = _chroma_device(p)
     # neighbouring windows are shared by consecutive frames; in low light a static tile reads up to ±LOW_LIGHT_RADIUS
     from spikeview.guided.temporal import LOW_LIGHT_RADIUS
@@ -173,9 +173,9 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
         if infos is not None:
             infos.append(smp.info)
         prev = out  # unsmoothed: a reused or warm-started window smooths exactly once, as a fresh one
-        if chroma_range is None or smp.info.mode != "region":  # a re-sampled region keeps the frame's range
-            chroma_range = luma_range(out, chroma_device) if p.chroma > 0 and out.ndim == 3 else 0.0
-        yield smooth_chroma(out, p.chroma, luma_range=chroma_range, device=chroma_device)
+        if smp.info.mode != "region":  # a re-sampled region keeps the frame's luma range and mean-keeping gains
+            chroma_keep = {}
+        yield smooth_chroma(out, p.chroma, keep=chroma_keep, device=chroma_device)
 
 
 def _chroma_device(p: GuidedConfig) -> Any:
