@@ -63,7 +63,7 @@ class GuidedPanel(QtWidgets.QWidget):
         self.pool_btn.toggled.connect(self._toggle_pooling_map)
         self.prior = ParamCombo(session, "prior", {"ffdnet": "FFDNet (embedded)", "sd": "Stable Diffusion (folder)"})
         self.guidance = ParamCombo(session, "guidance", {"hqs": "HQS (DiffPIR, fast)", "dps": "DPS (backprop)"})
-        self.quantise = ParamCombo(session, "quantise", {"auto": "auto (the plan decides)", "on": "on", "off": "off"})
+        self.quantise = ParamCombo(session, "quantise", {"auto": "auto (plan)", "on": "on", "off": "off"})
         self.precision = ParamCombo(session, "precision", {"auto": "auto (fastest, same quality)",
                                                            "float32": "float32 (reference)",
                                                            "float32-fast": "float32, NNPACK",
@@ -72,6 +72,9 @@ class GuidedPanel(QtWidgets.QWidget):
         # longer fitted a 1366-pixel screen): the full text shows when the list opens
         self.precision.setSizeAdjustPolicy(QtWidgets.QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
         self.precision.setMinimumContentsLength(14)
+        # the chroma σ shares Q's row (a row of its own pushed Run below a 768-pixel screen): Q's text may shorten
+        self.quantise.setSizeAdjustPolicy(QtWidgets.QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
+        self.quantise.setMinimumContentsLength(8)
         self.tiles_btn = QtWidgets.QToolButton(text="Tiles", objectName="tile_map_toggle", checkable=True)
         self.tiles_btn.toggled.connect(lambda _on: self._draw_tiles())
         self._tile_map: dict[str, Any] | None = None
@@ -86,10 +89,11 @@ class GuidedPanel(QtWidgets.QWidget):
         mpw = hbox((self.model_path, 1), browse)
         chroma_label = QtWidgets.QLabel("chroma σ")
         chroma_label.setToolTip(SPECS["chroma"].help)
-        smallw = hbox(QtWidgets.QLabel("steps"), self.steps, QtWidgets.QLabel("seed"), self.seed, chroma_label, self.chroma)
+        smallw = hbox(QtWidgets.QLabel("steps"), self.steps, QtWidgets.QLabel("seed"), self.seed)
         tw = hbox((self.t_start, 1), self.t_note)
         settings = form([self.s, self.k, self.levels, tw, ("", smallw), ("Prior", self.prior), ("Weights", mpw),
-                         ("Guidance", self.guidance), ("Q", self.quantise), ("Precision", hbox((self.precision, 1), self.tiles_btn)),
+                         ("Guidance", self.guidance), ("Q", hbox((self.quantise, 1), chroma_label, self.chroma)),
+                         ("Precision", hbox((self.precision, 1), self.tiles_btn)),
                          ("Neighbours ±", hbox((self.temporal, 1), self.pool_btn))])
         #: recipe path → the control of that knob (disabled with the plan's reason when it cannot act)
         self.knob_controls = {"guided.s": self.s, "guided.k": self.k, "guided.levels": self.levels,
