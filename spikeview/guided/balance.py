@@ -3,7 +3,8 @@
 Q rounds each photosite's rate to its window's count levels in the **raw** domain, and its soft floor (Q(0) ≈ 0.12 of a
 level at k = 20) crushes a rate of a fraction of one spike a window towards 0. At a low rate the less sensitive Bayer
 channels (R, B) hold the smallest counts and are crushed most, so after the colour cast's gains a gray scene comes out
-green: a gray `camera` scene (sensor R 0.55 / G 1 / B 0.45) at 0.02 spikes per tick was 14.5° off, at 0.05 7.7°,
+green: a gray `camera` scene (the simulator's sensor, R 0.6 / G 1 / B 0.5) at 0.02 spikes per tick was 14.5° off, at
+0.05 7.7°,
 where the TFP frame with the same gains is 3.5° and 3.2° off (``benchmarks/results/colour.md``, section 6).
 
 Where the sequence's white balance is gray-world (its gains are gray-world's, whether chosen by ``auto``, asked for,

@@ -12,7 +12,8 @@ a Gaussian of σ = ``sigma`` pixels in space times a Gaussian in luma difference
 :data:`LUMA_RANGE` times the luma's own noise (the robust spread of Y' minus its σ = 1 px blur), so colour does not
 leak across a luma edge. Y' is kept as it is; the frame goes back through the inverse transform and the sRGB
 curve at its own scale. A colour edge without a luma edge (an iso-luminant hue boundary) is softened over about
-``sigma`` pixels: on the bench's colour wheel this costs 0.3–0.5 dB one-gain PSNR while its ΔE00 falls 1.5.
+``sigma`` pixels: on the colour wheels of ``benchmarks/bench_colour.py`` this costs 0.13–0.52 dB one-gain PSNR while
+their ΔE00 falls by 1.5.
 
 Each channel's mean over the frame is kept: the result is scaled per channel back to the input's means (the sRGB
 curve would otherwise move them: smoothing a mostly black frame's colour noise moved its white balance by 0.8°).

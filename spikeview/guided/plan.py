@@ -107,6 +107,8 @@ class Plan:
     judged_sigma: float = 0.0
     #: σ in pixels of the chroma smoothing of the finished frame (0: none; :mod:`spikeview.guided.chroma`)
     chroma: float = 0.0
+    #: the finished frame's channel means are kept at the data's (gray-world gains, Q on: :mod:`spikeview.guided.balance`)
+    balance: bool = False
 
     def __str__(self) -> str:
         sig = ", ".join(f"{255 * s:.1f}" for s in self.sigma)
@@ -123,7 +125,7 @@ class Plan:
             "diffusion": "on" if self.diffusion else f"off -> {self.fallback}",
             "reuse": "yes" if self.reuse else "no",
             "temporal": self.temporal,
-            "balance": "kept" if self.reasons.get("balance", "").startswith("each") else "-",
+            "balance": "kept" if self.balance else "-",
             "chroma": f"σ {self.chroma:g} px" if self.chroma > 0 else "off",
             "precision": self.precision or "-",
             "device": self.device,
@@ -346,14 +348,16 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     temporal = "off" if pool is None or pool.kind in ("off", "unavailable") else pool.kind
     r["temporal"] = pool.reason if pool is not None else "off (temporal_radius = 0): the window alone, as in the paper"
     # --- the finished frame's colour balance (spikeview.guided.balance)
+    balance = bool(mosaic and quantise and diffusion and p.balance)
     if not mosaic:
         r["balance"] = "none: a gray frame"
-    elif not (p.balance and quantise and diffusion):
-        r["balance"] = ("as sampled" + ("" if p.balance else " (the gains are not gray-world's)") if mosaic and quantise
-                        else "as sampled (Q off)")
-    else:
+    elif balance:
         r["balance"] = ("each channel's mean kept at the data's (gray-world gains, and Q's floor would crush the "
                         "weaker channels' small counts)")
+    elif not (quantise and diffusion):
+        r["balance"] = "as sampled (Q off)" if diffusion else "as computed (no diffusion)"
+    else:
+        r["balance"] = "as sampled (the gains are not gray-world's)"
     # --- chroma smoothing of the finished frame (spikeview.guided.chroma)
     if not mosaic:
         r["chroma"] = "none: a gray frame has no colour to smooth"
@@ -390,4 +394,4 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
         precision, r["precision"] = resolve_precision(p.precision, device=dev)
     return Plan(mosaic, cast, levels, diffusion, fallback, reuse, changed, sigma, r, quantise, demosaic, temporal,
                 pooling=pool, precision=precision, tile_map=tile_map, device=device_label(dev), exposure=scale,
-                judged_sigma=smax, chroma=p.chroma if mosaic else 0.0)
+                judged_sigma=smax, chroma=p.chroma if mosaic else 0.0, balance=balance)

@@ -270,7 +270,7 @@ class GuidedSampler:
     @staticmethod
     def _balanced(out: np.ndarray, obs: Observation, p: GuidedConfig, plan: Plan) -> np.ndarray:
         """``out`` with gray-world's colour balance kept where Q is on (:mod:`spikeview.guided.balance`)."""
-        if not (p.balance and plan.quantise and plan.mosaic):
+        if not getattr(plan, "balance", False):  # the plan's decision (gray-world gains, Q on, colour)
             return out
         from spikeview.guided.balance import keep_balance
 
