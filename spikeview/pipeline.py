@@ -65,9 +65,9 @@ class SequenceState:
     #: the window-length estimate (measured the other way, exposing a dark Bayer frame at its display white, a 1-px-a-
     #: window pan at 0.03 spikes per tick lost 1.9 dB and half its detail)
     exposure_white: float | None = None
-    #: the gains α are gray-world's (chosen, asked for or recorded): the guided frame keeps that balance where Q is on
-    #: (:mod:`spikeview.guided.balance`, :func:`sampler_params`)
-    gray_world: bool = False
+    #: the gains α are gray-world's or the camera profile's (chosen, asked for or recorded): the guided frame keeps that
+    #: balance (:mod:`spikeview.guided.balance`, :func:`sampler_params`)
+    keep_balance: bool = False
 
     @property
     def sampler_white(self) -> float | None:
@@ -77,7 +77,7 @@ class SequenceState:
     def attrs(self) -> dict[str, Any]:
         """Plain values for metadata (Zarr attributes, logs)."""
         return {"alpha": None if self.alpha is None else [float(v) for v in self.alpha], "white": self.white,
-                "exposure_white": self.exposure_white, "gray_world": self.gray_world}
+                "exposure_white": self.exposure_white, "keep_balance": self.keep_balance}
 
 
 def window_centres(recipe: Recipe, n_frames: int) -> tuple[list[int], int]:
@@ -135,7 +135,7 @@ def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> Seque
         how += (f" over {span['ticks']}-tick windows (a {window}-tick window holds under {WHITE_LOW_COUNT:g} spikes at "
                 "the white: its count levels, not the scene, would set the percentile)")
     return SequenceState(a, white, note, why, how, span["window_white"] if longer else None,
-                         gray_world=detail["gray_world"])
+                         keep_balance=detail["keep_balance"])
 
 
 def recipe_for_state(recipe: Recipe, state: SequenceState, source: Any = None) -> Recipe:
@@ -223,13 +223,13 @@ def sampler_params(recipe: Recipe, state: SequenceState) -> Any:
     sequence's white point sits at :data:`spikeview.guided.observation.EXPOSURE_LEVEL` (the prior and
     the data term see the exposed image, never clipped); ``recipe.guided`` without a white point or
     without gains α (no C to carry the exposure: see :func:`guided_scale`). ``balance`` is the state's
-    :attr:`SequenceState.gray_world` (:mod:`spikeview.guided.balance`)."""
+    :attr:`SequenceState.keep_balance` (:mod:`spikeview.guided.balance`)."""
     if state.sampler_white is None or state.alpha is None:
         return recipe.guided
     from spikeview.guided.observation import exposed_eta
 
     return recipe.guided.replace(eta=exposed_eta(recipe.classical.eta, state.sampler_white),
-                                 balance=bool(state.gray_world))
+                                 balance=bool(state.keep_balance))
 
 
 @dataclass

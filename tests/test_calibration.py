@@ -303,3 +303,34 @@ def test_the_plan_turns_q_off_on_rates_a_profile_moved_off_the_tfp_grid(sensor):
         assert roi.obs.corrected and not roi.plan.quantise  # a region of it too
     finally:
         cap.info = cap.info.replace(camera=None)
+
+
+def test_the_guided_frame_keeps_the_profiles_balance(sensor):
+    """With a profile's colour response (auto → profile) the guided frame's channel means are kept at the corrected
+    data's (its clip at 0 would lift each channel's black by its own noise): the state says so, for recorded gains too,
+    and the plan's balance row names the profile. Monochrome: a gray frame, nothing to keep."""
+    from spikeview.pipeline import plan_window, prepare_sequence
+    from spikeview.recipe import Recipe
+
+    from spikeview.sim import MotionScene, simulate
+
+    cfa, _pat, _dark, _flat, prof = sensor
+    rng = np.random.default_rng(3)
+    img = np.kron(rng.random((8, 8, 3)), np.ones((4, 4, 1))).astype(np.float32) * 0.12 + 0.02  # a dark scene
+    cap = simulate(MotionScene(img, size=(N, N), pan=(0.0, 0.0)), _cfg(cfa, 60))
+    attach(cap, prof)
+    try:
+        recipe = Recipe().with_values({"run.method": "guided"})
+        state = prepare_sequence(cap, recipe, warn=False)
+        plan = plan_window(cap, recipe, 30, state=state).plan
+        if cfa == "none":
+            assert not state.keep_balance and plan.reasons["balance"].startswith("none")
+            return
+        assert state.keep_balance and "profile" in (state.white_balance or "")
+        recorded = recipe.with_values({"classical.alpha": [float(v) for v in state.alpha]})
+        assert prepare_sequence(cap, recorded, warn=False).keep_balance
+        assert not prepare_sequence(cap, recipe.with_values({"classical.white_balance": "white-patch"}),
+                                    warn=False).keep_balance
+        assert plan.diffusion and plan.balance and "camera profile" in plan.reasons["balance"]
+    finally:
+        cap.info = cap.info.replace(camera=None)

@@ -76,9 +76,9 @@ def test_a_gray_scene_at_a_low_rate_keeps_its_gray(tmp_path, cfa):
     recipe = Recipe().with_values({"run.method": "guided"})
     with open_source(str(cap)) as src:
         state = prepare_sequence(src, recipe, warn=False)
-        assert state.gray_world == (cfa == "RGGB")  # auto → gray-world: too few spikes for edges
+        assert state.keep_balance == (cfa == "RGGB")  # auto → gray-world: too few spikes for edges
         kept = next(reconstruct_windows(src, [150], recipe, state))
-        off = next(reconstruct_windows(src, [150], recipe, dataclasses.replace(state, gray_world=False)))
+        off = next(reconstruct_windows(src, [150], recipe, dataclasses.replace(state, keep_balance=False)))
         plan = plan_window(src, recipe, 150, state=state).plan
     if cfa == "none":
         assert np.array_equal(kept, off) and plan.reasons["balance"].startswith("none")
@@ -99,11 +99,11 @@ def test_the_rule_follows_the_gains_chosen_asked_for_or_recorded():
 
     cap = make_capture("astronaut", 64, n_ticks=40, seed=1, window=10)
     gray = prepare_sequence(cap, Recipe().with_values({"classical.white_balance": "gray-world"}), warn=False)
-    assert gray.gray_world
-    assert not prepare_sequence(cap, Recipe().with_values({"classical.white_balance": "white-patch"}), warn=False).gray_world
+    assert gray.keep_balance
+    assert not prepare_sequence(cap, Recipe().with_values({"classical.white_balance": "white-patch"}), warn=False).keep_balance
     recorded = Recipe().with_values({"classical.alpha": [float(v) for v in gray.alpha]})
-    assert prepare_sequence(cap, recorded, warn=False).gray_world  # a preset's recorded gray-world gains
+    assert prepare_sequence(cap, recorded, warn=False).keep_balance  # a preset's recorded gray-world gains
     other = Recipe().with_values({"classical.white_balance": "2,1,3"})
-    assert not prepare_sequence(cap, other, warn=False).gray_world
-    assert state_from_attrs(state_to_attrs(gray)).gray_world  # the Dask store's workers
+    assert not prepare_sequence(cap, other, warn=False).keep_balance
+    assert state_from_attrs(state_to_attrs(gray)).keep_balance  # the Dask store's workers
     assert "balance" not in Recipe().to_dict()["guided"]  # derived, never written in a preset

@@ -293,14 +293,14 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
     flat correction applies to the rates every estimator sees. α is float64 ``(3,)``. A channel without spikes gets
     the others' mean gain; with ``warn`` the note is also issued as a :class:`ColourCastWarning`.
 
-    ``detail``: a dict that receives ``gray_world``: whether the gains are gray-world's for this stream (the estimator
-    was gray-world, or recorded / fixed gains equal gray-world's within 1e-6; the guided frame then keeps that
-    balance where Q would tint it: :mod:`spikeview.guided.balance`).
+    ``detail``: a dict that receives ``keep_balance``: whether the gains are gray-world's or the camera profile's
+    colour response's for this stream (the estimator was one of those, or recorded / fixed gains equal theirs within
+    1e-6): the guided frame then keeps that balance (:mod:`spikeview.guided.balance`). Not for the other estimators.
     """
     from spikeview.classical import white_balance as wb
 
     out = detail if detail is not None else {}
-    out["gray_world"] = False
+    out["keep_balance"] = False
     if source.cfa is None or not config.colour_cast:
         return None, None, None
     given = None
@@ -310,12 +310,8 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
     if given is None and not isinstance(choice, str):
         given = np.asarray(choice, dtype=np.float64), "white balance: the fixed gains R,G,B given"
     if given is not None:
-        if detail is not None and getattr(source.info, "camera", None) is None:
-            gw = alpha_with_note(sequence_channel_means(source, window=min(config.alpha_window, source.n_frames),
-                                                        max_windows=config.alpha_max_windows))[0]
-            a = given[0]
-            out["gray_world"] = bool(a.shape == (3,) and a[1] > 0 and gw[1] > 0
-                                     and np.allclose(a / a[1], gw / gw[1], rtol=1e-6, atol=0.0))
+        if detail is not None:
+            out["keep_balance"] = _balanced_gains(source, config, given[0])
         return given[0], None, given[1]
     camera = getattr(source.info, "camera", None)
     if choice == "profile" and (camera is None or camera.colour_response is None):
@@ -348,8 +344,29 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
         gains, note = wb.gains_from_illuminant(how.illuminant, means), None
     if note is not None and warn:
         warnings.warn(note, ColourCastWarning, stacklevel=3)
-    out["gray_world"] = how.method == "gray-world"
+    out["keep_balance"] = how.method in ("gray-world", "profile")
     return np.asarray(gains, dtype=np.float64), note, how.reason
+
+
+def _balanced_gains(source: SpikeSource, config: Any, a: np.ndarray) -> bool:
+    """Whether recorded or fixed gains ``a`` are this stream's gray-world gains or its camera profile's (within 1e-6,
+    up to scale): the white balances whose colour the guided frame keeps (:func:`sequence_white_balance`)."""
+    from spikeview.classical import white_balance as wb
+
+    a = np.asarray(a, dtype=np.float64)
+    if a.shape != (3,) or not a[1] > 0:
+        return False
+    camera = getattr(source.info, "camera", None)
+    window = min(config.alpha_window, source.n_frames)
+    if camera is None:
+        candidates = [alpha_with_note(sequence_channel_means(source, window=window,
+                                                             max_windows=config.alpha_max_windows))[0]]
+    else:
+        means = sequence_images(source, window, config.alpha_max_windows, camera.correct)[3]
+        candidates = [alpha_with_note(means)[0]]
+        if camera.colour_response is not None:
+            candidates.append(wb.gains_from_illuminant(camera.colour_response, means))
+    return any(c[1] > 0 and np.allclose(a / a[1], c / c[1], rtol=1e-6, atol=0.0) for c in map(np.asarray, candidates))
 
 
 def estimate_alpha(source: SpikeSource, window: int = 10, max_windows: int = DEFAULT_ALPHA_WINDOWS) -> np.ndarray:

@@ -66,8 +66,8 @@ def state_to_attrs(state) -> dict[str, Any]:
            "white_point": None if white is None else float(white)}
     if exposure is not None:  # a dark capture: the sampler's exposure is set from another white (SequenceState)
         out["exposure_white"] = float(exposure)
-    if getattr(state, "gray_world", False):  # the guided frame keeps gray-world's balance (spikeview.guided.balance)
-        out["gray_world"] = True
+    if getattr(state, "keep_balance", False):  # the guided frame keeps the gains' balance (spikeview.guided.balance)
+        out["keep_balance"] = True
     return out
 
 
@@ -78,7 +78,7 @@ def state_from_attrs(attrs: dict[str, Any]):
     alpha, white, exposure = attrs.get("alpha"), attrs.get("white_point"), attrs.get("exposure_white")
     return SequenceState(None if alpha is None else np.asarray(alpha, dtype=np.float64),
                          None if white is None else float(white), exposure_white=None if exposure is None else float(exposure),
-                         gray_world=bool(attrs.get("gray_world", False)))
+                         keep_balance=bool(attrs.get("keep_balance", False)))
 
 
 def compute_chunk(source, centres: Sequence[int], data: dict[str, Any], state, *,

@@ -132,9 +132,10 @@ class GuidedConfig(Config):
         temporal_radius: neighbouring windows on each side whose photons the observation may
             borrow, aligned and weighted per photosite by how well they match
             (:mod:`spikeview.guided.temporal`); 0 = the window alone (the paper).
-        balance: the sequence's white balance is gray-world: where the plan turns Q on, the frame's channel means
-            are kept at the data's (:mod:`spikeview.guided.balance`); set by the pipeline
-            (:func:`spikeview.pipeline.sampler_params`), never written in a preset.
+        balance: the sequence's gains are gray-world's or the camera profile's: where the plan turns Q on or a
+            profile corrected the rates, the frame's channel means are kept at the data's
+            (:mod:`spikeview.guided.balance`); set by the pipeline (:func:`spikeview.pipeline.sampler_params`),
+            never written in a preset.
         chroma: colour frames only: σ in pixels of the luma-guided chroma smoothing applied to every
             frame the guided sequence yields (:mod:`spikeview.guided.chroma`); 0 = off.
         precision: arithmetic of the FFDNet prior (:mod:`spikeview.guided.precision`): ``"auto"``

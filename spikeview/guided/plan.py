@@ -33,8 +33,9 @@ reuse         the previous window's result is reused when the counts of this win
 temporal      what the observation pooled from its aligned neighbouring windows, per      ``temporal_radius``
               photosite (:mod:`spikeview.guided.temporal`: static, aligned, mixed, fast
               motion), or why it could not (capture too short)
-balance       with gray-world gains and Q on, the finished frame's channel means kept at the     ``balance`` (set
-              data's (:mod:`spikeview.guided.balance`)                                      by the pipeline)
+balance       with gray-world gains and Q on, or a camera profile's corrected rates and its  ``balance`` (set
+              gains, the finished frame's channel means kept at the data's                  by the pipeline)
+              (:mod:`spikeview.guided.balance`)
 chroma        the finished colour frame's chroma smoothed over ``chroma`` pixels, guided     ``chroma``
               by its luma (:mod:`spikeview.guided.chroma`); none for a gray frame
 precision     the prior's arithmetic: ``auto`` = the fastest path within 0.1 dB / 0.005    ``precision``
@@ -107,7 +108,7 @@ class Plan:
     judged_sigma: float = 0.0
     #: σ in pixels of the chroma smoothing of the finished frame (0: none; :mod:`spikeview.guided.chroma`)
     chroma: float = 0.0
-    #: the finished frame's channel means are kept at the data's (gray-world gains, Q on: :mod:`spikeview.guided.balance`)
+    #: the finished frame's channel means are kept at the data's (:mod:`spikeview.guided.balance`)
     balance: bool = False
 
     def __str__(self) -> str:
@@ -348,16 +349,20 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     temporal = "off" if pool is None or pool.kind in ("off", "unavailable") else pool.kind
     r["temporal"] = pool.reason if pool is not None else "off (temporal_radius = 0): the window alone, as in the paper"
     # --- the finished frame's colour balance (spikeview.guided.balance)
-    balance = bool(mosaic and quantise and diffusion and p.balance)
+    corrected = obs.corrected is not None
+    balance = bool(mosaic and diffusion and p.balance and (quantise or corrected))
     if not mosaic:
         r["balance"] = "none: a gray frame"
     elif balance:
-        r["balance"] = ("each channel's mean kept at the data's (gray-world gains, and Q's floor would crush the "
-                        "weaker channels' small counts)")
-    elif not (quantise and diffusion):
-        r["balance"] = "as sampled (Q off)" if diffusion else "as computed (no diffusion)"
+        r["balance"] = ("each channel's mean kept at the data's (" + (
+            "the camera profile's gains; the frame's clip at 0 would lift each channel's black by its own noise"
+            if corrected else "gray-world gains; Q's floor would crush the weaker channels' small counts") + ")")
+    elif not diffusion:
+        r["balance"] = "as computed (no diffusion)"
+    elif not p.balance:
+        r["balance"] = "as sampled (the gains are neither gray-world's nor the camera profile's)"
     else:
-        r["balance"] = "as sampled (the gains are not gray-world's)"
+        r["balance"] = "as sampled (Q off, rates not corrected by a profile)"
     # --- chroma smoothing of the finished frame (spikeview.guided.chroma)
     if not mosaic:
         r["chroma"] = "none: a gray frame has no colour to smooth"
