@@ -54,13 +54,35 @@ def levels_ordered(black: float, white: float | None) -> bool:
     return math.isfinite(black) and (white is None or (math.isfinite(white) and white > black))
 
 
-def srgb_encode(linear: np.ndarray) -> np.ndarray:
-    """Linear light to sRGB-encoded values (both nominally ``[0, 1]``), same dtype and shape."""
+#: the sRGB curve's knee, in linear light and in encoded values
+SRGB_KNEE_LINEAR = 0.0031308
+SRGB_KNEE_ENCODED = 0.04045
+
+
+def _is_tensor(x: Any) -> bool:
+    """A torch tensor (checked without importing torch)."""
+    return type(x).__module__.split(".")[0] == "torch"
+
+
+def srgb_encode(linear: Any) -> Any:
+    """Linear light to sRGB-encoded values (both nominally ``[0, 1]``), same dtype and shape; a torch tensor stays one
+    (on its device: :mod:`spikeview.guided.chroma`)."""
+    if _is_tensor(linear):
+        import torch
+
+        return torch.where(linear <= SRGB_KNEE_LINEAR, 12.92 * linear,
+                           1.055 * torch.pow(torch.clamp(linear, min=SRGB_KNEE_LINEAR), 1 / 2.4) - 0.055)
     x = np.asarray(linear)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(np.maximum(x, 0.0031308), 1 / 2.4) - 0.055)
+    return np.where(x <= SRGB_KNEE_LINEAR, 12.92 * x, 1.055 * np.power(np.maximum(x, SRGB_KNEE_LINEAR), 1 / 2.4) - 0.055)
 
 
-def srgb_decode(encoded: np.ndarray) -> np.ndarray:
-    """sRGB-encoded values to linear light (the inverse of :func:`srgb_encode`), same dtype and shape."""
+def srgb_decode(encoded: Any) -> Any:
+    """sRGB-encoded values to linear light (the inverse of :func:`srgb_encode`), same dtype and shape; a torch tensor
+    stays one."""
+    if _is_tensor(encoded):
+        import torch
+
+        return torch.where(encoded <= SRGB_KNEE_ENCODED, encoded / 12.92,
+                           torch.pow((torch.clamp(encoded, min=SRGB_KNEE_ENCODED) + 0.055) / 1.055, 2.4))
     x = np.asarray(encoded)
-    return np.where(x <= 0.04045, x / 12.92, ((np.maximum(x, 0.04045) + 0.055) / 1.055) ** 2.4)
+    return np.where(x <= SRGB_KNEE_ENCODED, x / 12.92, ((np.maximum(x, SRGB_KNEE_ENCODED) + 0.055) / 1.055) ** 2.4)

@@ -106,3 +106,16 @@ def test_each_channels_mean_is_kept():
     assert set(keep) == {"luma_range", "gains"}
     # handed back, the same settings give the same pixels
     assert np.array_equal(smooth_chroma(x, 2.0, keep=dict(keep)), out)
+
+
+def test_the_srgb_curve_has_one_home_for_arrays_and_tensors():
+    import torch
+
+    from spikeview.transfer import srgb_decode, srgb_encode
+
+    x = np.linspace(0, 1, 1001, dtype=np.float32)
+    t = torch.from_numpy(x)
+    assert isinstance(srgb_encode(t), torch.Tensor) and isinstance(srgb_encode(x), np.ndarray)
+    np.testing.assert_allclose(srgb_encode(t).numpy(), srgb_encode(x), atol=1e-6)
+    np.testing.assert_allclose(srgb_decode(t).numpy(), srgb_decode(x), atol=1e-6)
+    np.testing.assert_allclose(srgb_decode(srgb_encode(t)).numpy(), x, atol=1e-5)

@@ -35,6 +35,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from spikeview.transfer import srgb_decode, srgb_encode
+
 #: luma → (Y', Cb, Cr) of sRGB-encoded values (BT.601, full range, Cb/Cr centred on 0)
 _YCC = np.array([[0.299, 0.587, 0.114], [-0.168736, -0.331264, 0.5], [0.5, -0.418688, -0.081312]], dtype=np.float32)
 _RGB = np.linalg.inv(_YCC.astype(np.float64)).astype(np.float32)
@@ -44,20 +46,10 @@ LUMA_RANGE = 2.5
 REACH = 2.0
 
 
-def _encode(x: torch.Tensor) -> torch.Tensor:
-    """:func:`spikeview.transfer.srgb_encode` in torch."""
-    return torch.where(x <= 0.0031308, 12.92 * x, 1.055 * torch.pow(torch.clamp(x, min=0.0031308), 1 / 2.4) - 0.055)
-
-
-def _decode(e: torch.Tensor) -> torch.Tensor:
-    """:func:`spikeview.transfer.srgb_decode` in torch."""
-    return torch.where(e <= 0.04045, e / 12.92, torch.pow((torch.clamp(e, min=0.04045) + 0.055) / 1.055, 2.4))
-
-
 def _luma_chroma(x: torch.Tensor) -> torch.Tensor:
     """``(H, W, 3)`` linear → ``(3, H, W)`` Y', Cb, Cr of its sRGB encoding (clipped to [0, 1] first)."""
     m = torch.as_tensor(_YCC, device=x.device)
-    return torch.einsum("hwc,kc->khw", _encode(torch.clamp(x, 0.0, 1.0)), m)
+    return torch.einsum("hwc,kc->khw", srgb_encode(torch.clamp(x, 0.0, 1.0)), m)
 
 
 def _blur1(y: torch.Tensor) -> torch.Tensor:
@@ -115,7 +107,7 @@ def smooth_chroma(x: np.ndarray, sigma: float, *, keep: dict | None = None,
                 den += d
                 num.addcmul_(q[1:], d.expand_as(num))
         out = torch.cat([y[None], num / den], 0)
-        rgb = _decode(torch.clamp(torch.einsum("khw,ck->hwc", out, torch.as_tensor(_RGB, device=y.device)), 0.0, 1.0))
+        rgb = srgb_decode(torch.clamp(torch.einsum("khw,ck->hwc", out, torch.as_tensor(_RGB, device=y.device)), 0.0, 1.0))
         if given:
             g = torch.as_tensor(np.asarray(keep["gains"], dtype=np.float32), device=y.device)
         else:

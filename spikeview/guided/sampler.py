@@ -270,7 +270,7 @@ class GuidedSampler:
     @staticmethod
     def _balanced(out: np.ndarray, obs: Observation, p: GuidedConfig, plan: Plan) -> np.ndarray:
         """``out`` with gray-world's colour balance kept where Q is on (:mod:`spikeview.guided.balance`)."""
-        if not getattr(plan, "balance", False):  # the plan's decision (gray-world gains, Q on, colour)
+        if not plan.balance:  # the plan's decision (spikeview.guided.plan: the gains, Q, a profile's correction)
             return out
         from spikeview.guided.balance import keep_balance
 
