@@ -19,6 +19,11 @@ CHANNEL_INDEX = {"R": 0, "G": 1, "B": 2}
 CHANNEL_NAMES = ("R", "G", "B")
 #: names of the four photosite classes of a Bayer quad, in the order used by :func:`site_masks`
 SITE_NAMES = ("R", "Gr", "Gb", "B")
+#: the nominal response of a colour spike camera's R, G and B photosites to a neutral surface in daylight (relative
+#: to G): green-heavy, like silicon behind a Bayer filter (real colour captures look green). The simulator's default
+#: sensor and the prior of ``--white-balance auto`` (:mod:`spikeview.classical.white_balance`); a camera profile
+#: measures the real one.
+TYPICAL_RESPONSE = (0.6, 1.0, 0.5)
 
 
 def parse_cfa(value: str | None) -> str | None:

@@ -55,7 +55,8 @@ def test_edges_find_the_sensor_tint_where_gray_world_takes_the_scene_for_it(cfa)
     assert wb.angle_deg(co, TINT) < 4
     assert wb.angle_deg(gw, TINT) > 10  # the green field pulls the mean
     choice = wb.choose(img, "auto")
-    assert choice.method == "combined" and "colourful" in choice.reason
+    assert choice.method == "combined+typical" and "colourful" in choice.reason and "typical" in choice.reason
+    assert wb.angle_deg(choice.illuminant, TINT) < 4
     gray = wb.choose(wb.cells_rgb(_mosaic(np.repeat(scene.mean(axis=-1, keepdims=True), 3, -1) * TINT, cfa), cfa), "auto")
     assert gray.method == "gray-world" and "averages to gray" in gray.reason
 
@@ -64,8 +65,8 @@ def test_auto_keeps_gray_world_when_the_estimate_is_too_noisy():
     img = _colourful() * TINT
     noisy = [img * (1 + 0.3 * np.random.default_rng(s).standard_normal(img.shape)) ** 2 for s in (1, 2)]
     quiet = wb.choose(img, "auto", (img, img))
-    assert quiet.method == "combined"
-    assert wb.choose(img, "auto", tuple(noisy)).method in ("gray-world", "combined")  # decided by the numbers
+    assert quiet.method == "combined+typical"
+    assert wb.choose(img, "auto", tuple(noisy)).method in ("gray-world", "combined+typical")  # decided by the numbers
     far = (img, img * np.array([3.0, 1.0, 0.2]))  # halves that disagree by far more than the estimates do
     loud = wb.choose(img, "auto", far)
     assert loud.method == "gray-world" and "too noisy" in loud.reason
@@ -103,9 +104,9 @@ def test_sequence_white_balance_on_spikes(cfa):
     means = {m: sequence_white_balance(src, ClassicalConfig(white_balance=m), warn=False) for m in ("gray-world", "auto")}
     a_gw, _, why_gw = means["gray-world"]
     a_auto, _, why_auto = means["auto"]
-    assert "gray-world" in why_gw and "combined" in why_auto
+    assert "gray-world" in why_gw and "combined" in why_auto and "typical" in why_auto
     # the gains undo the tint: α·tint is gray for auto, not for gray-world
-    assert wb.angle_deg(a_auto * TINT, np.ones(3)) < 2.0
+    assert wb.angle_deg(a_auto * TINT, np.ones(3)) < 3.0  # the typical response is 3.3° off this sensor
     assert wb.angle_deg(a_gw * TINT, np.ones(3)) > 10
     fixed = sequence_white_balance(src, ClassicalConfig(white_balance="2,1,3"), warn=False)
     np.testing.assert_array_equal(fixed[0], [2.0, 1.0, 3.0])
@@ -169,3 +170,67 @@ def test_large_sequence_images_are_binned():
     assert wb.binned(img[:200]) is not img  # 200 rows, 300 cols: k = 2
     small = img[:100, :100]
     assert wb.binned(small) is small
+
+
+def _coloured_edges(seed: int = 0, n: int = 64) -> np.ndarray:
+    """A scene whose edges and highlights are coloured too: a texture of two yellow-greens (no neutral anywhere)."""
+    rng = np.random.default_rng(seed)
+    tex = 0.2 + 0.6 * rng.random((n // 4, n // 4, 1))
+    hue = np.where(rng.random((n // 4, n // 4, 1)) > 0.5, [0.7, 1.0, 0.6], [0.95, 1.0, 0.5])
+    return np.kron(tex * hue, np.ones((4, 4, 1)))
+
+
+def test_toward_typical_moves_a_near_estimate_and_keeps_a_far_sure_one():
+    typ = np.array(wb.TYPICAL_RESPONSE)
+    same, w = wb.toward_typical(typ * 3, 0.25)
+    np.testing.assert_allclose(same, typ)
+    near = typ * [1.2, 1, 0.85]  # 16 % and 15 % off: most of the way back
+    e, w = wb.toward_typical(near, wb.COMBINED_SIGMA)
+    assert w > 0.7 and wb.angle_deg(e, typ) < 0.3 * wb.angle_deg(near, typ)
+    far = np.array([1.5, 1.0, 2.0])  # a sensor unlike the typical one, estimated surely: kept
+    e, w = wb.toward_typical(far, 0.1)
+    assert w < 0.05 and wb.angle_deg(e, far) < 1.0
+    # a less sure estimate of the same moves further: the prior's share grows with the estimate's σ
+    assert wb.toward_typical(near, 0.6)[1] > wb.toward_typical(near, 0.1)[1]
+    bad = np.array([0.0, 1.0, 0.5])
+    e, w = wb.toward_typical(bad, 0.25)
+    assert w == 0 and e is not None and np.array_equal(e, bad)
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", "BGGR"])
+def test_auto_pulls_a_scene_with_coloured_edges_toward_the_typical_response(cfa):
+    # every estimator takes the scene's green-yellow for the sensor's cast; the typical response breaks the tie
+    scene = _coloured_edges()
+    img = wb.cells_rgb(_mosaic(scene * TINT * 0.5, cfa), cfa)
+    co = wb.illuminant(img, "combined")
+    assert wb.angle_deg(co, TINT) > 8
+    got = wb.choose(img, "auto", (img, img))
+    assert got.method == "combined+typical" and "pulled" in got.reason and "R 0.6 / G 1 / B 0.5" in got.reason
+    assert wb.angle_deg(got.illuminant, TINT) < 5
+    src = _source(scene * TINT * 0.8, cfa)
+    a, _, why = sequence_white_balance(src, ClassicalConfig(white_balance="auto"), warn=False)
+    assert "typical" in why and wb.angle_deg(a * TINT, np.ones(3)) < 5
+    t, _, why_t = sequence_white_balance(src, ClassicalConfig(white_balance="typical"), warn=False)
+    assert "typical" in why_t and wb.angle_deg(t * np.array(wb.TYPICAL_RESPONSE), np.ones(3)) < 1e-6
+
+
+def test_auto_keeps_gray_world_for_a_neutral_sensor_on_a_gray_scene():
+    # the prior acts only on colourful or dark scenes: a gray scene on a sensor unlike the typical one is untouched
+    scene = _colourful()
+    gray = np.repeat(scene.mean(axis=-1, keepdims=True), 3, -1)
+    img = wb.cells_rgb(_mosaic(gray * 0.5, "RGGB"), "RGGB")
+    got = wb.choose(img, "auto", (img, img), ticks=1000)
+    assert got.method == "gray-world" and wb.angle_deg(got.illuminant, np.ones(3)) < 1e-6
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", "GBRG"])
+def test_a_dark_scene_keeps_gray_world_without_the_prior(cfa):
+    # its rates hold the dark rate, alike in every channel: the typical response is not its balance (module docstring)
+    scene = _coloured_edges(2) * TINT * 0.05  # about 1.5 spikes per photosite in 64 ticks
+    src = _source(scene, cfa, ticks=64, seed=3)
+    detail: dict = {}
+    a, _, why = sequence_white_balance(src, ClassicalConfig(white_balance="auto"), warn=False, detail=detail)
+    assert "gray-world" in why and "too few" in why and "typical" not in why
+    assert detail["keep_balance"]  # the guided frame keeps gray-world's balance (spikeview.guided.balance)
+    gw = sequence_white_balance(src, ClassicalConfig(white_balance="gray-world"), warn=False)[0]
+    np.testing.assert_allclose(a, gw)

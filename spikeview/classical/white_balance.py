@@ -18,19 +18,30 @@ side (:func:`spikeview.classical.colour_cast.sequence_images`; no demosaicking).
   is the sum of the channels each divided by its mean, so that no channel's response favours its colour).
 * ``combined`` — the geometric mean of the gray-edge, white-patch and shades-of-gray illuminants (each of unit
   length): three different assumptions, so one scene rarely fools all three the same way.
-* ``auto`` — the camera profile's colour response (``profile``) when a profile with one is attached; else gray-world unless it disagrees with ``combined`` by more than :data:`AGREE_DEG` degrees **and** by more
-  than twice the estimators' own uncertainty (the angle between ``combined`` on the even and on the odd sampled
-  windows: a dark or fast-changing scene's edges and highlights are noisy) and the sampled windows hold at least
-  :data:`MIN_SPIKES` spikes per photosite (fewer: a dark scene, whose edges are noise); then ``combined``.
-  Gray-world is the paper's rule and the least noisy where the scene averages to gray. The choice and its reason are
-  one sentence. (The thresholds were set on simulated scenes: ``benchmarks/bench_colour.py``.)
+* ``auto`` — the camera profile's colour response (``profile``) when a profile with one is attached; else gray-world
+  when it agrees with ``combined`` within :data:`AGREE_DEG` degrees (the scene averages to gray) or when their
+  disagreement is within twice the estimators' own uncertainty (the angle between ``combined`` on the even and on the
+  odd sampled windows: a featureless or fast-changing scene's edges and highlights are noise); else the scene is
+  colourful and ``combined`` is taken, **pulled toward the typical spike-camera response** (:func:`toward_typical`):
+  a colourful scene's edges and highlights are often coloured too (orange fur, a blue sky), and no estimator that sees
+  only the capture can tell that from the sensor (below), so the camera's nominal response is the prior that breaks
+  the tie. Below :data:`MIN_SPIKES` spikes per photosite (a dark scene, whose edges are noise) gray-world is taken
+  (no prior: a dark scene's rates hold the dark rate, the same in every channel, so their balance is not the
+  typical response's; a dark colourful scene is then off by gray-world's error). The choice, its reason and how far
+  the prior moved it are one sentence. (The thresholds were set on simulated scenes:
+  ``benchmarks/bench_colour.py``.)
+* ``typical`` — the typical response alone (:data:`spikeview.cfa.TYPICAL_RESPONSE`), whatever the scene.
 * ``profile`` — the colour response measured by ``spikeview calibrate`` from a flat capture
   (:mod:`spikeview.classical.calibration`): the only choice that is right for a scene that is itself tinted.
 
 No estimator that sees only the capture can tell a tinted scene from a tinted sensor: every one of them is
 equivariant to per-channel gains (``est(D·I) = D·est(I)``), so a scene whose colours are all shifted by ``D``
 (a green-dominated crop, a scene under a coloured light) is corrected as if ``D`` were the sensor's. Only a
-reference measured with a known neutral (the calibration's flat capture) separates the two.
+reference measured with a known neutral (the calibration's flat capture) separates the two, or knowledge of the
+camera: ``auto``'s prior is what a camera's automatic white balance does with its sensor's known daylight response
+(Bayesian colour constancy: Brainard & Freeman 1997, Gehler et al. 2008). Its cost is a sensor unlike the typical
+one: a colourful scene's estimate is pulled toward the wrong response (``benchmarks/results/colour.md`` measures
+both); ``spikeview calibrate`` removes the question.
 """
 
 from __future__ import annotations
@@ -39,12 +50,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spikeview.cfa import CHANNEL_INDEX, site_offsets
+from spikeview.cfa import CHANNEL_INDEX, TYPICAL_RESPONSE, site_offsets
 from spikeview.errors import ParameterError
 
 #: the estimators (``auto`` picks one of the first two; ``profile`` needs a camera profile)
 ESTIMATORS = ("gray-world", "gray-edge", "gray-edge-2", "shades-of-gray", "white-patch", "combined")
-CHOICES = ("auto",) + ESTIMATORS + ("profile",)
+CHOICES = ("auto",) + ESTIMATORS + ("typical", "profile")
 #: Minkowski norm of shades-of-gray and gray-edge
 MINKOWSKI_P = 6.0
 #: Gaussian σ (in 2×2 cells) before the derivatives of gray-edge
@@ -58,6 +69,16 @@ NOISE_FACTOR = 2.0
 #: auto: ... or when the sampled windows hold fewer spikes than this per photosite on average (a dark scene: its
 #: edges and highlights are shot noise and dark current, biased the same way in both halves)
 MIN_SPIKES = 5.0
+#: auto's prior on the illuminant (log R/G, log B/G of :data:`~spikeview.cfa.TYPICAL_RESPONSE`): a Gaussian of this
+#: σ (log units: 12 %, the spread of sensors' daylight responses) ...
+PRIOR_SIGMA = 0.12
+#: ... with this weight, the rest a broad Gaussian of σ :data:`PRIOR_BROAD` (a sensor unlike the typical one: an
+#: estimate far from the typical response and sure of itself is then kept)
+PRIOR_WEIGHT = 0.9
+PRIOR_BROAD = 1.0
+#: σ (log units) of combined's error on colourful scenes (the spread of its error on those of
+#: ``benchmarks/bench_colour.py``: 2–23°)
+COMBINED_SIGMA = 0.25
 
 
 def parse_white_balance(text: str, name: str = "--white-balance") -> str | list[float]:
@@ -149,6 +170,8 @@ def illuminant(img: np.ndarray, method: str, saturated: float = 0.95) -> np.ndar
     img = np.asarray(img, dtype=np.float64)
     if method == "gray-world":
         return img.reshape(-1, 3).mean(axis=0)
+    if method == "typical":
+        return np.array(TYPICAL_RESPONSE, dtype=np.float64)
     if method != "combined" and min(img.shape[:2]) >= 3:
         img = median3(img)  # hot pixels: an isolated bright cell would be the brightest patch and the strongest edge
     if method == "shades-of-gray":
@@ -192,6 +215,43 @@ def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(a @ b / (na * nb), -1.0, 1.0))))
 
 
+def toward_typical(e: np.ndarray, sigma: float) -> tuple[np.ndarray, float]:
+    """An illuminant estimate ``e`` (3,) of error σ ``sigma`` (log units) combined with the typical response.
+
+    In log chromaticity (log R/G, log B/G) the prior is a mixture: weight :data:`PRIOR_WEIGHT` on a Gaussian of σ
+    :data:`PRIOR_SIGMA` around :data:`~spikeview.cfa.TYPICAL_RESPONSE`, the rest on a broad one (σ
+    :data:`PRIOR_BROAD`). The result is the posterior mean: the precision-weighted mean of ``e`` and the typical
+    response, times the probability that the sensor is a typical one given ``e``, plus ``e`` times the rest. So an
+    estimate near the typical response moves most of the way to it, and one far off it (a sensor unlike the typical
+    one, if the estimator is right) is kept.
+
+    Returns:
+        the illuminant (float64 (3,), G = 1) and the prior's share of it (0–1). ``e`` with a channel that is not
+        positive is returned unchanged, with share 0.
+    """
+    e = np.asarray(e, dtype=np.float64).reshape(3)
+    if not (np.isfinite(e).all() and (e > 0).all()):
+        return e, 0.0
+    d = np.log(e[[0, 2]] / e[1])
+    p = np.log(np.asarray(TYPICAL_RESPONSE, dtype=np.float64)[[0, 2]])
+    s2d, s2p = float(sigma) ** 2, PRIOR_SIGMA ** 2
+    dist2 = float(np.sum((d - p) ** 2))
+
+    def evidence(s2: float) -> float:  # the 2-D Gaussian density of d − p with variance s2 per axis
+        return float(np.exp(-0.5 * dist2 / s2) / (2 * np.pi * s2))
+
+    near, far = PRIOR_WEIGHT * evidence(s2d + s2p), (1 - PRIOR_WEIGHT) * evidence(s2d + PRIOR_BROAD ** 2)
+    typical = near / (near + far) if near + far > 0 else 0.0
+    w = typical * s2d / (s2d + s2p)  # how much of the way to the typical response
+    u = (1 - w) * d + w * p
+    return np.array([np.exp(u[0]), 1.0, np.exp(u[1])]), float(w)
+
+
+def _typical_text() -> str:
+    r, g, b = TYPICAL_RESPONSE
+    return f"R {r:g} / G {g:g} / B {b:g}"
+
+
 @dataclass
 class WhiteBalance:
     """A sequence's white balance: which estimator gave the gains and why.
@@ -231,11 +291,15 @@ def choose(img: np.ndarray, method: str, halves: tuple[np.ndarray, np.ndarray] |
     checked).
     """
     if method != "auto":
-        return WhiteBalance(method, illuminant(img, method), f"white balance {method} (as asked)")
+        why = f"white balance {method} (as asked)" if method != "typical" else (
+            f"white balance typical: the typical spike-camera response ({_typical_text()}), as asked")
+        return WhiteBalance(method, illuminant(img, method), why)
     gw = illuminant(img, "gray-world")
     if ticks is not None:
         spikes = float(np.asarray(img, dtype=np.float64).mean()) * ticks
         if spikes < MIN_SPIKES:
+            # no prior here: a dark scene's rates hold the sensor's dark rate, the same in every channel, so its
+            # colour balance is not the typical response's (pulled toward it, a dark gray scene went 2.2° → 5.2°)
             return WhiteBalance("gray-world", gw, f"white balance auto → gray-world: the sampled windows hold "
                                                  f"{spikes:.1f} spikes per photosite (< {MIN_SPIKES:g}), too few for "
                                                  "edges and highlights")
@@ -254,6 +318,14 @@ def choose(img: np.ndarray, method: str, halves: tuple[np.ndarray, np.ndarray] |
         return WhiteBalance("gray-world", gw, f"white balance auto → gray-world: edges and highlights are {d:.1f}° off "
                                              f"the scene's mean, but they vary by {u:.1f}° between halves of the "
                                              "sequence (too noisy to trust)")
-    return WhiteBalance("combined", co, f"white balance auto → combined (gray-edge, white-patch, shades-of-gray): the "
-                                        f"scene's mean is {d:.1f}° off its edges and highlights (> {AGREE_DEG:g}°, "
-                                        f"uncertainty {u:.1f}°), a colourful scene")
+    e, w = toward_typical(co, COMBINED_SIGMA)
+    return WhiteBalance("combined+typical", e, f"white balance auto → combined (gray-edge, white-patch, "
+                                               f"shades-of-gray), {_pulled(co, e, w)}: the scene's mean is {d:.1f}° "
+                                               f"off its edges and highlights (> {AGREE_DEG:g}°, uncertainty "
+                                               f"{u:.1f}°), a colourful scene")
+
+
+def _pulled(e: np.ndarray, post: np.ndarray, w: float) -> str:
+    """How far :func:`toward_typical` moved estimate ``e`` to ``post``, in words."""
+    return (f"pulled {angle_deg(e, post):.1f}° toward the typical spike-camera response ({_typical_text()}; "
+            f"{w:.0%} of the way)")

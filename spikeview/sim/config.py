@@ -53,6 +53,7 @@ from typing import Any
 
 from spikeview.cfa import cfa_to_str, parse_cfa
 from spikeview.config import Config
+from spikeview.cfa import TYPICAL_RESPONSE
 from spikeview.errors import ParameterError
 
 #: elementary charge (C)
@@ -83,7 +84,8 @@ class SimConfig(Config):
         cfa: ``"RGGB"``, ``"BGGR"``, ``"GRBG"``, ``"GBRG"`` (top-left 2×2 of the frames as read,
             i.e. after the reader's flips) or ``"none"`` for a monochrome sensor.
         spectral_gains: relative response of the R, G and B photosites (each ≥ 0). The default
-            ``(0.6, 1.0, 0.5)`` is green-heavy like silicon behind a Bayer filter in daylight:
+            ``(0.6, 1.0, 0.5)`` (:data:`spikeview.cfa.TYPICAL_RESPONSE`) is green-heavy like silicon behind a Bayer
+            filter in daylight:
             a grey scene gives a green-cast mosaic, which gray-world colour-cast correction
             (α_c = 1 / mean(Y_c)) has to undo. Ignored for ``cfa="none"``.
 
@@ -117,7 +119,7 @@ class SimConfig(Config):
 
     rate: float = 0.6
     cfa: str = "RGGB"
-    spectral_gains: tuple[float, float, float] = (0.6, 1.0, 0.5)
+    spectral_gains: tuple[float, float, float] = TYPICAL_RESPONSE
 
     dark_current: bool = True
     prnu: bool = True
