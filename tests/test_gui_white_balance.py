@@ -41,6 +41,11 @@ def test_the_picker_and_the_typed_gains_set_the_recipes_white_balance(qtbot, win
     qtbot.waitUntil(lambda: window.session.stream is not None and window.session.stream.label == "neutral", timeout=60000)
     panel = window.stream_panel
     assert panel.wb.isEnabled()
+    # the gains the sequence got are shown beside the choice, the CLI's whole line (which, why) as their tooltip
+    qtbot.waitUntil(lambda: panel.wb_gains.text() != "", timeout=60000)
+    r, _, b = (float(v) for v in panel.wb_gains.text().split(" : "))
+    assert np.allclose([r, b], [GAINS[1] / GAINS[0], GAINS[1] / GAINS[2]], rtol=0.1), panel.wb_gains.text()
+    assert panel.wb_gains.toolTip().startswith("white balance auto → gray-world") and "gains R" in panel.wb.toolTip()
     panel.wb_pick.setChecked(True)
     window.canvas.clicked.emit(16, 32)
     wb = window.session.get("white_balance")
@@ -62,7 +67,9 @@ def test_a_monochrome_capture_disables_the_white_balance_with_the_reason(qtbot, 
     window.set_stream(core.memory_stream(ArraySource((rng.random((60, 32, 32)) < 0.3).astype(np.uint8), cfa=None), "mono"))
     qtbot.waitUntil(lambda: window.session.stream is not None and window.session.stream.label == "mono", timeout=60000)
     panel = window.stream_panel
-    assert not panel.wb.isEnabled() and not panel.wb_pick.isEnabled() and panel.wb.toolTip()
+    qtbot.waitUntil(lambda: window.controller.capture_white is not None, timeout=60000)  # the sequence's estimate
+    assert not panel.wb.isEnabled() and not panel.wb_pick.isEnabled() and "monochrome" in panel.wb.toolTip().lower()
+    assert panel.wb_gains.text() == ""
 
 
 @pytest.mark.parametrize("cfa", ["RGGB", "none"])

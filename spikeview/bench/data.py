@@ -13,7 +13,7 @@ reported):
 * ``highlights``: medium-dark scenes with small regions near full scale (lamps, speculars).
 
 The reconstruction is run on the **user's path**: nothing from the simulator's calibration is
-used; the colour cast (gray-world α) and the exposure (white point) are estimated from the spikes,
+used; the colour cast (α by the default white balance, auto) and the exposure (white point) are estimated from the spikes,
 as the CLI does.
 
 **Spike-Zoo clips.** The monochrome 400×250 plain ``.dat`` clips with ground-truth PNGs that ship

@@ -6,8 +6,8 @@ Usage::
     python benchmarks/bench_guided.py --spikezoo DIR  # the same, plus the Spike-Zoo clips under DIR
     python benchmarks/bench_guided.py --quick         # 64×64, 4 scenes: a smoke run (not written)
 
-**What runs is what the CLI runs by default**: per sequence, the gray-world gains α
-(:func:`~spikeview.classical.colour_cast.estimate_alpha`) and the white point
+**What runs is what the CLI runs by default**: per sequence, the colour-cast gains α by the default white
+balance (``auto``: :func:`~spikeview.classical.colour_cast.sequence_white_balance`) and the white point
 (:func:`~spikeview.classical.colour_cast.estimate_white`) are estimated from the spikes once; TFP
 frames are the classical reconstruction (10-tick window, η = 2, unclipped) mapped to the bounded
 range by that white point; the guided sampler runs with :class:`GuidedConfig`'s defaults (the plan
@@ -17,7 +17,7 @@ Nothing from the simulator's calibration is used.
 
 **Scoring**: the frame a user gets in a bounded output (values in [0, 1]: clipping counts) is
 compared with the clean linear ground truth **after a per-channel gain fitted to the ground truth by
-least squares** (``g_c = Σ x_c·t_c / Σ x_c²``), so the exposure and the gray-world guess of the
+least squares** (``g_c = Σ x_c·t_c / Σ x_c²``), so the exposure and the white balance's guess of the
 scene's colour do not decide the score, while detail lost to clipping or noise does. PSNR and SSIM
 from :mod:`spikeview.metrics` (the app's; scikit-image's definitions and SSIM defaults) with
 ``data_range = 1`` (SSIM averaged over the colour channels). Seconds: median per
@@ -61,8 +61,8 @@ PARETO_RADIUS = (0, 1, 2)
 
 # ------------------------------------------------------------------------------- the user path
 class Sequence:
-    """What the CLI computes once per sequence (:func:`spikeview.pipeline.prepare_sequence`): α (gray-world)
-    and the white point, for window ``window``."""
+    """What the CLI computes once per sequence (:func:`spikeview.pipeline.prepare_sequence`): α (the default white
+    balance, ``auto``) and the white point, for window ``window``."""
 
     def __init__(self, source, window: int = 10, eta: float | None = None):
         from spikeview.classical.colour_cast import DEFAULT_ETA
@@ -354,7 +354,7 @@ def write_report(res: dict, out: Path, notes: list[str] | None = None) -> None:
          f"Set: {len({r['scene'] for r in rows})} simulated scenes at {info['size']}×{info['size']}, {info['frames']} windows of 10 ticks each "
          "(realistic sensor noise, RGGB, camera motion); ground truth = clean linear frame at the window centre.",
          f"Tuning scenes (defaults were chosen on these only): {', '.join(tune)}. Held-out (reported): {', '.join(held)}.",
-         "Path: gray-world α and white point (99.9th percentile of the corrected 10-tick rates) estimated from the spikes once per "
+         "Path: colour-cast gains α (the default white balance, auto) and white point (99.9th percentile of the corrected 10-tick rates) estimated from the spikes once per "
          "sequence, as the CLI; no calibration from the simulator. The guided sampler sees the exposure that puts the white point at 0.9.",
          "Score: bounded frame (clipping counts) after a per-channel least-squares gain to the ground truth; skimage PSNR/SSIM, "
          "data_range 1. Seconds: median per frame. The colour columns (held-out) are what that gain hides: PSNR after ONE "

@@ -14,7 +14,7 @@ truth. Three motions: ``static`` (no motion), ``slow`` (a slow pan, ≤ 0.2 px p
 has a **tuning** sequence (the default ``temporal_radius`` was chosen on these only) and held-out
 sequences, monochrome and Bayer.
 
-Methods, all on the user's path (:func:`spikeview.pipeline.prepare_sequence`: gray-world α and the
+Methods, all on the user's path (:func:`spikeview.pipeline.prepare_sequence`: the default white balance's α and the
 white point from the spikes, :func:`spikeview.pipeline.reconstruct_windows` with its reuse test and
 keyframes, frames divided by the white point and clipped as in a bounded output):
 

@@ -91,6 +91,7 @@ class Controller(QtCore.QObject):
     error = QtCore.Signal(str)  # a sentence for the user (status bar or dialog)
     fps_changed = QtCore.Signal(float)
     alpha_ready = QtCore.Signal(object)
+    white_balance_said = QtCore.Signal(str)  # the CLI's line: which white balance, why, the gains ("" without)
     guided_started = QtCore.Signal(int, object)  # run, the ROI it runs on (None: the whole frame)
     compare_ready = QtCore.Signal(object)  # jobs.CompareView
 
@@ -537,7 +538,8 @@ class Controller(QtCore.QObject):
             self.alpha_history.emit((ticks, np.array([self._alpha_hist[t] for t in ticks])))
             self.rates_ready.emit(result)
         elif channel == "alpha":
-            self.alpha, self.alpha_note, white = result
+            self.alpha, self.alpha_note, white, said = result
+            self.white_balance_said.emit(said or "")
             if self.alpha_note:
                 self._error(self.alpha_note)
             if white is not None:  # the exposure: the sequence's white point, as the CLI chooses it

@@ -416,6 +416,7 @@ class MainWindow(QtWidgets.QMainWindow):
         c.rates_ready.connect(self.rates_panel.show_rates)
         c.alpha_history.connect(self.rates_panel.show_alpha_history)
         c.alpha_ready.connect(self.rates_panel.show_sequence_alpha)
+        c.white_balance_said.connect(self.stream_panel.show_white_balance)
         c.degradation_ready.connect(self.degradation_panel.show_result)
         c.degradation_ready.connect(self.canvas.show_degradation)
         c.tfi_ready.connect(self.canvas.show_tfi)

@@ -155,9 +155,12 @@ class StreamPanel(QtWidgets.QWidget):
         self.wb.activated.connect(lambda _i: self._set_wb(self.wb.currentText()))
         self.wb_pick = QtWidgets.QToolButton(text="Pick", objectName="white_balance_pick", checkable=True)
         self.wb_pick.setToolTip("Click a white or gray surface on the image: its gains become the white balance.")
+        #: the gains the sequence got (relative to G), the CLI's whole line (which estimator, why) as its tooltip
+        self.wb_gains = QtWidgets.QLabel("", objectName="white_balance_gains")
         wb_row = QtWidgets.QHBoxLayout()
         wb_row.addWidget(QtWidgets.QLabel("White bal."))
         wb_row.addWidget(self.wb, 1)
+        wb_row.addWidget(self.wb_gains)
         wb_row.addWidget(self.wb_pick)
         self.colour_only = {c: c.toolTip() for c in (self.demosaic, self.cast, self.wb, self.wb_pick)}
         curve_row = QtWidgets.QHBoxLayout()
@@ -194,6 +197,17 @@ class StreamPanel(QtWidgets.QWidget):
         subscribe(self, ev.param_changed, self._on_param)
         subscribe(self, ev.roi_changed, self._on_roi)
         self._on_source()
+
+    def show_white_balance(self, line: str) -> None:
+        """The sequence's white balance as the CLI prints it (``""``: none, monochrome or colour cast off): the gains
+        beside the choice, the whole line (which estimator auto took, why, how far the prior moved it) as tooltip."""
+        import re
+
+        m = re.search(r"gains R ([0-9.eE+-]+), G 1, B ([0-9.eE+-]+)", line or "")
+        self.wb_gains.setText(f"{m.group(1)} : 1 : {m.group(2)}" if m else "")
+        self.wb_gains.setToolTip(line or "")
+        if self.wb.isEnabled():  # a monochrome capture's combo keeps its reason for being disabled
+            self.wb.setToolTip((line + "\n\n" if line else "") + self.colour_only.get(self.wb, ""))
 
     def set_images_visible(self, on: bool) -> None:
         """Show or hide the panel's own small image panes (hidden while the central canvas shows the images)."""
