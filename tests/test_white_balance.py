@@ -223,14 +223,45 @@ def test_auto_keeps_gray_world_for_a_neutral_sensor_on_a_gray_scene():
     assert got.method == "gray-world" and wb.angle_deg(got.illuminant, np.ones(3)) < 1e-6
 
 
+def _dark_source(scene: np.ndarray, cfa: str, ticks: int = 96, dark: float = 0.004, seed: int = 3) -> ArraySource:
+    """A dark capture: ``scene`` rates plus a dark rate alike in every channel (the colour filter does not see it)."""
+    return _source(scene + dark, cfa, ticks=ticks, seed=seed)
+
+
 @pytest.mark.parametrize("cfa", ["RGGB", "GBRG"])
-def test_a_dark_scene_keeps_gray_world_without_the_prior(cfa):
-    # its rates hold the dark rate, alike in every channel: the typical response is not its balance (module docstring)
-    scene = _coloured_edges(2) * TINT * 0.05  # about 1.5 spikes per photosite in 64 ticks
-    src = _source(scene, cfa, ticks=64, seed=3)
+def test_a_dark_colourful_scene_takes_its_edges_pulled_toward_the_typical_response(cfa):
+    # about 2 spikes per photosite, a fifth of them the dark rate: the mean, dark rate included, would make gray-world take the scene's yellow-green
+    # for the sensor's cast
+    rng = np.random.default_rng(5)
+    hue = np.where(rng.random((16, 16, 1)) > 0.5, [0.5, 1.0, 0.3], [0.9, 1.0, 0.25])  # greens and yellows
+    scene = np.kron(hue * (0.3 + 0.7 * rng.random((16, 16, 1))), np.ones((4, 4, 1))) * TINT * 0.04
+    src = _dark_source(scene, cfa, ticks=96)
     detail: dict = {}
     a, _, why = sequence_white_balance(src, ClassicalConfig(white_balance="auto"), warn=False, detail=detail)
-    assert "gray-world" in why and "too few" in why and "typical" not in why
-    assert detail["keep_balance"]  # the guided frame keeps gray-world's balance (spikeview.guided.balance)
+    assert "combined" in why and "dark scene" in why and "typical" in why and not detail["keep_balance"]
+    gw = sequence_white_balance(src, ClassicalConfig(white_balance="gray-world"), warn=False)[0]
+    assert wb.angle_deg(a * TINT, np.ones(3)) < 4 < 12 < wb.angle_deg(gw * TINT, np.ones(3))
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", "GBRG"])
+def test_a_dark_gray_scene_keeps_gray_world(cfa):
+    # the same dark rate under a gray scene: the mean less the dark rate agrees with the edges, gray-world is kept
+    # (its gains, dark rate included, keep the scene gray; the guided frame keeps that balance)
+    scene = np.repeat(_coloured_edges(2).mean(axis=-1, keepdims=True), 3, -1) * TINT * 0.04
+    scene[:8] = 0  # a black band: the dark rate alone
+    src = _dark_source(scene, cfa, ticks=96)
+    detail: dict = {}
+    a, _, why = sequence_white_balance(src, ClassicalConfig(white_balance="auto"), warn=False, detail=detail)
+    assert "gray-world" in why and "dark rate" in why and detail["keep_balance"]
     gw = sequence_white_balance(src, ClassicalConfig(white_balance="gray-world"), warn=False)[0]
     np.testing.assert_allclose(a, gw)
+
+
+def test_dark_level_measures_the_dark_rate_where_the_scene_is_black():
+    rng = np.random.default_rng(0)
+    img = np.kron(rng.random((8, 8, 3)), np.ones((8, 8, 1))) * [0.3, 0.5, 0.2]
+    img[:16, :16] = 0  # a black corner
+    img = img + 0.004  # the dark rate
+    assert abs(wb.dark_level(img) - 0.004) < 1e-9
+    assert wb.dark_level(np.full((64, 64, 3), 0.2)) == pytest.approx(0.2)  # no black anywhere: its darkest patch
+    assert wb.dark_level(np.zeros((0, 0, 3))) == 0.0

@@ -25,10 +25,14 @@ side (:func:`spikeview.classical.colour_cast.sequence_images`; no demosaicking).
   colourful and ``combined`` is taken, **pulled toward the typical spike-camera response** (:func:`toward_typical`):
   a colourful scene's edges and highlights are often coloured too (orange fur, a blue sky), and no estimator that sees
   only the capture can tell that from the sensor (below), so the camera's nominal response is the prior that breaks
-  the tie. Below :data:`MIN_SPIKES` spikes per photosite (a dark scene, whose edges are noise) gray-world is taken
-  (no prior: a dark scene's rates hold the dark rate, the same in every channel, so their balance is not the
-  typical response's; a dark colourful scene is then off by gray-world's error). The choice, its reason and how far
-  the prior moved it are one sentence. (The thresholds were set on simulated scenes:
+  the tie. Below :data:`MIN_SPIKES` spikes per photosite (a dark scene) the rates hold the sensor's dark rate, the
+  same in every channel, which pulls the mean toward gray while the edges and highlights do not see it: the test
+  compares them after taking the dark rate (:func:`dark_level`) off the mean, within :data:`DARK_AGREE_DEG` (edges
+  are noisier in the dark); gray-world's gains themselves stay those of the whole mean, dark rate included (they
+  keep a dark gray scene gray). A dark colourful scene then gets ``combined`` pulled toward the typical response,
+  its σ widened by its own noise (half the distance between the estimates of the even and the odd windows);
+  gray-world had turned dark colourful scenes 16–35° off. The choice, its reason and how far the prior moved it are
+  one sentence. (The thresholds were set on simulated scenes:
   ``benchmarks/bench_colour.py``.)
 * ``typical`` — the typical response alone (:data:`spikeview.cfa.TYPICAL_RESPONSE`), whatever the scene.
 * ``profile`` — the colour response measured by ``spikeview calibrate`` from a flat capture
@@ -66,9 +70,16 @@ BRIGHT_FRACTION = 0.01
 AGREE_DEG = 3.0
 #: auto: ... or when their disagreement is within this many times ``combined``'s split-half uncertainty
 NOISE_FACTOR = 2.0
-#: auto: ... or when the sampled windows hold fewer spikes than this per photosite on average (a dark scene: its
-#: edges and highlights are shot noise and dark current, biased the same way in both halves)
+#: auto: below this many spikes per photosite on average in the sampled windows (a dark scene) the agreement test is
+#: not made (edges and highlights are shot noise and dark current, biased the same way in both halves): combined is
+#: taken, pulled toward the typical response
 MIN_SPIKES = 5.0
+#: ... there the mean less the dark rate (:func:`dark_level`) is compared with the edges and highlights, which are
+#: noisier in the dark: gray-world is kept within this angle (twice :data:`AGREE_DEG`)
+DARK_AGREE_DEG = 6.0
+#: :func:`dark_level`: blocks of this many cells a side, and the percentile of their mean rates taken
+DARK_BLOCK = 8
+DARK_PERCENTILE = 2.0
 #: auto's prior on the illuminant (log R/G, log B/G of :data:`~spikeview.cfa.TYPICAL_RESPONSE`): a Gaussian of this
 #: σ (log units: 12 %, the spread of sensors' daylight responses) ...
 PRIOR_SIGMA = 0.12
@@ -206,6 +217,23 @@ def illuminant(img: np.ndarray, method: str, saturated: float = 0.95) -> np.ndar
     raise ParameterError(f"unknown white-balance estimator {method!r}; use one of {', '.join(ESTIMATORS)}.")
 
 
+def dark_level(img: np.ndarray) -> float:
+    """The sensor's dark rate as seen in a sequence image ``(h, w, 3)`` (spikes per tick): the lowest channel's
+    :data:`DARK_PERCENTILE` th percentile of the mean rates of :data:`DARK_BLOCK` × :data:`DARK_BLOCK`-cell blocks.
+
+    A photosite fires at its dark rate where the scene is black; the dark rate is the same in every channel (the
+    colour filter does not see it), so the darkest blocks of the least sensitive channel measure it. A scene with no
+    black anywhere gives more than the dark rate (its darkest patch's rate). 0 for an image too small for one block.
+    """
+    img = np.asarray(img, dtype=np.float64)
+    k = min(DARK_BLOCK, img.shape[0], img.shape[1])
+    if k < 1:
+        return 0.0
+    h, w = img.shape[0] // k * k, img.shape[1] // k * k
+    blocks = img[:h, :w].reshape(h // k, k, w // k, k, 3).mean(axis=(1, 3)).reshape(-1, 3)
+    return float(np.percentile(blocks, DARK_PERCENTILE, axis=0).min())
+
+
 def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     """Angle in degrees between two RGB vectors (0 when either is zero)."""
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
@@ -295,22 +323,40 @@ def choose(img: np.ndarray, method: str, halves: tuple[np.ndarray, np.ndarray] |
             f"white balance typical: the typical spike-camera response ({_typical_text()}), as asked")
         return WhiteBalance(method, illuminant(img, method), why)
     gw = illuminant(img, "gray-world")
+    dark = None
     if ticks is not None:
         spikes = float(np.asarray(img, dtype=np.float64).mean()) * ticks
         if spikes < MIN_SPIKES:
-            # no prior here: a dark scene's rates hold the sensor's dark rate, the same in every channel, so its
-            # colour balance is not the typical response's (pulled toward it, a dark gray scene went 2.2° → 5.2°)
-            return WhiteBalance("gray-world", gw, f"white balance auto → gray-world: the sampled windows hold "
-                                                 f"{spikes:.1f} spikes per photosite (< {MIN_SPIKES:g}), too few for "
-                                                 "edges and highlights")
+            dark = spikes
     co = illuminant(img, "combined")
     ok = gw > 0
     d = angle_deg(co[ok] / gw[ok], np.ones(int(ok.sum()))) if ok.sum() >= 2 else 0.0
-    u = 0.0
+    u, sigma = 0.0, COMBINED_SIGMA
     if halves is not None:
         a, b = (illuminant(h, "combined") for h in halves)
         okh = (a > 0) & (b > 0)
         u = angle_deg(a[okh] / b[okh], np.ones(int(okh.sum()))) if okh.sum() >= 2 else 0.0
+        if okh.all():  # combined's own noise, in log chromaticity: half the distance between the halves' estimates
+            split = np.log(a[[0, 2]] / a[1]) - np.log(b[[0, 2]] / b[1])
+            sigma = float(np.hypot(COMBINED_SIGMA, np.linalg.norm(split) / 2))
+    if dark is not None:
+        # a dark scene: its mean holds the sensor's dark rate, the same in every channel, which pulls gray-world
+        # toward neutral while the edges and highlights do not see it; the test compares them without it
+        floor = dark_level(img)
+        lifted = gw - floor
+        okd = lifted > 0
+        dd = angle_deg(co[okd] / lifted[okd], np.ones(int(okd.sum()))) if okd.sum() >= 2 else 0.0
+        if dd <= DARK_AGREE_DEG or dd <= NOISE_FACTOR * u:
+            return WhiteBalance("gray-world", gw, f"white balance auto → gray-world: a dark scene ({dark:.1f} spikes "
+                                                 f"per photosite) whose mean, less the dark rate {floor:.2g} spikes "
+                                                 f"per tick, agrees with its edges and highlights within {dd:.1f}° "
+                                                 f"(≤ {DARK_AGREE_DEG:g}°, or twice their noise {u:.1f}°)")
+        e, w = toward_typical(co, sigma)
+        return WhiteBalance("combined+typical", e, f"white balance auto → combined (gray-edge, white-patch, "
+                                                   f"shades-of-gray), {_pulled(co, e, w)}: a dark scene ({dark:.1f} "
+                                                   f"spikes per photosite) whose mean, less the dark rate {floor:.2g} "
+                                                   f"spikes per tick, is {dd:.1f}° off its edges and highlights "
+                                                   f"(> {DARK_AGREE_DEG:g}°, noise {u:.1f}°), a colourful scene")
     if d <= AGREE_DEG:
         return WhiteBalance("gray-world", gw, f"white balance auto → gray-world: edges, highlights and the scene's mean "
                                              f"agree within {d:.1f}° (≤ {AGREE_DEG:g}°), the scene averages to gray")
