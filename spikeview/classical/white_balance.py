@@ -32,8 +32,7 @@ side (:func:`spikeview.classical.colour_cast.sequence_images`; no demosaicking).
   keep a dark gray scene gray). A dark colourful scene then gets ``combined`` pulled toward the typical response,
   its σ widened by its own noise (half the distance between the estimates of the even and the odd windows);
   gray-world had turned dark colourful scenes 16–35° off. The choice, its reason and how far the prior moved it are
-  one sentence. (The thresholds were set on simulated scenes:
-  ``benchmarks/bench_colour.py``.)
+  one sentence. (The thresholds were set on simulated scenes: ``benchmarks/bench_colour.py``.)
 * ``typical`` — the typical response alone (:data:`spikeview.cfa.TYPICAL_RESPONSE`), whatever the scene.
 * ``profile`` — the colour response measured by ``spikeview calibrate`` from a flat capture
   (:mod:`spikeview.classical.calibration`): the only choice that is right for a scene that is itself tinted.
@@ -57,7 +56,8 @@ import numpy as np
 from spikeview.cfa import CHANNEL_INDEX, TYPICAL_RESPONSE, site_offsets
 from spikeview.errors import ParameterError
 
-#: the estimators (``auto`` picks one of the first two; ``profile`` needs a camera profile)
+#: the estimators (``auto`` takes gray-world, or combined pulled toward the typical response; ``profile`` needs a
+#: camera profile)
 ESTIMATORS = ("gray-world", "gray-edge", "gray-edge-2", "shades-of-gray", "white-patch", "combined")
 CHOICES = ("auto",) + ESTIMATORS + ("typical", "profile")
 #: Minkowski norm of shades-of-gray and gray-edge
@@ -70,9 +70,8 @@ BRIGHT_FRACTION = 0.01
 AGREE_DEG = 3.0
 #: auto: ... or when their disagreement is within this many times ``combined``'s split-half uncertainty
 NOISE_FACTOR = 2.0
-#: auto: below this many spikes per photosite on average in the sampled windows (a dark scene) the agreement test is
-#: not made (edges and highlights are shot noise and dark current, biased the same way in both halves): combined is
-#: taken, pulled toward the typical response
+#: auto: below this many spikes per photosite on average in the sampled windows (a dark scene, whose rates hold the
+#: sensor's dark rate) the agreement test is made on the mean less the dark rate, ...
 MIN_SPIKES = 5.0
 #: ... there the mean less the dark rate (:func:`dark_level`) is compared with the edges and highlights, which are
 #: noisier in the dark: gray-world is kept within this angle (twice :data:`AGREE_DEG`)
