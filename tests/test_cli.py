@@ -107,7 +107,10 @@ def test_reconstruct_npy_matches_library_and_preset_reproduces(capture, tmp_path
     assert preset.exists()
     white = load_toml(preset)["export"]["white"]
     assert f"white point {white:.4g}" in capsys.readouterr().err
+    from spikeview.classical.calibration import attach
+
     with open_source(path, width=96, height=64, cfa="RGGB") as src:
+        attach(src, None)  # the capture's own corrections (hot pixels, a dark rate), as the CLI opens it
         ref = np.stack(list(reconstruct_frames(src, range(0, 400, 50), ClassicalConfig(window=10, demosaic="bilinear"))))
     np.testing.assert_array_equal(frames, np.clip(ref * np.float32(1.0 / white), 0.0, 1.0))
     # clipped beyond half a quantisation step: at most 0.2 % (the white point is the 99.9th percentile of the

@@ -141,7 +141,10 @@ class CameraProfile:
         """One line: what the profile corrects."""
         if self.from_capture:
             n = int(self.hot.sum())
-            return f"none given; the capture's own {n} hot pixel{'s' if n != 1 else ''} filled from their neighbours (defects below)."
+            dark = float(self.stats.get("dark_rate_mean", 0.0) or 0.0)
+            also = f", its dark rate {dark:.3g} spikes/tick subtracted" if dark > 0 else ""
+            return (f"none given; the capture's own {n} hot pixel{'s' if n != 1 else ''} filled from their neighbours"
+                    f"{also} (defects below).")
         parts = []
         if self.captures.get("dark"):
             parts.append(f"dark rate {self.stats.get('dark_rate_mean', float(self.dark.mean())):.4g} spikes/tick, "
@@ -451,18 +454,20 @@ def attach(source: Any, profile: CameraProfile | str | Path | None) -> Any:
 
 
 def capture_profile(source: Any) -> CameraProfile | None:
-    """A profile of the capture's own hot photosites (:func:`spikeview.classical.defects.find_defects`; no dark rate,
-    unit gain) for a capture opened without a camera profile; ``None`` when it has none."""
+    """A profile of the capture's own hot photosites and, for a colour capture whose darkest patches agree in R, G and
+    B, its dark rate (:func:`spikeview.classical.defects.find_defects`; uniform, unit gain) for a capture opened
+    without a camera profile; ``None`` when it has neither."""
     from spikeview.classical.defects import find_defects
 
     d = find_defects(source)
-    if not d.hot.any():
+    if not d.hot.any() and d.dark <= 0:
         return None
     info = source.info
     h, w = d.hot.shape
-    return CameraProfile(w, h, info.cfa, np.zeros((h, w), np.float32), np.ones((h, w), np.float32), d.hot,
+    return CameraProfile(w, h, info.cfa, np.full((h, w), d.dark, np.float32), np.ones((h, w), np.float32), d.hot,
                          flip_vertical=bool(info.flip_vertical), flip_horizontal=bool(info.flip_horizontal),
-                         stats={"source": "capture", "hot_pixels": int(d.hot.sum()), "ticks": d.ticks})
+                         stats={"source": "capture", "hot_pixels": int(d.hot.sum()), "ticks": d.ticks,
+                                "dark_rate_mean": d.dark})
 
 
 def camera_of(source: Any) -> CameraProfile | None:

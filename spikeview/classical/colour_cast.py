@@ -312,7 +312,8 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
         given = np.asarray(choice, dtype=np.float64), "white balance: the fixed gains R,G,B given"
     if given is not None:
         if detail is not None:
-            out["keep_balance"] = _balanced_gains(source, config, given[0])
+            cam = getattr(source.info, "camera", None)
+            out["keep_balance"] = bool(cam is not None and cam.moves_rates()) or _balanced_gains(source, config, given[0])
         return given[0], None, given[1]
     camera = getattr(source.info, "camera", None)
     if choice == "profile" and (camera is None or camera.colour_response is None):
@@ -345,7 +346,9 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
         gains, note = wb.gains_from_illuminant(how.illuminant, means), None
     if note is not None and warn:
         warnings.warn(note, ColourCastWarning, stacklevel=3)
-    out["keep_balance"] = how.method in KEEP_BALANCE
+    # on dark-subtracted rates the guided frame's clip at 0 lifts each channel's black by its own noise, whatever the
+    # gains: there it keeps the balance for every white balance (the plan applies it only where the rates moved)
+    out["keep_balance"] = how.method in KEEP_BALANCE or bool(camera is not None and camera.moves_rates())
     return np.asarray(gains, dtype=np.float64), note, how.reason
 
 

@@ -19,8 +19,13 @@ Not found: short bright streaks of a few photosites along an edge (the real ``uh
 edge, 3–6× the rate around them). A rule that took bright clusters near an edge also took scene content (a dark
 coat against a bright sky at a frame's edge), so it is not used.
 
+A colour capture's **dark rate** is measured too (:func:`dark_rate`): where the darkest patches of R, G and B fire
+alike while the channels above them show the sensor's colour cast, those patches are black scene and their rate is
+the sensor's dark rate (the same in every channel). A monochrome capture has no second witness: 0.
+
 Where they go (:func:`spikeview.classical.calibration.attach`, which reads them through :func:`find_defects`): a
-capture opened without a camera profile gets its hot photosites as a profile of its own (no dark rate, unit gain), so the one rate correction
+capture opened without a camera profile gets its hot photosites and that dark rate as a profile of its own (uniform
+dark rate, unit gain), so the one rate correction
 (:func:`~spikeview.classical.calibration.correct_rates`) fills them from their neighbours for the classical frames,
 the guided observation (its noise estimate and plan) and the white point alike; the border and edge lines are
 kept out of the white point (:func:`interior`) and named by ``spikeview info``.
@@ -57,12 +62,15 @@ class Defects:
         border: ``(top, bottom, left, right)`` dark rows/columns at each edge.
         edges: ``(top, bottom, left, right)`` bright edge lines at each edge (outside the dark border).
         ticks: how many ticks were measured.
+        dark: the sensor's dark rate (spikes per tick) measured on a colour capture's darkest patches (:func:`dark_rate`),
+            0 where it cannot be told from scene black (a monochrome capture, or channels whose floors differ).
     """
 
     hot: np.ndarray
     border: tuple[int, int, int, int]
     edges: tuple[int, int, int, int]
     ticks: int
+    dark: float = 0.0
 
     def describe(self) -> str:
         """One line for ``spikeview info``."""
@@ -73,6 +81,8 @@ class Defects:
         e = [f"{n} {v}" for n, v in zip(names, self.edges) if v]
         parts.append("dark border: " + (", ".join(b) if b else "none"))
         parts.append("bright edge lines: " + (", ".join(e) if e else "none"))
+        if self.dark > 0:
+            parts.append(f"dark rate {self.dark:.3g} spikes/tick (the darkest patches, alike in R, G and B; subtracted)")
         return "; ".join(parts) + f" (measured over {self.ticks} ticks; kept out of the white point and the noise estimate)"
 
     def interior(self) -> tuple[slice, slice]:
@@ -151,10 +161,50 @@ def find_defects(source: Any) -> Defects:
             t, b, bt, bb = _edge_runs(rows, rref)
             left, right, bl, br = _edge_runs(cols, cref)
             border, edges = (t, b, left, right), (bt, bb, bl, br)
-    d = Defects(hot, border, edges, ticks)
+    d = Defects(hot, border, edges, ticks, dark_rate(r, getattr(source, "cfa", None), hot))
     try:
         source._spikeview_defects = d
     except AttributeError:  # a source with __slots__: measured again next time
         pass
     return d
 
+
+#: :func:`dark_rate`: the three channels' floors must agree within this ratio to be the dark rate ...
+DARK_AGREE_RATIO = 1.3
+#: ... while the channels' means above the floor differ by at least this ratio (the sensor's colour cast, which scene
+#: light in the darkest patch would show too)
+DARK_WITNESS_RATIO = 1.5
+
+
+def dark_rate(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None) -> float:
+    """The sensor's dark rate from a colour capture's mean rates ``(H, W)``, or 0.
+
+    Each channel's floor is the 2nd percentile of its 8×8-cell block means
+    (:func:`spikeview.classical.white_balance.dark_level`, hot photosites replaced by their channel's median). The
+    dark rate is the same in every channel (the colour filter does not see it), while scene light in the darkest
+    patch follows the sensor's colour response (G about twice R and B): the floors are taken for the dark rate only when
+    they agree within :data:`DARK_AGREE_RATIO` while the channels' means above the floor differ by
+    :data:`DARK_WITNESS_RATIO` or more (without a cast, agreeing floors could be a gray patch's light), and the lowest
+    is returned. A monochrome capture has no second witness:
+    0 (its dark rate cannot be told from scene black without a dark capture; ``spikeview calibrate --dark``).
+    """
+    from spikeview.cfa import parse_cfa
+    from spikeview.classical import white_balance as wb
+
+    cfa = parse_cfa(cfa)
+    if cfa is None:
+        return 0.0
+    r = np.asarray(rates, dtype=np.float64)
+    if hot is not None and hot.any():
+        r = r.copy()
+        r[hot] = np.median(r)
+    img = wb.cells_rgb(r, cfa)
+    if min(img.shape[:2]) < 2 * wb.DARK_BLOCK:
+        return 0.0
+    floors = np.array([wb.dark_level(img[..., [c, c, c]]) for c in range(3)])
+    light = img.reshape(-1, 3).mean(axis=0) - floors.min()  # each channel's mean above the floor
+    if not ((floors > 0).all() and (light > 0).all()) or floors.max() > DARK_AGREE_RATIO * floors.min():
+        return 0.0
+    if light.max() < DARK_WITNESS_RATIO * light.min():
+        return 0.0  # channels alike above the floor (a sensor without a cast): agreeing floors prove nothing
+    return float(floors.min())
