@@ -76,10 +76,9 @@ def frames(cap, centres, method: str, values: dict, sampler=None):
     from spikeview.recipe import Recipe
 
     recipe = Recipe().with_values({"run.method": method, **values})
-    from spikeview.classical.calibration import attach
+    from spikeview.classical.calibration import attach_own
 
-    if getattr(cap.info, "camera", None) is None:
-        attach(cap, None)  # the capture's own corrections, as the CLI opens a file
+    attach_own(cap)  # the capture's own corrections, as the CLI opens a file
     state = prepare_sequence(cap, recipe, warn=False)
     recipe = recipe_for_state(recipe, state)
     expose = exposure_mapping(recipe, state, "x.npy")[1]

@@ -73,10 +73,9 @@ class Sequence:
         self.window = window
         self.eta = DEFAULT_ETA if eta is None else eta
         recipe = Recipe().with_values({"classical.window": window, "classical.alpha_window": window, "classical.eta": self.eta})
-        from spikeview.classical.calibration import attach
+        from spikeview.classical.calibration import attach_own
 
-        if getattr(source.info, "camera", None) is None:
-            attach(source, None)  # the capture's own corrections (hot pixels, a colour capture's dark rate), as the CLI
+        attach_own(source)  # the capture's own corrections (hot pixels, a colour capture's dark rate), as the CLI
         state = prepare_sequence(source, recipe)
         self.state = state
         self.alpha, self.white = state.alpha, state.white

@@ -126,11 +126,10 @@ def _method_runs(cap: Any, centres: list[int], prior: Any, steps: dict, radii) -
     from spikeview.pipeline import guided_scale, output_white, prepare_sequence, reconstruct_windows, sampler_params
     from spikeview.recipe import Recipe
 
-    from spikeview.classical.calibration import attach
+    from spikeview.classical.calibration import attach_own
 
     base = Recipe().with_values({"run.method": "guided", **{f"guided.{k}": v for k, v in steps.items()}})
-    if getattr(cap.info, "camera", None) is None:
-        attach(cap, None)  # the capture's own corrections, as the CLI opens a file
+    attach_own(cap)  # the capture's own corrections, as the CLI opens a file
     state = prepare_sequence(cap, base)
     white = output_white(base, state)
     out: dict[str, tuple[list[np.ndarray], list[float], list]] = {}
@@ -236,11 +235,10 @@ def timing(size: int = 256, repeats: int = 5, name: str = "coffee/fast", radius:
     torch.set_num_threads(2)
     r = GuidedConfig().temporal_radius if radius is None else radius
     cap, centres = make_sequence(name, size, repeats + 1)
-    from spikeview.classical.calibration import attach
+    from spikeview.classical.calibration import attach_own
 
     recipe = Recipe().with_values({"run.method": "guided"})
-    if getattr(cap.info, "camera", None) is None:
-        attach(cap, None)  # the capture's own corrections, as the CLI opens a file
+    attach_own(cap)  # the capture's own corrections, as the CLI opens a file
     state = prepare_sequence(cap, recipe)
     cfg = sampler_params(recipe, state).replace(reuse=False)
     smp = GuidedSampler(cfg, prior=load_prior(cfg, 1 if cap.cfa is None else 3))

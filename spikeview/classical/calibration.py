@@ -453,6 +453,14 @@ def attach(source: Any, profile: CameraProfile | str | Path | None) -> Any:
     return source
 
 
+def attach_own(source: Any) -> Any:
+    """``source`` with the capture's own corrections (:func:`capture_profile`) unless it already carries a camera
+    profile: how the CLI and the app open a capture without ``--camera`` (the benches open theirs so too)."""
+    if camera_of(source) is None:
+        attach(source, None)
+    return source
+
+
 def capture_profile(source: Any) -> CameraProfile | None:
     """A profile of the capture's own hot photosites and, for a colour capture whose darkest patches agree in R, G and
     B, its dark rate (:func:`spikeview.classical.defects.find_defects`; uniform, unit gain) for a capture opened

@@ -304,6 +304,10 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
     out["keep_balance"] = False
     if source.cfa is None or not config.colour_cast:
         return None, None, None
+    camera = getattr(source.info, "camera", None)
+    # on dark-subtracted rates the guided frame's clip at 0 lifts each channel's black by its own noise, whatever the
+    # gains: there it keeps the balance for every white balance (the plan applies it only where the rates moved)
+    moved = bool(camera is not None and camera.moves_rates())
     given = None
     if config.alpha is not None:
         given = np.asarray(config.alpha, dtype=np.float64), "white balance: the recorded gains classical.alpha"
@@ -312,10 +316,8 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
         given = np.asarray(choice, dtype=np.float64), "white balance: the fixed gains R,G,B given"
     if given is not None:
         if detail is not None:
-            cam = getattr(source.info, "camera", None)
-            out["keep_balance"] = bool(cam is not None and cam.moves_rates()) or _balanced_gains(source, config, given[0])
+            out["keep_balance"] = moved or _balanced_gains(source, config, given[0])
         return given[0], None, given[1]
-    camera = getattr(source.info, "camera", None)
     if choice == "profile" and (camera is None or camera.colour_response is None):
         raise ParameterError("--white-balance profile needs a camera profile with a colour response: pass --camera "
                              "PROFILE.toml made by `spikeview calibrate --flat FLAT` (or choose auto).")
@@ -346,9 +348,7 @@ def sequence_white_balance(source: SpikeSource, config: Any, *, warn: bool = Tru
         gains, note = wb.gains_from_illuminant(how.illuminant, means), None
     if note is not None and warn:
         warnings.warn(note, ColourCastWarning, stacklevel=3)
-    # on dark-subtracted rates the guided frame's clip at 0 lifts each channel's black by its own noise, whatever the
-    # gains: there it keeps the balance for every white balance (the plan applies it only where the rates moved)
-    out["keep_balance"] = how.method in KEEP_BALANCE or bool(camera is not None and camera.moves_rates())
+    out["keep_balance"] = moved or how.method in KEEP_BALANCE
     return np.asarray(gains, dtype=np.float64), note, how.reason
 
 

@@ -180,7 +180,7 @@ def dark_rate(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None)
     """The sensor's dark rate from a colour capture's mean rates ``(H, W)``, or 0.
 
     Each channel's floor is the 2nd percentile of its 8×8-cell block means
-    (:func:`spikeview.classical.white_balance.dark_level`, hot photosites replaced by their channel's median). The
+    (:func:`spikeview.classical.white_balance.channel_floors`, hot photosites replaced by the median). The
     dark rate is the same in every channel (the colour filter does not see it), while scene light in the darkest
     patch follows the sensor's colour response (G about twice R and B): the floors are taken for the dark rate only when
     they agree within :data:`DARK_AGREE_RATIO` while the channels' means above the floor differ by
@@ -201,7 +201,7 @@ def dark_rate(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None)
     img = wb.cells_rgb(r, cfa)
     if min(img.shape[:2]) < 2 * wb.DARK_BLOCK:
         return 0.0
-    floors = np.array([wb.dark_level(img[..., [c, c, c]]) for c in range(3)])
+    floors = wb.channel_floors(img)
     light = img.reshape(-1, 3).mean(axis=0) - floors.min()  # each channel's mean above the floor
     if not ((floors > 0).all() and (light > 0).all()) or floors.max() > DARK_AGREE_RATIO * floors.min():
         return 0.0

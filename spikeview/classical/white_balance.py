@@ -216,21 +216,28 @@ def illuminant(img: np.ndarray, method: str, saturated: float = 0.95) -> np.ndar
     raise ParameterError(f"unknown white-balance estimator {method!r}; use one of {', '.join(ESTIMATORS)}.")
 
 
+def channel_floors(img: np.ndarray) -> np.ndarray:
+    """Each channel's floor in a sequence image ``(h, w, 3)`` (spikes per tick): the :data:`DARK_PERCENTILE` th
+    percentile of the mean rates of :data:`DARK_BLOCK` × :data:`DARK_BLOCK`-cell blocks; float64 ``(3,)``, zeros for an
+    empty image."""
+    img = np.asarray(img, dtype=np.float64)
+    k = min(DARK_BLOCK, img.shape[0], img.shape[1])
+    if k < 1:
+        return np.zeros(3)
+    h, w = img.shape[0] // k * k, img.shape[1] // k * k
+    blocks = img[:h, :w].reshape(h // k, k, w // k, k, 3).mean(axis=(1, 3)).reshape(-1, 3)
+    return np.percentile(blocks, DARK_PERCENTILE, axis=0)
+
+
 def dark_level(img: np.ndarray) -> float:
-    """The sensor's dark rate as seen in a sequence image ``(h, w, 3)`` (spikes per tick): the lowest channel's
-    :data:`DARK_PERCENTILE` th percentile of the mean rates of :data:`DARK_BLOCK` × :data:`DARK_BLOCK`-cell blocks.
+    """The sensor's dark rate as seen in a sequence image ``(h, w, 3)`` (spikes per tick): the lowest of the
+    :func:`channel_floors`.
 
     A photosite fires at its dark rate where the scene is black; the dark rate is the same in every channel (the
     colour filter does not see it), so the darkest blocks of the least sensitive channel measure it. A scene with no
     black anywhere gives more than the dark rate (its darkest patch's rate). 0 for an image too small for one block.
     """
-    img = np.asarray(img, dtype=np.float64)
-    k = min(DARK_BLOCK, img.shape[0], img.shape[1])
-    if k < 1:
-        return 0.0
-    h, w = img.shape[0] // k * k, img.shape[1] // k * k
-    blocks = img[:h, :w].reshape(h // k, k, w // k, k, 3).mean(axis=(1, 3)).reshape(-1, 3)
-    return float(np.percentile(blocks, DARK_PERCENTILE, axis=0).min())
+    return float(channel_floors(img).min())
 
 
 def angle_deg(a: np.ndarray, b: np.ndarray) -> float:

@@ -91,7 +91,7 @@ class Controller(QtCore.QObject):
     error = QtCore.Signal(str)  # a sentence for the user (status bar or dialog)
     fps_changed = QtCore.Signal(float)
     alpha_ready = QtCore.Signal(object)
-    white_balance_said = QtCore.Signal(str)  # the CLI's line: which white balance, why, the gains ("" without)
+    white_balance_said = QtCore.Signal(str, object)  # the CLI's line (which white balance, why; "" without), the gains α
     guided_started = QtCore.Signal(int, object)  # run, the ROI it runs on (None: the whole frame)
     compare_ready = QtCore.Signal(object)  # jobs.CompareView
 
@@ -539,7 +539,7 @@ class Controller(QtCore.QObject):
             self.rates_ready.emit(result)
         elif channel == "alpha":
             self.alpha, self.alpha_note, white, said = result
-            self.white_balance_said.emit(said or "")
+            self.white_balance_said.emit(said or "", self.alpha)
             if self.alpha_note:
                 self._error(self.alpha_note)
             if white is not None:  # the exposure: the sequence's white point, as the CLI chooses it

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from spikeview.session.model import Session, format_us
@@ -198,13 +200,12 @@ class StreamPanel(QtWidgets.QWidget):
         subscribe(self, ev.roi_changed, self._on_roi)
         self._on_source()
 
-    def show_white_balance(self, line: str) -> None:
-        """The sequence's white balance as the CLI prints it (``""``: none, monochrome or colour cast off): the gains
-        beside the choice, the whole line (which estimator auto took, why, how far the prior moved it) as tooltip."""
-        import re
-
-        m = re.search(r"gains R ([0-9.eE+-]+), G 1, B ([0-9.eE+-]+)", line or "")
-        self.wb_gains.setText(f"{m.group(1)} : 1 : {m.group(2)}" if m else "")
+    def show_white_balance(self, line: str, alpha: np.ndarray | None = None) -> None:
+        """The sequence's white balance: its gains ``alpha`` relative to G beside the choice (none: monochrome or colour
+        cast off), the CLI's line ``line`` (which estimator auto took, why, how far the prior moved it) as tooltip."""
+        a = None if alpha is None else np.asarray(alpha, dtype=np.float64).reshape(-1)
+        ok = a is not None and a.size == 3 and a[1] > 0
+        self.wb_gains.setText(f"{a[0] / a[1]:.3g} : 1 : {a[2] / a[1]:.3g}" if ok else "")
         self.wb_gains.setToolTip(line or "")
         if self.wb.isEnabled():  # a monochrome capture's combo keeps its reason for being disabled
             self.wb.setToolTip((line + "\n\n" if line else "") + self.colour_only.get(self.wb, ""))
