@@ -99,12 +99,18 @@ def test_the_torch_alignment_makes_the_numpy_pooling_decisions(capture, monkeypa
     assert p0.dtau.max() > 10  # something was pooled: the comparison is not of two empty maps
 
 
-def test_a_sequence_built_one_window_ahead_gives_the_same_frames(capture, monkeypatch):
-    """The GPU path prepares the next window in a thread while this one samples: the same frames."""
+@pytest.mark.parametrize("cores", [2, 64])
+def test_a_sequence_built_windows_ahead_gives_the_same_frames(capture, monkeypatch, cores):
+    """The GPU path prepares the next windows in threads (half the host's cores, 2 to 8) while this one samples: the
+    same frames, in order."""
+    import os
+
     from spikeview.guided import video
 
     a, _ = _frames(capture)
     monkeypatch.setattr(video, "_on_gpu", lambda p: True)
+    monkeypatch.setattr(os, "cpu_count", lambda: cores)
+    assert video.prefetch_depth() == (video.PREFETCH if cores == 2 else video.PREFETCH_MAX)
     b, _ = _frames(capture)
     assert np.array_equal(a, b)
 

@@ -535,24 +535,29 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
             accepted[k] = ok_tile
             # every photosite reads the neighbour at its tile's shift (the 3×3 same-colour sums shift with it)
             tile_ok_px = ok_tile[ty_of][:, tx_of]
-            best_px = best[ty_of][:, tx_of] * f
-            ys = np.arange(h)[:, None] + best_px[..., 0]
-            xs = np.arange(w)[None, :] + best_px[..., 1]
-            inside = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
-            ys, xs = np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)
-            aligned = nk[ys, xs]
-            boxk = _box_same_colour(nk, cfa)[ys, xs]
-            # a shifted 3×3 sum that reaches past the frame's border (edge-extended there) is not the sum
-            # the centre window's photosite sees: such photosites are left out unless the shift is zero
-            margin = (ys >= 2) & (ys < h - 2) & (xs >= 2) & (xs < w - 2)
-            zero = (best_px[..., 0] == 0) & (best_px[..., 1] == 0)
-            weight = chain[1 if k > 0 else -1] & tile_ok_px & inside & (margin | zero) & pixel_ok(refs, boxk, factors[k])
+            if not best.any():  # every tile at rest (a static scene, the common case): no gather, nothing moved
+                weight = chain[1 if k > 0 else -1] & tile_ok_px & pixel_ok(refs, _box_same_colour(nk, cfa), factors[k])
+                aligned = nk
+            else:
+                best_px = best[ty_of][:, tx_of] * f
+                ys = np.arange(h)[:, None] + best_px[..., 0]
+                xs = np.arange(w)[None, :] + best_px[..., 1]
+                inside = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
+                ys, xs = np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)
+                aligned = nk[ys, xs]
+                boxk = _box_same_colour(nk, cfa)[ys, xs]
+                # a shifted 3×3 sum that reaches past the frame's border (edge-extended there) is not the sum
+                # the centre window's photosite sees: such photosites are left out unless the shift is zero
+                margin = (ys >= 2) & (ys < h - 2) & (xs >= 2) & (xs < w - 2)
+                zero = (best_px[..., 0] == 0) & (best_px[..., 1] == 0)
+                weight = (chain[1 if k > 0 else -1] & tile_ok_px & inside & (margin | zero)
+                          & pixel_ok(refs, boxk, factors[k]))
+                still &= ~weight | zero
             chain[1 if k > 0 else -1] = weight
             sides[1 if k > 0 else -1] += weight
-            still &= ~weight | zero
             oks[k] = (weight, aligned)
         for k, (weight, aligned) in oks.items():
-            total += np.where(weight, aligned, 0.0).astype(np.float32)
+            np.add(total, aligned, out=total, where=weight)
             pooled += weight
     # low light: static tiles go on pooling at rest beyond ±radius while their pooled count is low
     far = max(abs(k) for k in offsets)

@@ -139,7 +139,9 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
     # neighbouring windows are shared by consecutive frames; in low light a static tile reads up to ±LOW_LIGHT_RADIUS
     from spikeview.guided.temporal import LOW_LIGHT_RADIUS
 
-    cache = WindowCache(2 * max(2 * p.temporal_radius, LOW_LIGHT_RADIUS if p.temporal_radius else 0) + 6)
+    depth = prefetch_depth() if (n > 1 and _on_gpu(p)) else 0
+    # every window the frames in flight may pool (the prepared ones too: each is a frame further on)
+    cache = WindowCache(2 * max(2 * p.temporal_radius, LOW_LIGHT_RADIUS if p.temporal_radius else 0) + 6 + depth)
 
     def observe(fi: int, c: int) -> tuple[Observation, Any]:
         """Frame ``fi``'s observation (counts, pooling) and plan: they depend on the capture and the
@@ -150,9 +152,9 @@ def reconstruct_sequence(source: SpikeSource, centers: Iterable[int], params: Gu
         w = observe_window(source, c, p, a, roi=roi, previous=fi > 0 and p.reuse is not False, cache=cache)
         return w.obs, w.plan
 
-    # on a GPU the next window's counting, pooling and plan (CPU and small GPU work) run in a thread of their own
-    # while this window samples: the same observations, built in the same order (one thread touches the cache)
-    ahead = _Prefetch(observe, centers) if (n > 1 and _on_gpu(p)) else None
+    # on a GPU the next windows' counting, pooling and plan (CPU work, and small GPU work) run in threads of their own
+    # while this window samples: the same observations, results in frame order (the cache has its lock)
+    ahead = _Prefetch(observe, centers, depth) if depth else None
     for fi, c in enumerate(centers):
         obs, plan = ahead.get(fi) if ahead is not None else observe(fi, c)
         cb = None
@@ -196,8 +198,19 @@ def _on_gpu(p: GuidedConfig) -> bool:
     return resolve_device(p.device).type == "cuda"
 
 
-#: frames whose observation and plan are prepared ahead on a GPU (each in a thread of its own)
+#: fewest frames whose observation and plan are prepared ahead on a GPU (each in a thread of its own)
 PREFETCH = 2
+#: most frames prepared ahead (a host's cores beyond this sit idle; each frame in flight holds its windows' arrays)
+PREFETCH_MAX = 8
+
+
+def prefetch_depth() -> int:
+    """Frames prepared ahead on a GPU: half the host's cores, within :data:`PREFETCH` … :data:`PREFETCH_MAX`. A window's
+    counting and pooling is CPU work (numpy and numba release the GIL for most of it: two threads on two cores give
+    1.4× one), ~1 s at 1000² on one core, against ~0.1 s of sampling on an H100: the GPU waits on the host's cores."""
+    import os
+
+    return int(np.clip((os.cpu_count() or 2) // 2, PREFETCH, PREFETCH_MAX))
 
 
 class _Prefetch:
