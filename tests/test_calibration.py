@@ -291,7 +291,7 @@ def test_the_plan_turns_q_off_on_rates_a_profile_moved_off_the_tfp_grid(sensor):
     alpha = None if cfa == "none" else np.ones(3)
     low = GuidedConfig(temporal_radius=0)  # one 10-tick window: a low count, where Q is on by the rate rule
     plain = observe_window(cap, 30, low, alpha).plan
-    assert plain.quantise and "low rate" in plain.reasons["quantise"]
+    assert plain.quantise and "low count" in plain.reasons["quantise"]
     attach(cap, prof)
     try:
         w = observe_window(cap, 30, low, alpha)

@@ -63,3 +63,32 @@ def test_hot_photosites_are_filled_for_the_frames_and_left_out_of_the_white_poin
     assert main(["info", str(path), "--cfa", cfa or "none"]) == 0
     said = capsys.readouterr().out
     assert "defects:     3 hot pixels" in said and "hot pixels filled from their neighbours" in said
+
+
+def _rggb(img):
+    from spikeview.cfa import channel_map
+
+    cm = channel_map("RGGB", *img.shape[:2])
+    return np.take_along_axis(img, cm[..., None].astype(np.int64), -1)[..., 0]
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", None])
+def test_a_dim_capture_whose_darkest_patch_holds_a_little_light_gives_its_dark_rate(cfa):
+    """Dark chelsea and logo at 0.03 spikes per tick: the darkest patch holds a trace of light in the more sensitive
+    channels, so the floors are 1.4–2.3× apart; below DARK_DIM_RATE the lowest is the dark rate. A brighter pedestal
+    (above it) is scene light unless the floors agree within DARK_AGREE_RATIO; monochrome has no second witness."""
+    from spikeview.classical.defects import DARK_AGREE_RATIO, DARK_DIM_RATE, dark_rate
+
+    rng = np.random.default_rng(5)
+    scene = np.kron(rng.random((16, 16, 3)), np.ones((8, 8, 1))) * [0.8, 0.6, 0.5]
+    scene[:32, :32] = [0.12, 0.06, 0.0]  # a dark brown corner: a little red and green, no blue
+    sensor = np.array([0.6, 1.0, 0.5])
+    dim = scene * sensor * 0.03 + 0.005  # 0.03 spikes per tick at white, the simulator's dark rate
+    rates = _rggb(dim) if cfa else dim.mean(axis=-1)
+    from spikeview.classical import white_balance as wb
+
+    floors = wb.channel_floors(wb.cells_rgb(_rggb(dim), "RGGB"))
+    assert floors.max() > DARK_AGREE_RATIO * floors.min() and floors.min() < DARK_DIM_RATE
+    assert dark_rate(rates, cfa) == (pytest.approx(0.005, rel=0.05) if cfa else 0.0)
+    bright = scene * sensor * 0.6 + 0.005  # the same scene in normal light: the floors are scene light
+    assert dark_rate(_rggb(bright) if cfa else bright.mean(axis=-1), cfa) == 0.0

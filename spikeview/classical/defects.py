@@ -171,6 +171,14 @@ def find_defects(source: Any) -> Defects:
 
 #: :func:`dark_rate`: the three channels' floors must agree within this ratio to be the dark rate ...
 DARK_AGREE_RATIO = 1.3
+#: ... or within this one where the lowest floor is below :data:`DARK_DIM_RATE` (a dark capture: its darkest patch
+#: holds a little light in the more sensitive channels, the lowest floor is then the dark rate plus a trace of its
+#: weakest channel: dark chelsea and logo at 0.03 spikes per tick had floors 1.37× and 2.26× apart, their dark rate
+#: left in, 16° and 7° off once Q's floor no longer hid it) ...
+DARK_AGREE_DIM = 3.0
+#: ... spikes per tick: a pedestal below this (one spike per 50 ticks) common to the channels' darkest patches is taken
+#: for a dark current; a brighter one is scene light unless the floors agree within DARK_AGREE_RATIO
+DARK_DIM_RATE = 0.02
 #: ... while the channels' means above the floor differ by at least this ratio (the sensor's colour cast, which scene
 #: light in the darkest patch would show too)
 DARK_WITNESS_RATIO = 1.5
@@ -183,7 +191,7 @@ def dark_rate(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None)
     (:func:`spikeview.classical.white_balance.channel_floors`, hot photosites replaced by the median). The
     dark rate is the same in every channel (the colour filter does not see it), while scene light in the darkest
     patch follows the sensor's colour response (G about twice R and B): the floors are taken for the dark rate only when
-    they agree within :data:`DARK_AGREE_RATIO` while the channels' means above the floor differ by
+    they agree within :data:`DARK_AGREE_RATIO` (:data:`DARK_AGREE_DIM` below :data:`DARK_DIM_RATE`) while the channels' means above the floor differ by
     :data:`DARK_WITNESS_RATIO` or more (without a cast, agreeing floors could be a gray patch's light), and the lowest
     is returned. A monochrome capture has no second witness:
     0 (its dark rate cannot be told from scene black without a dark capture; ``spikeview calibrate --dark``).
@@ -203,7 +211,8 @@ def dark_rate(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None)
         return 0.0
     floors = wb.channel_floors(img)
     light = img.reshape(-1, 3).mean(axis=0) - floors.min()  # each channel's mean above the floor
-    if not ((floors > 0).all() and (light > 0).all()) or floors.max() > DARK_AGREE_RATIO * floors.min():
+    agree = DARK_AGREE_DIM if floors.min() < DARK_DIM_RATE else DARK_AGREE_RATIO
+    if not ((floors > 0).all() and (light > 0).all()) or floors.max() > agree * floors.min():
         return 0.0
     if light.max() < DARK_WITNESS_RATIO * light.min():
         return 0.0  # channels alike above the floor (a sensor without a cast): agreeing floors prove nothing

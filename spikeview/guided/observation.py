@@ -225,9 +225,26 @@ class Observation:
 
     def window_count(self) -> float:
         """Mean spikes per photosite per ``window``-tick window: the (pooled) rate × Δτ (equals
-        :meth:`mean_count` without pooling). The plan's Q rule reads it: a pooled value is the mean of
-        its windows' TFP values, each on the 1/Δτ grid that Q models."""
+        :meth:`mean_count` without pooling)."""
         return float(self.y.mean()) * self.window
+
+    def quantise_window(self) -> int:
+        """The ticks whose count Q models: ``window``, or for a pooled colour observation its mean Δτ_eff (the aligned
+        windows' spikes summed, so its values step by 1/Δτ_eff; Q rounds to that grid).
+
+        A monochrome observation keeps the own window's 1/Δτ grid: there Q's soft floor (Q(0) ≈ 0.12/Δτ) takes the
+        dark rate's pedestal off a dark frame, which a monochrome capture cannot measure (no second channel to witness
+        it), and the real dark capture and the simulated dark gray scenes lost 0.02 detail and 4 dB without it. In colour
+        the same floor crushes the least sensitive channel's pooled rate (a fraction of a spike a window) to black:
+        dark colourful scenes lost their blue and 8–20 dB (``benchmarks/results/colour.md``, section 8)."""
+        if self.dtau is None or self.cfa is None:
+            return int(self.window)
+        return max(int(self.window), int(round(float(np.mean(self.dtau)))))
+
+    def quantise_count(self) -> float:
+        """The count the plan compares with its Q threshold: spikes per photosite over :meth:`quantise_window` ticks
+        (the pooled count in colour; per ``window``-tick window for monochrome)."""
+        return self.window_count() if self.cfa is None else self.mean_count()
 
     def crop(self, y0: int, y1: int, x0: int, x1: int) -> "Observation":
         """The observation on the photosites ``[y0:y1, x0:x1]`` (``previous`` and ``own`` not kept)."""
