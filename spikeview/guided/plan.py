@@ -280,13 +280,11 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     elif p.guidance == "dps" or p.prior == "sd":
         quantise, r["quantise"] = True, "DPS guidance: the residual of the non-squared loss sees the TFP's 1/Δτ steps"
     else:
-        # the spikes the value is made of: a pooled value is the aligned windows' spikes over Δτ_eff ticks, a count
-        # on the 1/Δτ_eff grid (Observation.quantise_window), not a mean of 1/Δτ steps: on that grid Q's soft floor
-        # read the pooled rate of a dark channel as black (dark scenes without a dark rate lost 8–20 dB)
-        # (colour; a monochrome frame keeps the per-window count and grid: Observation.quantise_window says why)
-        count = obs.quantise_count()
+        # the spikes Q's value is made of: a pooled colour value's over Δτ_eff ticks, a monochrome one's per window
+        # (Observation.quantise_window says why)
+        count, qw = obs.quantise_count(), obs.quantise_window()
         per_window = obs.cfa is None
-        step = "1/Δτ" if obs.quantise_window() == obs.window else f"1/{obs.quantise_window()}-tick"
+        step = "1/Δτ" if qw == obs.window else f"1/{qw}-tick"
         if count < Q_COUNT:
             quantise, r["quantise"] = True, (f"low count ({_count_words(obs, count, per_window)} < {Q_COUNT:g}): the "
                                              f"counts are small integers and Q models their {step} steps")

@@ -51,7 +51,6 @@ from spikeview.guided.plan import Plan, make_plan
 from spikeview.guided.priors.base import DenoiserPrior
 from spikeview.guided.schedule import ve_ladder
 from spikeview.ops.forward import ForwardModel
-from spikeview.ops.quantise import SoftQuantise
 
 SD_NEEDS_DPS = ('the sd prior is guided by gradients through the model: set guidance = "dps" '
                 "(--guidance dps; in the app: Guidance rule ▸ DPS).")
@@ -173,16 +172,10 @@ class GuidedSampler:
         alpha = obs.alpha if (plan.cast and obs.alpha is not None) else None
         fm = ForwardModel(obs.cfa if plan.mosaic else None, obs.window, alpha=alpha,
                           eta=obs.eta if alpha is not None else 1.0, k=params.k if plan.quantise else None,
-                          dense_grad=params.dense_gradient, cast=alpha is not None, bands=plan.levels + 1, norm="l2")
-        # a pooled observation's value is its spikes over Δτ_eff ticks (the aligned windows' counts summed: an
-        # integrate-and-fire pixel carries its charge across windows), so its steps are 1/Δτ_eff: Q rounds to those
-        # (on the 1/Δτ grid, Q's floor Q(0) ≈ 0.12/Δτ read the pooled rate of a dark channel, a fraction of one spike
-        # a window, as black: no-dark-current captures at 0.03 spikes per tick lost their blue and 8–20 dB).
-        # Δτ_eff also enters the noise weights (obs.variance)
-        q = obs.quantise_window()
-        if fm.quantise is not None and q != fm.window:
-            # k scaled with the grid: the same rounding shape within each (finer) step, Q(0) ≈ 0.12 of a step
-            fm.quantise = SoftQuantise(q, params.k * q / fm.window)
+                          dense_grad=params.dense_gradient, cast=alpha is not None, bands=plan.levels + 1, norm="l2",
+                          quantise_window=obs.quantise_window())
+        # a pooled colour observation's value is its spikes over Δτ_eff ticks, so Q rounds to its 1/Δτ_eff steps
+        # (Observation.quantise_window says why); Δτ_eff also enters the noise weights (obs.variance)
         return fm
 
     @classmethod

@@ -39,6 +39,7 @@ class ForwardModel(nn.Module):
         norm: ``"l2"`` (non-squared, DPS reference) or ``"l2sq"``.
         vst: compare :func:`~spikeview.ops.noise.binomial_vst` of both sides, so the residual is
             in units of the (≈ unit) noise standard deviation.
+        quantise_window: the ticks whose count Q models (default ``window``); k is scaled by ``quantise_window / window``.
 
     Shape:
         ``(N, 3, H, W)`` (mono ``(N, 1, H, W)``) in [0, 1] → ``(N, 1, H, W)`` in [0, 1] (with Q).
@@ -57,13 +58,17 @@ class ForwardModel(nn.Module):
         weights: Sequence[float] | None = None,
         norm: str = "l2",
         vst: bool = False,
+        quantise_window: int | None = None,
     ):
         super().__init__()
         self.cfa = check_cfa(cfa, allow_mono=True)
         self.window = check_positive_int(window, "window")
         self.mosaic = Mosaic(self.cfa, dense_grad) if self.cfa is not None else None
         self.cast = ColourCast((1.0, 1.0, 1.0) if alpha is None else alpha, eta) if (cast and self.cfa is not None) else None
-        self.quantise = SoftQuantise(self.window, k) if k is not None else None
+        # Q's grid: the window's 1/Δτ, or a pooled observation's 1/Δτ_eff with k scaled to it (the same rounding shape
+        # within each finer step; spikeview.guided.observation.Observation.quantise_window)
+        qw = self.window if quantise_window is None else check_positive_int(quantise_window, "quantise_window")
+        self.quantise = SoftQuantise(qw, k * qw / self.window) if k is not None else None
         if isinstance(bands, bool) or not isinstance(bands, int) or bands < 1:
             raise ParameterError(f"bands must be an integer >= 1, got {bands!r}; use 1 for a single-scale loss.")
         if norm not in ("l2", "l2sq"):
