@@ -75,9 +75,9 @@ def _rggb(img):
 @pytest.mark.parametrize("cfa", ["RGGB", None])
 def test_a_dim_capture_whose_darkest_patch_holds_a_little_light_gives_its_dark_rate(cfa):
     """Dark chelsea and logo at 0.03 spikes per tick: the darkest patch holds a trace of light in the more sensitive
-    channels, so the floors are 1.4–2.3× apart; below DARK_DIM_RATE the lowest is the dark rate. A brighter pedestal
+    channels, so the floors are up to 1.5× apart; below DARK_DIM_RATE the lowest is then the dark rate. A brighter pedestal
     (above it) is scene light unless the floors agree within DARK_AGREE_RATIO; monochrome has no second witness."""
-    from spikeview.classical.defects import DARK_AGREE_RATIO, DARK_DIM_RATE, dark_rate
+    from spikeview.classical.defects import DARK_AGREE_DIM, DARK_AGREE_RATIO, DARK_DIM_RATE, dark_rate
 
     rng = np.random.default_rng(5)
     scene = np.kron(rng.random((16, 16, 3)), np.ones((8, 8, 1))) * [0.8, 0.6, 0.5]
@@ -92,3 +92,9 @@ def test_a_dim_capture_whose_darkest_patch_holds_a_little_light_gives_its_dark_r
     assert dark_rate(rates, cfa) == (pytest.approx(0.005, rel=0.05) if cfa else 0.0)
     bright = scene * sensor * 0.6 + 0.005  # the same scene in normal light: the floors are scene light
     assert dark_rate(_rggb(bright) if cfa else bright.mean(axis=-1), cfa) == 0.0
+    lit = np.kron(0.3 + 0.7 * rng.random((16, 16, 3)), np.ones((8, 8, 1))) * [0.8, 0.6, 0.5]
+    lit[:32, :32] = [0.3, 0.3, 0.04]  # the darkest patch, with light in every channel: floors over DARK_AGREE_DIM apart
+    lit = lit * sensor * 0.03 + 0.005
+    lit_floors = wb.channel_floors(wb.cells_rgb(_rggb(lit), "RGGB"))
+    assert lit_floors.max() > DARK_AGREE_DIM * lit_floors.min() and lit_floors.min() < DARK_DIM_RATE
+    assert dark_rate(_rggb(lit) if cfa else lit.mean(axis=-1), cfa) == 0.0  # its weakest channel's light is not taken

@@ -205,7 +205,9 @@ def test_q_reason_says_what_the_count_counts_when_windows_are_pooled(cfa):
     and Q on (Observation.quantise_window says why). The reason says which count and gives the own window's beside it."""
     from spikeview.guided.plan import Q_COUNT
 
-    src = ArraySource(spikes_from_rates(np.full((32, 32), 0.03), 120, seed=2), cfa=cfa)  # static: ~0.3 spikes per 10 ticks
+    rates = np.full((32, 32), 0.03)
+    rates[:16, :16] = 0.0  # a black corner: no dark rate in the rates (Observation.quantise_window)
+    src = ArraySource(spikes_from_rates(rates, 120, seed=2), cfa=cfa)  # static: ~0.3 spikes per 10 ticks
     alpha = CAST if cfa else None
     pooled = Observation.from_source(src, 60, 10, alpha=alpha, eta=1.0, radius=3)
     assert pooled.dtau is not None and pooled.own is not None
@@ -236,7 +238,9 @@ def test_q_of_a_pooled_observation_rounds_to_its_pooled_step(cfa):
 
     from spikeview.guided.sampler import GuidedSampler
 
-    src = ArraySource(spikes_from_rates(np.full((32, 32), 0.008), 120, seed=3), cfa=cfa)  # ~0.6 spikes over 70 ticks
+    rates = np.full((32, 32), 0.008)
+    rates[:16, :16] = 0.0  # a black corner: no dark rate in the rates
+    src = ArraySource(spikes_from_rates(rates, 120, seed=3), cfa=cfa)  # ~0.6 spikes over 70 ticks
     alpha = CAST if cfa else None
     pooled = Observation.from_source(src, 60, 10, alpha=alpha, eta=1.0, radius=3)
     plan = make_plan(pooled, GuidedConfig(diffusion="always"))
@@ -270,3 +274,13 @@ def test_cast_reason_names_the_eta_and_the_alpha_it_divides():
     g = np.round(6.0 / np.asarray(CAST), 3).tolist()
     assert f"gains η/α = {g} (η 6, the sampler's exposed η; α = 1/mean SFR, ticks/spike)" in reason
     assert "monochrome" in make_plan(_obs(cfa=None)).reasons["cast"] or "no colour" in make_plan(_obs(cfa=None)).reasons["cast"]
+
+
+def test_a_dark_rate_left_in_keeps_q_on_the_window_grid():
+    """The same dim static colour scene without black (its darkest floor 0.03 spikes per tick: a dark rate no profile
+    took off): Q stays on the own window's grid, whose floor takes the pedestal off, and decides per window."""
+    src = ArraySource(spikes_from_rates(np.full((32, 32), 0.03), 120, seed=2), cfa="RGGB")
+    pooled = Observation.from_source(src, 60, 10, alpha=CAST, eta=1.0, radius=3)
+    assert pooled.floor * pooled.window >= 0.03 and pooled.quantise_window() == 10
+    plan = make_plan(pooled, GuidedConfig(diffusion="always"))
+    assert plan.quantise and "per 10-tick window, the rate pooled" in plan.reasons["quantise"]

@@ -150,7 +150,9 @@ def test_q_is_decided_from_the_pooled_count(cfa):
     from spikeview.guided.plan import Q_COUNT
 
     for rate, on in ((0.05, cfa is None), (0.01, True)):  # monochrome: the count per window (quantise_window)
-        src = ArraySource(_spikes(np.full((90, 32, 32), rate), seed=4), cfa=cfa)
+        rates = np.full((90, 32, 32), rate)
+        rates[:, :16, :16] = 0.0  # a black corner: no dark rate in the rates (Observation.quantise_window)
+        src = ArraySource(_spikes(rates, seed=4), cfa=cfa)
         pooled = Observation.from_source(src, 45, 10, radius=3, eta=2.0)
         alone = Observation.from_source(src, 45, 10, eta=2.0, radius=0)
         assert pooled.mean_count() > 3 * pooled.window_count()  # most photosites pooled several windows

@@ -64,6 +64,7 @@ class Defects:
         ticks: how many ticks were measured.
         dark: the sensor's dark rate (spikes per tick) measured on a colour capture's darkest patches (:func:`dark_rate`),
             0 where it cannot be told from scene black (a monochrome capture, or channels whose floors differ).
+        floor: a colour capture's lowest channel floor in spikes per tick (:func:`darkest_floor`; 0 for monochrome).
     """
 
     hot: np.ndarray
@@ -71,6 +72,7 @@ class Defects:
     edges: tuple[int, int, int, int]
     ticks: int
     dark: float = 0.0
+    floor: float = 0.0
 
     def describe(self) -> str:
         """One line for ``spikeview info``."""
@@ -161,7 +163,8 @@ def find_defects(source: Any) -> Defects:
             t, b, bt, bb = _edge_runs(rows, rref)
             left, right, bl, br = _edge_runs(cols, cref)
             border, edges = (t, b, left, right), (bt, bb, bl, br)
-    d = Defects(hot, border, edges, ticks, dark_rate(r, getattr(source, "cfa", None), hot))
+    cfa = getattr(source, "cfa", None)
+    d = Defects(hot, border, edges, ticks, dark_rate(r, cfa, hot), darkest_floor(r, cfa, hot))
     try:
         source._spikeview_defects = d
     except AttributeError:  # a source with __slots__: measured again next time
@@ -171,11 +174,13 @@ def find_defects(source: Any) -> Defects:
 
 #: :func:`dark_rate`: the three channels' floors must agree within this ratio to be the dark rate ...
 DARK_AGREE_RATIO = 1.3
-#: ... or within this one where the lowest floor is below :data:`DARK_DIM_RATE` (a dark capture: its darkest patch
-#: holds a little light in the more sensitive channels, the lowest floor is then the dark rate plus a trace of its
-#: weakest channel: dark chelsea and logo at 0.03 spikes per tick had floors 1.37× and 2.26× apart, their dark rate
-#: left in, 16° and 7° off once Q's floor no longer hid it) ...
-DARK_AGREE_DIM = 3.0
+#: ... or within this one where the lowest floor is below :data:`DARK_DIM_RATE` (a dim capture: its darkest patch
+#: holds a little light in the more sensitive channels, and the lowest floor is the dark rate plus a trace of its
+#: weakest channel: dark chelsea at 0.03 spikes per tick had floors 1.37× apart, its dark rate left in, 16° off once Q's
+#: floor no longer hid it, 2.7° with it taken off). Not wider: at 3× the bench's coins_rgb took 0.0074 spikes per tick
+#: for its dark rate (the simulator's is 0.005) and its white balance went 8.6° → 22°; its rocket and coffee, 2.2× and
+#: 2.4× apart, keep theirs (benchmarks/results/colour.md, section 8) ...
+DARK_AGREE_DIM = 1.5
 #: ... spikes per tick: a pedestal below this (one spike per 50 ticks) common to the channels' darkest patches is taken
 #: for a dark current; a brighter one is scene light unless the floors agree within DARK_AGREE_RATIO
 DARK_DIM_RATE = 0.02
@@ -196,24 +201,42 @@ def dark_rate(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None)
     is returned. A monochrome capture has no second witness:
     0 (its dark rate cannot be told from scene black without a dark capture; ``spikeview calibrate --dark``).
     """
-    from spikeview.cfa import parse_cfa
-    from spikeview.classical import white_balance as wb
-
-    cfa = parse_cfa(cfa)
-    if cfa is None:
+    stats = _floor_stats(rates, cfa, hot)
+    if stats is None:
         return 0.0
-    r = np.asarray(rates, dtype=np.float64)
-    if hot is not None and hot.any():
-        r = r.copy()
-        r[hot] = np.median(r)
-    img = wb.cells_rgb(r, cfa)
-    if min(img.shape[:2]) < 2 * wb.DARK_BLOCK:
-        return 0.0
-    floors = wb.channel_floors(img)
-    light = img.reshape(-1, 3).mean(axis=0) - floors.min()  # each channel's mean above the floor
+    floors, means = stats
+    light = means - floors.min()  # each channel's mean above the floor
     agree = DARK_AGREE_DIM if floors.min() < DARK_DIM_RATE else DARK_AGREE_RATIO
     if not ((floors > 0).all() and (light > 0).all()) or floors.max() > agree * floors.min():
         return 0.0
     if light.max() < DARK_WITNESS_RATIO * light.min():
         return 0.0  # channels alike above the floor (a sensor without a cast): agreeing floors prove nothing
     return float(floors.min())
+
+
+def darkest_floor(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None) -> float:
+    """A colour capture's lowest channel floor in spikes per tick (its darkest patches' weakest channel): ~0 where the
+    scene has black and the sensor no dark rate (0.0002–0.0015 on such simulated scenes at 0.03–0.15 spikes per tick),
+    the dark rate or more where one is in the rates (0.005 in the simulator); 0 for monochrome. The guided plan's Q
+    rule reads it (:meth:`spikeview.guided.observation.Observation.quantise_window`)."""
+    stats = _floor_stats(rates, cfa, hot)
+    return 0.0 if stats is None else float(stats[0].min())
+
+
+def _floor_stats(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(floors, means)`` per channel of a colour capture's mean rates (hot photosites replaced by the median), or
+    ``None`` (monochrome, or too small)."""
+    from spikeview.cfa import parse_cfa
+    from spikeview.classical import white_balance as wb
+
+    cfa = parse_cfa(cfa)
+    if cfa is None:
+        return None
+    r = np.asarray(rates, dtype=np.float64)
+    if hot is not None and hot.any():
+        r = r.copy()
+        r[hot] = np.median(r)
+    img = wb.cells_rgb(r, cfa)
+    if min(img.shape[:2]) < 2 * wb.DARK_BLOCK:
+        return None
+    return wb.channel_floors(img), img.reshape(-1, 3).mean(axis=0)

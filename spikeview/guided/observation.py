@@ -82,6 +82,13 @@ def _bayer_planes(y: np.ndarray) -> list[tuple[slice, slice]]:
     return [(slice(i, None, 2), slice(j, None, 2)) for i in (0, 1) for j in (0, 1)]
 
 
+#: spikes per photosite per window: a capture's darkest floor below this is black (no dark rate in its rates), and a
+#: pooled colour observation's Q models its pooled count (:meth:`Observation.quantise_window`); a quarter of Q's own floor
+#: (0.12 of a level at k = 20). Simulated scenes without a dark current: 0.002–0.015 a 10-tick window; the simulator's
+#: dark rate: 0.05
+PEDESTAL_COUNT = 0.03
+
+
 @dataclass
 class Observation:
     """One TFP window of a stream, with everything the forward model needs (see module docstring).
@@ -102,6 +109,8 @@ class Observation:
         own: the centre window alone (a pooled observation's reuse test compares own windows).
         corrected: what moved ``y`` off the TFP's 1/Δτ grid (a camera profile's dark rate and flat field:
             :func:`spikeview.classical.calibration.correct_observation`), or ``None``; the plan's Q rule reads it.
+        floor: the capture's darkest floor in spikes per tick (:func:`spikeview.classical.defects.darkest_floor`: a
+            dark rate left in the rates shows there); :meth:`quantise_window` reads it.
     """
 
     y: np.ndarray
@@ -116,6 +125,7 @@ class Observation:
     pooling: Any = field(default=None, repr=False)
     own: "Observation | None" = field(default=None, repr=False)
     corrected: str | None = None
+    floor: float = 0.0
 
     def __post_init__(self) -> None:
         y = np.asarray(self.y)
@@ -169,6 +179,11 @@ class Observation:
             device: where the pooling's alignment runs (``guided.device``; ``None`` = the CPU).
         """
         a, b = window_range(center, window, source.n_frames)
+        floor = 0.0
+        if source.cfa is not None:
+            from spikeview.classical.defects import find_defects
+
+            floor = find_defects(source).floor  # measured once per capture (cached on it)
 
         def count(x: int, y: int) -> np.ndarray:  # through the sequence's cache (and its lock) when there is one
             return window_counts(source, x, y) if cache is None else cache.counts(source, x, y)
@@ -200,14 +215,15 @@ class Observation:
                     if took.any():  # the plan's temporal row says it
                         pool.reason += (f"; the rate of {100 * float(took.mean()):.0f}% of photosites (pooled at rest) from "
                                         "the intervals between their spikes")
-                return cls(y, source.cfa, b - a, alpha, eta, (a, b), int(center), prev, pool.dtau, pool, own)
-            return cls(counts / float(b - a), source.cfa, b - a, alpha, eta, (a, b), int(center), prev, None, pool)
+                return cls(y, source.cfa, b - a, alpha, eta, (a, b), int(center), prev, pool.dtau, pool, own, floor=floor)
+            return cls(counts / float(b - a), source.cfa, b - a, alpha, eta, (a, b), int(center), prev, None, pool,
+                       floor=floor)
         from spikeview.guided.temporal import Pooling, neighbour_offsets
 
         y = counts_to_sfr(count(a, b), b - a)
         pool = Pooling(0, b - a, neighbour_offsets(a, b, int(source.n_frames), 1), kind="off",
                        reason="off (temporal_radius = 0): the window alone, as in the paper")
-        return cls(y, source.cfa, b - a, alpha, eta, (a, b), int(center), prev, None, pool)
+        return cls(y, source.cfa, b - a, alpha, eta, (a, b), int(center), prev, None, pool, floor=floor)
 
     # ------------------------------------------------------------------------------ geometry
     @property
@@ -229,29 +245,37 @@ class Observation:
         return float(self.y.mean()) * self.window
 
     def quantise_window(self) -> int:
-        """The ticks whose count Q models: ``window``, or for a pooled colour observation its mean Δτ_eff (the aligned
-        windows' spikes summed, so its values step by 1/Δτ_eff; Q rounds to that grid).
+        """The ticks whose count Q models: ``window``, or for a pooled colour observation without a dark rate in its
+        rates its mean Δτ_eff (the aligned windows' spikes summed, so its values step by 1/Δτ_eff; Q rounds to that
+        grid).
 
-        A monochrome observation keeps the own window's 1/Δτ grid: there Q's soft floor (Q(0) ≈ 0.12/Δτ) takes the
-        dark rate's pedestal off a dark frame, which a monochrome capture cannot measure (no second channel to witness
-        it), and the real dark capture and the simulated dark gray scenes lost 0.02 detail and 4 dB without it. In colour
-        the same floor crushes the least sensitive channel's pooled rate (a fraction of a spike a window) to black:
-        dark colourful scenes lost their blue and 8–20 dB (``benchmarks/results/colour.md``, section 8)."""
-        if self.dtau is None or self.cfa is None:
+        On the own window's 1/Δτ grid Q's soft floor (Q(0) ≈ 0.12/Δτ) crushes a rate of a fraction of one spike a
+        window to black. Where the capture's darkest patches are black (:attr:`floor` × Δτ under
+        :data:`PEDESTAL_COUNT`) that floor ate the least sensitive channel's pooled rate: dark colourful scenes without a
+        dark current lost their blue and 8–20 dB (``benchmarks/results/colour.md``, section 8). Where a dark rate is left
+        in the rates (no profile subtracted it), the same floor takes it off, and the per-window grid stays (without
+        it the bench's coffee sequences lost 0.05–0.17 SSIM, coins_rgb 3° of white balance). A monochrome
+        observation keeps the per-window grid too: it cannot measure its dark rate (the real dark capture and the
+        simulated dark gray scenes lost 0.02 detail and 4 dB without the floor)."""
+        if self.dtau is None or not self._counts_pooled():
             return int(self.window)
         return max(int(self.window), int(round(float(np.mean(self.dtau)))))
 
     def quantise_count(self) -> float:
         """The count the plan compares with its Q threshold: spikes per photosite over :meth:`quantise_window` ticks
-        (the pooled count in colour; per ``window``-tick window for monochrome)."""
-        return self.window_count() if self.cfa is None else self.mean_count()
+        (the pooled count, or per ``window``-tick window)."""
+        return self.mean_count() if (self.dtau is not None and self._counts_pooled()) else self.window_count()
+
+    def _counts_pooled(self) -> bool:
+        """Q models the pooled count (:meth:`quantise_window`): a colour observation whose darkest floor is black."""
+        return self.cfa is not None and self.floor * self.window < PEDESTAL_COUNT
 
     def crop(self, y0: int, y1: int, x0: int, x1: int) -> "Observation":
         """The observation on the photosites ``[y0:y1, x0:x1]`` (``previous`` and ``own`` not kept)."""
         d = None if self.dtau is None else self.dtau[y0:y1, x0:x1]
         pool = None if self.pooling is None else self.pooling.crop(y0, y1, x0, x1)
         return Observation(self.y[y0:y1, x0:x1], self.cfa, self.window, self.alpha, self.eta, self.ticks, self.center,
-                           None, d, pool, corrected=self.corrected)
+                           None, d, pool, corrected=self.corrected, floor=self.floor)
 
     @property
     def channels(self) -> int:
