@@ -116,14 +116,30 @@ def test_right_settings_give_no_warning(tmp_path):
         assert src.info.warnings == []
 
 
-def test_a_wrong_width_is_reported(tmp_path, capsys):
-    path = write_capture(tmp_path / "c.dat", 128, 96, 200)
-    with open_source(path, width=96, height=128, cfa="RGGB") as src:
+@pytest.mark.parametrize("cfa", ["RGGB", "none"])
+def test_a_wrong_width_is_refused_before_anything_is_written(tmp_path, capsys, cfa):
+    path = write_capture(tmp_path / "c.dat", 128, 96, 200, cfa=cfa != "none")
+    with open_source(path, width=96, height=128, cfa=cfa) as src:
         assert any("rows do not line up at width 96" in w and "128x96" in w for w in src.info.warnings), src.info.warnings
-    assert main(["reconstruct", str(path), "--width", "192", "--height", "64", "--cfa", "RGGB", "--at", "100",
-                 "--out", str(tmp_path / "f.png")]) == 0
+        assert src.info.likely_size == (128, 96)
+    with open_source(path, width=128, height=96, cfa=cfa) as src:
+        assert src.info.likely_size is None
+    out = tmp_path / "f.png"
+    assert main(["reconstruct", str(path), "--width", "192", "--height", "64", "--cfa", cfa, "--at", "100",
+                 "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "c.dat: the rows do not line up at 192x64" in err and "--width 128 --height 96" in err, err
+    assert "--keep-geometry" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert not out.exists() and not list(tmp_path.glob("f*"))
+    # the size it names reads the file; --keep-geometry writes it as given, with the warning
+    assert main(["reconstruct", str(path), "--width", "128", "--height", "96", "--cfa", cfa, "--at", "100",
+                 "--out", str(out)]) == 0
+    assert "rows do not line up" not in capsys.readouterr().err
+    assert main(["reconstruct", str(path), "--width", "192", "--height", "64", "--cfa", cfa, "--at", "100",
+                 "--out", str(tmp_path / "g.png"), "--keep-geometry"]) == 0
     err = capsys.readouterr().err
     assert "spikeview: warning: c.dat: the rows do not line up at width 192" in err and "frames are 128x96" in err
+    assert (tmp_path / "g.png").exists()
 
 
 def test_an_odd_width_with_a_colour_filter_is_reported(tmp_path):

@@ -177,6 +177,17 @@ def test_errors_are_one_sentence_naming_the_file(tmp_path):
     with pytest.raises(InputFileError, match="noise.bin: not a spike file") as e:  # random bytes: no geometry offered
         open_source(noise)
     assert str(e.value).count(". ") == 0  # one sentence
+    # given a geometry, a text file or an image is still said to be one (not read as spikes); random bytes with a
+    # geometry are the user's call (a noisy capture may look so)
+    notes = tmp_path / "notes.txt"
+    notes.write_text("ticks 0-99 were dark; then the lamp came on\n" * 400)
+    png = tmp_path / "frame.dat"
+    png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(16_376))
+    for path, what in ((notes, "it holds text"), (png, "a PNG image")):
+        with pytest.raises(InputFileError, match=f"{path.name}: not a spike file \\({what}\\)"):
+            open_source(path, width=64, height=64)
+    with open_source(noise, width=8, height=8, flip_vertical=False) as src:
+        assert src.n_frames == 12_347 // 8
     good = write_plain(tmp_path / "ok.dat", _spikes(9, 2, 8, 8))
     with pytest.raises(InputFileError, match="is a sidecar.*open ok.dat"):
         open_source(sidecar_path(good))

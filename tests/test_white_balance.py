@@ -129,7 +129,7 @@ def test_cli_white_balance_flag_prints_the_choice_and_records_it(tmp_path, capsy
     src = _source(_colourful() * TINT * 0.8, None if cfa == "none" else cfa)
     path = tmp_path / "cap.dat"
     write_plain(path, src.read(0, src.n_frames))
-    geom = ["--width", "64", "--height", "64", "--cfa", cfa]
+    geom = ["--width", "128", "--height", "128", "--cfa", cfa]  # 64² cells of 2×2 photosites
     outs = {}
     for m in ("gray-world", "auto"):
         out = tmp_path / f"{m}.npy"

@@ -50,12 +50,20 @@ def add_geometry_flags(p: argparse.ArgumentParser) -> None:
         else:
             g.add_argument(flag, type=kind, metavar=meta.get("metavar"), help=meta["help"])
     g.add_argument("--tag-check", choices=["sequence", "lenient"], help=TAG_CHECK_HELP)
+    g.add_argument("--keep-geometry", action="store_true",
+                   help="write frames at the given --width/--height even where the firing rates say the rows are sheared "
+                        "and point to another frame size (refused without it)")
 
 
-def open_source_from_args(args: argparse.Namespace, recipe: Any = None, *, show_warnings: bool = True):
+def open_source_from_args(args: argparse.Namespace, recipe: Any = None, *, show_warnings: bool = True,
+                          writes: bool = False):
     """The source ``args.input`` names, read with the geometry flags (or ``recipe``'s ``[stream]``, flags
     already folded in); the stream's warnings (a truncated file, a doubtful width or CFA) are said on
-    stderr before the work unless ``show_warnings`` is false (``info`` lists them itself)."""
+    stderr before the work unless ``show_warnings`` is false (``info`` lists them itself).
+
+    ``writes``: the command writes what it reads (frames, a profile): a width whose rows the firing rates show
+    sheared, where another frame size lines them up (``info.likely_size``), is refused in one sentence naming the
+    size and ``--keep-geometry`` (nothing is written)."""
     from spikeview.io import open_source
     from spikeview.recipe import StreamTable
 
@@ -70,6 +78,15 @@ def open_source_from_args(args: argparse.Namespace, recipe: Any = None, *, show_
     from spikeview.classical.calibration import attach
 
     try:
+        likely = src.info.likely_size
+        if writes and likely is not None and not getattr(args, "keep_geometry", False):
+            from spikeview.errors import ParameterError
+
+            name = src.info.path.name if src.info.path else args.input
+            raise ParameterError(
+                f"{name}: the rows do not line up at {src.width}x{src.height} (the frames would come out sheared); judging "
+                f"by the spikes the frames are {likely[0]}x{likely[1]}: run with --width {likely[0]} --height {likely[1]} "
+                "(or add --keep-geometry to write them as given).")
         attach(src, camera)
     except BaseException:
         src.close()

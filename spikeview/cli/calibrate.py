@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
             path = getattr(args, name)
             if path is not None:
                 args.input = path
-                sources[name] = open_source_from_args(args)
+                sources[name] = open_source_from_args(args, writes=True)
         profile = measure(sources.get("dark"), sources.get("flat"))
     finally:
         for s in sources.values():

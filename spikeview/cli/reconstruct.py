@@ -187,7 +187,7 @@ def _run_one(args: argparse.Namespace) -> int:
     recipe = recipe if recipe is not None else recipe_from_args(args)
     out = Path(args.out)
     _check_output_first(out, args)
-    src = open_source_from_args(args, recipe)
+    src = open_source_from_args(args, recipe, writes=True)
     if chosen:  # once the input is known to be a capture
         print(f"no --out given: writing {out} in the current folder (--out NAME.png for an 8-bit sRGB image)", file=sys.stderr)
     with src:

@@ -556,13 +556,14 @@ _MAGIC = ((b"\x89PNG\r\n\x1a\n", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image
           (b"\x1f\x8b", "a gzip archive"), (b"\x93NUMPY", "a .npy array without the .npy suffix"))
 
 
-def not_spike_data(buf: np.ndarray) -> str | None:
+def not_spike_data(buf: np.ndarray, structure: bool = True) -> str | None:
     """Why the bytes of a file offered as a plain spike stream are not one, or ``None`` if they may be.
 
     A plain stream has no header, so only what it is not can be told: a known file signature (an
     image, an archive), text (every byte printable), or random bytes with no row structure (each bit
     set half the time, byte values uniform, and no frame size at which pixels repeat from tick to
-    tick, :func:`rank_geometries`).
+    tick, :func:`rank_geometries`; only with ``structure``: with the geometry given, a noisy capture is
+    the user's to read).
     """
     head = bytes(np.asarray(buf[:16]))
     for magic, what in _MAGIC:
@@ -580,7 +581,7 @@ def not_spike_data(buf: np.ndarray) -> str | None:
             return "it holds text"
         except UnicodeDecodeError:
             pass
-    if buf.size >= 4096:
+    if structure and buf.size >= 4096:
         hist = np.bincount(sample, minlength=256).astype(np.float64)
         expected = sample.size / 256.0
         chi2_stat = float(((hist - expected) ** 2 / expected).sum())
@@ -677,6 +678,19 @@ def odd_width_warning(cfa: str, width: int) -> str:
             "sensor does; check --width, or pass --cfa none for a monochrome capture.")
 
 
+#: the frame size the rates point to is taken as the likely one (the CLI refuses the given one) only when its rows
+#: line up at least this well (mean correlation 1–4 rows down; a sheared Spike-Zoo clip's true size: 0.98, a dark
+#: simulated 256² capture's: 0.53) and it holds at least LIKELY_SIDE pixels a side (a 16x16 flat test stream's rates
+#: "line up" best at 15x8)
+LIKELY_SPATIAL = 0.5
+LIKELY_SIDE = 16
+
+
+def _likely(src, width: int, height: int, spatial: float) -> None:
+    if spatial >= LIKELY_SPATIAL and min(width, height) >= LIKELY_SIDE:
+        src.info.likely_size = (int(width), int(height))
+
+
 def rate_warnings(src, *, check_width: bool = True) -> list[str]:
     """Sentences for people when the firing rates suggest a wrong width, colour filter or flip.
 
@@ -688,6 +702,9 @@ def rate_warnings(src, *, check_width: bool = True) -> list[str]:
     Args:
         src: an open :class:`~spikeview.io.source.SpikeSource`.
         check_width: also try the other widths of the same frame size (plain files).
+
+    Where the rows look sheared and another frame size lines them up well (:data:`LIKELY_SPATIAL`), that size is
+    also set as ``src.info.likely_size`` (the CLI refuses to write frames at a sheared width).
     """
     from spikeview.cfa import cfa_to_str, parse_cfa
 
@@ -719,12 +736,14 @@ def rate_warnings(src, *, check_width: bool = True) -> list[str]:
             if guess is not None and guess.size != (w, h) and guess.spatial > 0.3 and here < 0.5 * guess.spatial:
                 out.append(f"the rows do not line up at width {w} (the rates look sheared); judging by the spikes the "
                            f"frames are {guess.width}x{guess.height}: check --width and --height.")
+                _likely(src, guess.width, guess.height, guess.spatial)
             elif not _whole_frames(src):
                 out.append(f"the rows do not line up at width {w} and the file is not whole {w}x{h} frames, so the "
                            "frame size is probably wrong: check --width and --height.")
             elif best[1] != w and best[0] > 0.3 and here < 0.5 * best[0]:
                 out.append(f"the rows do not line up at width {w} (the rates look sheared); the frames are probably "
                            f"{best[1]}x{best[2]}: check --width and --height.")
+                _likely(src, best[1], best[2], best[0])
     cfa = parse_cfa(src.cfa) if src.cfa is not None else None
     if cfa is None and not out:
         note = monochrome_cfa_warning(rates)

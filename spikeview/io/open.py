@@ -217,10 +217,11 @@ def _detect(path: Path, *, width: int | None, height: int | None,
             and raw1m.looks_like_raw1m(buf):
         return "raw1m", raw1m.RAW1M_WIDTH, raw1m.RAW1M_HEIGHT, (
             "detected a raw 1000x1000 stream from its block tags; pass --format to be explicit.")
-    if only in (None, "plain") and width is None and height is None:
+    if only in (None, "plain"):
         from spikeview.io.geometry import not_spike_data
 
-        why = not_spike_data(buf)
+        # with the geometry given, only what a file plainly is (a signature, text) says it is not spikes
+        why = not_spike_data(buf, structure=width is None and height is None)
         if why is not None:
             raise InputFileError(f"{path}: not a spike file ({why}); spikeview reads plain packed .dat spike streams "
                                  "(with --width and --height), raw 400x250 and 1000x1000 camera streams (--format raw400, "

@@ -59,6 +59,8 @@ class StreamInfo:
         extra: free-form metadata carried from the sidecar (simulator parameters, drop counters).
         camera: the camera profile whose dark, flat and colour corrections apply to this stream
             (:class:`spikeview.classical.calibration.CameraProfile`, set by :func:`spikeview.classical.calibration.attach`), or ``None``.
+        likely_size: ``(width, height)`` the firing rates point to when the given width shears the rows
+            (set by :func:`spikeview.io.geometry.rate_warnings` with its warning), else ``None``.
     """
 
     width: int
@@ -73,6 +75,7 @@ class StreamInfo:
     warnings: list[str] = field(default_factory=list)
     extra: dict[str, Any] = field(default_factory=dict)
     camera: Any = None
+    likely_size: tuple[int, int] | None = None
 
     def __post_init__(self) -> None:
         self.cfa = parse_cfa(self.cfa)
