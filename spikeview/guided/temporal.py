@@ -142,6 +142,35 @@ class Pooling:
 TORCH_ON_CPU = False
 
 
+class _Arrays:
+    """The pooling's per-photosite arrays: numpy (``device`` None), or torch tensors on ``device`` (:data:`TORCH_ON_CPU`:
+    the CPU). ``put`` moves a numpy array there (dtypes kept), ``get`` brings one back."""
+
+    def __init__(self, device: Any = None):
+        self.torch = None
+        if device is not None:
+            import torch
+
+            self.torch, self.device = torch, torch.device(device)
+
+    def put(self, a: Any) -> Any:
+        if self.torch is None or not isinstance(a, np.ndarray):
+            return a
+        return self.torch.from_numpy(np.ascontiguousarray(a)).to(self.device)
+
+    def get(self, a: Any) -> Any:
+        return a if isinstance(a, np.ndarray) else a.cpu().numpy()
+
+    def full(self, shape: tuple[int, int], value: bool) -> Any:
+        return self.put(np.full(shape, value))
+
+    def zeros(self, shape: tuple[int, int], dtype: Any) -> Any:
+        return self.put(np.zeros(shape, dtype=dtype))
+
+    def where(self, cond: Any, a: Any, b: float) -> Any:
+        return np.where(cond, a, np.float32(b)) if self.torch is None else self.torch.where(cond, a, b)
+
+
 # --------------------------------------------------------------------------------- window reads
 class WindowCache:
     """Counts of recently read windows (a sequence's consecutive frames share most neighbours)."""
@@ -235,11 +264,38 @@ def dispersion_curve(raw: np.ndarray, cap: float, keep: float = 0.9, bins: int =
     return np.asarray(levels), np.asarray(kappas)
 
 
-def _countvar(g: np.ndarray, cap: float, curve: tuple[np.ndarray, np.ndarray], scale: float = 1.0) -> np.ndarray:
+def _countvar(g: Any, cap: float, curve: tuple[np.ndarray, np.ndarray], scale: float = 1.0) -> Any:
     """Variance ``κ(g·scale) · g (1 − g/cap)`` of counts ``g`` (``scale`` maps ``g`` to the curve's super-pixel
-    units), float32: κ interpolated linearly in float64 between the curve's levels (constant beyond them)."""
+    units), float32: κ interpolated linearly in float64 between the curve's levels (constant beyond them).
+    A torch tensor ``g`` stays on its device (:func:`_interp_torch`: numpy's interpolation)."""
+    if not isinstance(g, np.ndarray) and hasattr(g, "double"):
+        g64 = g.double()
+        return (_interp_torch(g64 * scale, curve[0], curve[1]) * _binvar_torch(g64, cap)).float()
     kap = np.interp(np.asarray(g, dtype=np.float64) * scale, curve[0], curve[1])
     return (kap * _binvar(np.asarray(g, dtype=np.float64), cap)).astype(np.float32)
+
+
+def _binvar_torch(g: Any, cap: float) -> Any:
+    """:func:`_binvar` of a torch tensor."""
+    return (g * (1.0 - g / cap)).clamp_min(0.0)
+
+
+def _interp_torch(x: Any, xp: np.ndarray, fp: np.ndarray) -> Any:
+    """``np.interp(x, xp, fp)`` for a float64 torch tensor ``x`` (on its device): the same slope and offset per interval,
+    ``fp[0]``/``fp[-1]`` beyond the ends."""
+    import torch
+
+    xp_t = torch.as_tensor(np.asarray(xp, dtype=np.float64), device=x.device)
+    fp_t = torch.as_tensor(np.asarray(fp, dtype=np.float64), device=x.device)
+    if xp_t.numel() == 1:
+        return torch.full_like(x, float(fp_t[0]))
+    j = (torch.searchsorted(xp_t, x.contiguous(), right=True) - 1).clamp(0, xp_t.numel() - 2)
+    x0, x1, y0, y1 = xp_t[j], xp_t[j + 1], fp_t[j], fp_t[j + 1]
+    dx = x1 - x0
+    slope = torch.where(dx > 0, (y1 - y0) / torch.where(dx > 0, dx, torch.ones_like(dx)), torch.zeros_like(dx))
+    out = slope * (x - x0) + y0
+    out = torch.where(x == x1, y1, out)
+    return torch.where(x <= xp_t[0], fp_t[0], torch.where(x >= xp_t[-1], fp_t[-1], out))
 
 
 def _tile_sum(x: np.ndarray, t: int) -> np.ndarray:
@@ -369,10 +425,19 @@ def _fit_tiles(a: np.ndarray, th: int, tw: int) -> np.ndarray:
     return np.pad(a, pad, mode="edge") if pad[0][1] or pad[1][1] else a
 
 
-def _box_same_colour(c: np.ndarray, cfa: str | None) -> np.ndarray:
-    """3×3 sums over photosites of the same colour (within each Bayer plane)."""
+def _box_same_colour(c: Any, cfa: str | None) -> Any:
+    """3×3 sums over photosites of the same colour (within each Bayer plane); a torch tensor stays on its device
+    (:func:`_box_torch`)."""
     from scipy.ndimage import uniform_filter
 
+    if not isinstance(c, np.ndarray) and hasattr(c, "double"):
+        if cfa is None:
+            return _box_torch(c)
+        out = c.new_empty(c.shape)
+        for i in (0, 1):
+            for j in (0, 1):
+                out[i::2, j::2] = _box_torch(c[i::2, j::2])
+        return out
     if cfa is None:
         return uniform_filter(c, size=3, mode="nearest") * 9.0
     out = np.empty_like(c)
@@ -380,6 +445,19 @@ def _box_same_colour(c: np.ndarray, cfa: str | None) -> np.ndarray:
         for j in (0, 1):
             out[i::2, j::2] = uniform_filter(c[i::2, j::2], size=3, mode="nearest") * 9.0
     return out
+
+
+def _box_torch(c: Any) -> Any:
+    """``uniform_filter(c, 3, mode="nearest") * 9`` of a float32 torch tensor, as scipy rounds it: a 3-tap mean along
+    the rows, then the columns, each summed in float64 and stored as float32."""
+    import torch
+
+    def mean3(x: Any, dim: int) -> Any:
+        n = x.shape[dim]
+        p = torch.cat((x.narrow(dim, 0, 1), x, x.narrow(dim, n - 1, 1)), dim).double()
+        return ((p.narrow(dim, 0, n) + p.narrow(dim, 1, n) + p.narrow(dim, 2, n)) / 3.0).float()
+
+    return mean3(mean3(c.float(), 0), 1) * 9.0
 
 
 #: bounds of the measured scale of a neighbour's differences over the model's (:func:`_noise_scale`)
@@ -476,7 +554,8 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     zero_g = np.zeros((-(-raw0.shape[0] // tile_g), -(-raw0.shape[1] // tile_g), 2), np.int64)
     chi0 = {k: match_quality(raw0, raws[k], zero_g, tile_g, 1.0, cap, curve) for k in offsets}
     factors = {k: _noise_scale(chi0[k], ADJACENT_DISPERSION if abs(k) == 1 else 1.0, tile_g) for k in offsets}
-    if getattr(device, "type", "cpu") != "cpu" or TORCH_ON_CPU:  # a resolved torch.device (Observation.from_source)
+    on_device = getattr(device, "type", "cpu") != "cpu" or TORCH_ON_CPU  # a resolved torch.device (Observation.from_source)
+    if on_device:
         motion, chis, frame = _search_torch(raw0, g0, raws, guides, window, radius, curve, kernel_energy, factors,
                                             device if device is not None else "cpu")
     else:
@@ -497,15 +576,19 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
         chis[k] = np.where(at_rest, chi0[k], chis[k])
     cap9 = 9.0 * window  # a 3×3 same-colour sum holds at most 9 × window spikes per window
     lv = 4.0 / 9.0  # a 3×3 same-colour sum's level in the curve's super-pixel (2×2) units
+    # the per-photosite decisions: numpy, or torch on the alignment's device (there the host's cores, not the GPU, set
+    # a clip's pace: benchmarks/gpu_profile.py); the same operations, the same float32/float64 sums
+    xp = _Arrays((device if device is not None else "cpu") if on_device else None)
+    total, pooled = xp.put(total), xp.put(pooled)
 
-    def reference() -> tuple[np.ndarray, np.ndarray]:
+    def reference() -> tuple[Any, Any]:
         """What was pooled so far as a 3×3 same-colour sum per window, and that mean's variance (once per step: both
         sides of a distance are tested against the same reference)."""
         box_n = _box_same_colour(1.0 + pooled, cfa)
         ref = 9.0 * _box_same_colour(total, cfa) / box_n
         return ref, _countvar(ref, cap9, curve, lv) * 9.0 / box_n
 
-    def pixel_ok(refs: tuple[np.ndarray, np.ndarray], nk_aligned_box: np.ndarray, factor: float) -> np.ndarray:
+    def pixel_ok(refs: tuple[Any, Any], nk_aligned_box: Any, factor: float) -> Any:
         """The per-photosite test: the 3×3 same-colour sum of the aligned neighbour against the pooled reference."""
         ref, ref_var = refs
         var = ref_var + _countvar(nk_aligned_box, cap9, curve, lv)
@@ -514,10 +597,12 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     # nearest windows first; a photosite takes window k only if it took every window between k and the
     # centre (motion grows with the distance), and window k is compared with what was pooled so far
     # (the centre and the accepted nearer windows: a less noisy reference than the centre alone)
-    chain = {-1: np.ones((h, w), dtype=bool), 1: np.ones((h, w), dtype=bool)}
+    chain = {-1: xp.full((h, w), True), 1: xp.full((h, w), True)}
     # how many windows each photosite took on each side (contiguous: the chain), and whether all at zero shift
-    sides = {-1: np.zeros((h, w), np.int64), 1: np.zeros((h, w), np.int64)}
-    still = np.ones((h, w), dtype=bool)
+    sides = {-1: xp.zeros((h, w), np.int64), 1: xp.zeros((h, w), np.int64)}
+    still = xp.full((h, w), True)
+    ty_px, tx_px = xp.put(ty_of), xp.put(tx_of)
+    rows, cols = xp.put(np.arange(h)[:, None]), xp.put(np.arange(w)[None, :])
     for d in sorted({abs(k) for k in offsets}):
         oks = {}
         refs = reference()
@@ -525,7 +610,7 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
             if k not in counts:
                 continue
             check_cancelled("while pooling the neighbouring windows")  # each window's pooling: ~0.1 s at 1000×1000
-            nk = counts[k]
+            nk = xp.put(counts[k])
             # tiles of the guide are tiles of TILE photosites (an odd last row/column of a Bayer frame
             # has no super-pixel: it takes its neighbour tile's match)
             best, chi = _fit_tiles(motion[k], th, tw), _fit_tiles(chis[k], th, tw)
@@ -534,31 +619,33 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
             shifts[k] = best * f
             accepted[k] = ok_tile
             # every photosite reads the neighbour at its tile's shift (the 3×3 same-colour sums shift with it)
-            tile_ok_px = ok_tile[ty_of][:, tx_of]
+            tile_ok_px = xp.put(ok_tile)[ty_px][:, tx_px]
+            side = 1 if k > 0 else -1
             if not best.any():  # every tile at rest (a static scene, the common case): no gather, nothing moved
-                weight = chain[1 if k > 0 else -1] & tile_ok_px & pixel_ok(refs, _box_same_colour(nk, cfa), factors[k])
+                weight = chain[side] & tile_ok_px & pixel_ok(refs, _box_same_colour(nk, cfa), factors[k])
                 aligned = nk
             else:
-                best_px = best[ty_of][:, tx_of] * f
-                ys = np.arange(h)[:, None] + best_px[..., 0]
-                xs = np.arange(w)[None, :] + best_px[..., 1]
+                best_px = xp.put(best * f)[ty_px][:, tx_px]
+                ys, xs = rows + best_px[..., 0], cols + best_px[..., 1]
                 inside = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
-                ys, xs = np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)
+                ys, xs = ys.clip(0, h - 1), xs.clip(0, w - 1)
                 aligned = nk[ys, xs]
                 boxk = _box_same_colour(nk, cfa)[ys, xs]
                 # a shifted 3×3 sum that reaches past the frame's border (edge-extended there) is not the sum
                 # the centre window's photosite sees: such photosites are left out unless the shift is zero
                 margin = (ys >= 2) & (ys < h - 2) & (xs >= 2) & (xs < w - 2)
                 zero = (best_px[..., 0] == 0) & (best_px[..., 1] == 0)
-                weight = (chain[1 if k > 0 else -1] & tile_ok_px & inside & (margin | zero)
-                          & pixel_ok(refs, boxk, factors[k]))
+                weight = chain[side] & tile_ok_px & inside & (margin | zero) & pixel_ok(refs, boxk, factors[k])
                 still &= ~weight | zero
-            chain[1 if k > 0 else -1] = weight
-            sides[1 if k > 0 else -1] += weight
+            chain[side] = weight
+            sides[side] += weight
             oks[k] = (weight, aligned)
         for k, (weight, aligned) in oks.items():
-            np.add(total, aligned, out=total, where=weight)
+            total += xp.where(weight, aligned, 0.0)
             pooled += weight
+    total, pooled, still = xp.get(total), xp.get(pooled), xp.get(still)
+    chain = {k: xp.get(v) for k, v in chain.items()}
+    sides = {k: xp.get(v) for k, v in sides.items()}
     # low light: static tiles go on pooling at rest beyond ±radius while their pooled count is low
     far = max(abs(k) for k in offsets)
     ext: tuple[int, ...] = ()
