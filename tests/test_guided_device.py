@@ -171,3 +171,56 @@ def test_a_capture_too_small_for_guided_gets_one_sentence(tmp_path, capsys, cfa,
     err = capsys.readouterr().err
     assert rc != 0 and "this is a bug" not in err and "needs at least 2x2; use --method tfp" in err
     assert not (tmp_path / "o.npy").exists()
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", None], ids=["bayer", "mono"])
+def test_the_device_arrays_give_numpys_sums_and_variances(cfa):
+    """The pooling's per-photosite arrays on a device (spikeview.guided.temporal._box_torch, _interp_torch): the same
+    float32/float64 roundings as scipy's 3×3 sums and numpy's interpolation, bit for bit on the CPU."""
+    import torch
+
+    from spikeview.guided import temporal
+
+    rng = np.random.default_rng(1)
+    for shape in ((64, 48), (65, 47), (2, 9)):
+        for x in (rng.integers(0, 40, shape).astype(np.float32), (rng.random(shape) * 37 / 3).astype(np.float32)):
+            a = temporal._box_same_colour(x, cfa)
+            b = temporal._box_same_colour(torch.from_numpy(x), cfa).numpy()
+            assert b.dtype == a.dtype and np.array_equal(a, b)
+    curve = (np.array([1.0, 3.0, 7.0, 7.0, 20.0]), np.array([0.5, 0.6, 0.9, 1.0, 1.2]))  # a repeated level too
+    g = np.concatenate([rng.random(5000) * 30, [0.0, 1.0, 3.0, 7.0, 20.0, 25.0]]).astype(np.float32)
+    for scale in (1.0, 4.0 / 9.0):
+        a = temporal._countvar(g, 40.0, curve, scale)
+        b = temporal._countvar(torch.from_numpy(g), 40.0, curve, scale).numpy()
+        assert b.dtype == np.float32 and np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", "none"])
+def test_a_panning_and_a_dark_capture_pool_alike_on_the_device_path(cfa, monkeypatch):
+    """The gather at each tile's shift (a pan) and the low-light extension after the device stage: the same pooled
+    counts, support and decisions as numpy."""
+    from scipy.ndimage import gaussian_filter
+
+    from spikeview.cfa import parse_cfa
+    from spikeview.guided import temporal
+    from spikeview.io.source import ArraySource
+    from spikeview.sim import SimConfig, demo_scene, simulate
+
+    rng = np.random.default_rng(4)
+    tex = gaussian_filter(rng.random((64, 160)), 2.0)
+    tex = 0.1 + 0.8 * (tex - tex.min()) / (tex.max() - tex.min())
+    rates = np.stack([tex[:, int(round(0.2 * t)):int(round(0.2 * t)) + 64] for t in range(90)]) * 0.6  # 2 px a window
+    pan = ArraySource((rng.random(rates.shape) < rates).astype(np.uint8), cfa=None if cfa == "none" else cfa)
+    dark = simulate(demo_scene(size=64, seed=1), SimConfig(n_ticks=200, width=64, height=64, cfa=cfa, seed=6, rate=0.03))
+    moved = extended = False
+    for src, centre in ((pan, 45), (dark, 100)):
+        a, b = centre - 5, centre + 5
+        tot0, p0 = temporal.pool_counts(src, a, b, 2, parse_cfa(src.cfa))
+        monkeypatch.setattr(temporal, "TORCH_ON_CPU", True)
+        tot1, p1 = temporal.pool_counts(src, a, b, 2, parse_cfa(src.cfa))
+        monkeypatch.setattr(temporal, "TORCH_ON_CPU", False)
+        assert np.array_equal(tot0, tot1) and np.array_equal(p0.dtau, p1.dtau) and p0.reason == p1.reason
+        assert all(np.array_equal(x, y) for x, y in zip(p0.support, p1.support, strict=True))
+        moved |= any(np.any(s != 0) for s in p0.shifts.values())
+        extended |= bool(p0.extended)
+    assert moved and extended  # tiles read at a shift (the gather), and the dark capture pooled beyond ±radius
