@@ -68,6 +68,9 @@ class SequenceState:
     #: the gains α are gray-world's or the camera profile's (chosen, asked for or recorded): the guided frame keeps that
     #: balance (:mod:`spikeview.guided.balance`, :func:`sampler_params`)
     keep_balance: bool = False
+    #: on a dark capture, the TFI half window its darker parts' intervals need (:func:`tfi_reach`); ``None`` otherwise.
+    #: TFI searches at least this far (:func:`tfi_half_window`)
+    tfi_reach: int | None = None
 
     @property
     def sampler_white(self) -> float | None:
@@ -135,7 +138,32 @@ def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> Seque
         how += (f" over {span['ticks']}-tick windows (a {window}-tick window holds under {WHITE_LOW_COUNT:g} spikes at "
                 "the white: its count levels, not the scene, would set the percentile)")
     return SequenceState(a, white, note, why, how, span["window_white"] if longer else None,
-                         keep_balance=detail["keep_balance"])
+                         keep_balance=detail["keep_balance"], tfi_reach=tfi_reach(span["ticks"]) if longer else None)
+
+
+#: on a dark capture TFI searches far enough to find the interval of a photosite at this fraction of the white (a
+#: search too short caps the darker photosites' intervals at 2·half_window: they then all show 1/(2·half_window), a
+#: flat level near the white of a dark capture, tinted by the gains: a dark chelsea at 0.03 spikes a tick came out a
+#: uniform lilac with the ±32-tick default, and shows the cat with ±256)
+TFI_REACH_FRACTION = 1.0 / 8.0
+
+
+def tfi_reach(white_ticks: int) -> int:
+    """The TFI half window of a dark capture whose white holds :data:`~spikeview.classical.colour_cast.WHITE_LOW_COUNT`
+    spikes in ``white_ticks`` ticks (:func:`~spikeview.classical.colour_cast.estimate_white`'s longer windows): one
+    interval of a photosite at :data:`TFI_REACH_FRACTION` of the white on each side, within the setting's bounds."""
+    from spikeview.classical.colour_cast import WHITE_LOW_COUNT
+    from spikeview.classical.config import ClassicalConfig
+
+    hi = next(f.metadata["param"].hi for f in dataclasses.fields(ClassicalConfig) if f.name == "tfi_half_window")
+    return int(min(hi, np.ceil(float(white_ticks) / WHITE_LOW_COUNT / TFI_REACH_FRACTION)))
+
+
+def tfi_half_window(configured: int, state: SequenceState | None) -> int:
+    """How far TFI searches: the setting (``classical.tfi_half_window``), or further on a dark capture
+    (:attr:`SequenceState.tfi_reach`). The CLI says so; the app's TFI pane shows it in its title."""
+    reach = None if state is None else state.tfi_reach
+    return int(configured) if reach is None else max(int(configured), int(reach))
 
 
 def recipe_for_state(recipe: Recipe, state: SequenceState, source: Any = None) -> Recipe:
@@ -330,6 +358,8 @@ def reconstruct_windows(source: Any, centers: Iterable[int], recipe: Recipe, sta
     from spikeview.errors import Cancelled, is_cancelled
 
     cfg = recipe.classical.replace(method=recipe.run.method)
+    if cfg.method == "tfi":
+        cfg = cfg.replace(tfi_half_window=tfi_half_window(cfg.tfi_half_window, state))
     for i, frame in enumerate(reconstruct_frames(source, centers, cfg, alpha=state.alpha)):
         if is_cancelled(cancel):
             raise Cancelled(f"reconstruction cancelled at frame {i + 1} of {n}")

@@ -45,3 +45,53 @@ def test_a_dark_capture_tells_a_tfp_user_what_to_do(tmp_path):
                 assert r.returncode == 0, r.stderr
                 said = "note: a dark capture for a 10-tick window" in r.stderr and "--method guided" in r.stderr
                 assert said == (name == "dark" and method == "tfp"), (name, cfa, method, r.stderr)
+
+
+def test_a_dark_captures_tfi_searches_as_far_as_its_intervals_need(tmp_path):
+    """TFI on a dark capture: the ±32-tick default search capped most intervals and showed a flat level; the search
+    now reaches as far as a photosite at 1/8 of the white needs (spikeview.pipeline.tfi_reach), said in one note, and
+    the frame is TFI at that reach. A bright capture keeps its setting and gets no note. Monochrome and Bayer."""
+    from spikeview.classical.tfi import tfi
+    from spikeview.io import open_source
+    from spikeview.io.plain import write_plain
+    from spikeview.pipeline import prepare_sequence, reconstruct_windows, tfi_half_window
+    from spikeview.recipe import Recipe
+
+    rng = np.random.default_rng(2)
+    for cfa in ("RGGB", "none"):
+        for name, p in (("dark", 0.03), ("bright", 0.4)):
+            ramp = p * np.linspace(0.1, 1.0, 32)[None, None, :]
+            v = rng.random((32, 32))
+            s = np.zeros((400, 32, 32), np.uint8)
+            for t in range(400):  # integrate-and-fire: evenly spaced spikes, as a real pixel's
+                v += ramp[0]
+                s[t] = v >= 1
+                v -= s[t]
+            path = tmp_path / f"{name}_{cfa}.dat"
+            write_plain(path, s, cfa=None if cfa == "none" else cfa)
+            r = subprocess.run([sys.executable, "-m", "spikeview", "reconstruct", str(path), "--cfa", cfa, "--width", "32",
+                                "--height", "32", "--method", "tfi", "--at", "200", "--out", str(tmp_path / f"{name}.npy"),
+                                "--overwrite"], capture_output=True, text=True, timeout=300)
+            assert r.returncode == 0, r.stderr
+            said = "note: a dark capture, so TFI searches ±" in r.stderr and "not ±32 (--tfi-half-window)" in r.stderr
+            assert said == (name == "dark"), (name, cfa, r.stderr)
+            recipe = Recipe().with_values({"run.method": "tfi", "run.at": 200})
+            with open_source(path, width=32, height=32, cfa=cfa) as src:
+                state = prepare_sequence(src, recipe, warn=False)
+                hw = tfi_half_window(32, state)
+                frame = next(reconstruct_windows(src, [200], recipe, state))
+                raw = tfi(src, 200, hw)
+                if name == "bright":
+                    assert state.tfi_reach is None and hw == 32
+                    continue
+                assert f"±{hw} ticks" in r.stderr and 100 <= hw <= 512
+                assert tfi_half_window(1, state) == hw and tfi_half_window(512, state) == 512  # at least the setting
+                # the capped floor 1/(2·half_window): most of the darker part (from 1/6 of the white) sat on it with ±32,
+                # almost none of it now
+                dim = np.s_[:, 3:12]
+                assert (tfi(src, 200, 32)[dim] == np.float32(1 / 64)).mean() > 0.5
+                assert (raw[dim] == np.float32(1 / (2 * hw))).mean() < 0.05
+                # the frame is TFI at that reach (the colour cast and demosaic applied to it as before)
+                ref = next(reconstruct_windows(src, [200], recipe.with_values({"classical.tfi_half_window": hw}),
+                                               prepare_sequence(src, recipe, warn=False)))
+                assert np.array_equal(frame, ref)

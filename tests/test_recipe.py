@@ -185,7 +185,7 @@ def test_a_recipe_saved_by_the_app_gives_the_cli_the_apps_pixels(capture, tmp_pa
     recipe = session_recipe(s)
     ticks = jobs.export_ticks(recipe, s.n_frames)
     assert len(ticks) >= 2
-    alpha, _note, _white, _said = jobs.alpha_job(s.source, recipe, Ctx())
+    alpha, _note, _white, _said, _reach = jobs.alpha_job(s.source, recipe, Ctx())
     app_out = tmp_path / "app.npy"
     jobs.export_job(jobs.ExportRequest(s.source, str(capture), ticks, recipe, alpha, app_out), Ctx())
     preset = save_preset(s, tmp_path / "app.toml")
@@ -261,7 +261,7 @@ def test_the_apps_guided_metrics_compare_like_with_like():
     s = Session()
     s.open_stream(st)
     s.set_tick(60)
-    alpha, _note, white, _said = jobs.alpha_job(st.source, s.recipe(), Ctx())
+    alpha, _note, white, _said, _reach = jobs.alpha_job(st.source, s.recipe(), Ctx())
     res = jobs.guided_job(jobs.GuidedRequest(st.source, 60, dict(s.params), alpha, None, st.ground_truth, 1, s.recipe()),
                           Ctx())
     assert res.psnr > 20.0 and res.ssim > 0.6, (res.psnr, res.ssim)

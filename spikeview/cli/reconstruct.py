@@ -180,7 +180,7 @@ def _run_one(args: argparse.Namespace) -> int:
     if batch.wants_zarr(args):  # a .zarr output: the chunked, resumable batch path
         return batch.run_zarr(args)
     from spikeview.export import describe_slow_motion, slow_motion_factor
-    from spikeview.pipeline import prepare_sequence, recipe_for_state, white_balance_line, white_point_line, window_centres, write_sequence
+    from spikeview.pipeline import prepare_sequence, recipe_for_state, tfi_half_window, white_balance_line, white_point_line, window_centres, write_sequence
     from spikeview.classical.colour_cast import WHITE_LOW_COUNT
     from spikeview.pipeline import WriteOptions
 
@@ -221,12 +221,18 @@ def _run_one(args: argparse.Namespace) -> int:
         notes, first = inactive_notes(recipe, args, src, centres[0], state, asked_precision)
         for note in notes:
             print(f"note: {note}", file=sys.stderr)
-        if recipe.run.method in ("tfp", "tfi") and state.exposure_white is not None:
+        if recipe.run.method == "tfp" and state.exposure_white is not None:
             # the white point needed longer windows: a classical frame of this window is a few single spikes
             print(f"note: a dark capture for a {recipe.classical.window}-tick window (it holds under "
-                  f"{WHITE_LOW_COUNT:g} spikes where the scene is white), so each {recipe.run.method.upper()} frame is "
+                  f"{WHITE_LOW_COUNT:g} spikes where the scene is white), so each TFP frame is "
                   "mostly single spikes; --method guided pools the neighbouring windows where the scene is still, or a "
                   "longer --window averages more ticks.", file=sys.stderr)
+        reach = tfi_half_window(recipe.classical.tfi_half_window, state)
+        if recipe.run.method == "tfi" and reach > recipe.classical.tfi_half_window:
+            print(f"note: a dark capture, so TFI searches ±{reach} ticks around each frame's tick, not "
+                  f"±{recipe.classical.tfi_half_window} (--tfi-half-window): its darker parts fire less than once in "
+                  f"{2 * recipe.classical.tfi_half_window} ticks, and a shorter search shows them all at one flat level.",
+                  file=sys.stderr)
         if out.suffix.lower() == ".mp4" and recipe.run.at is None and recipe.run.range is None:
             print(f"note: no --at or --range, so the video holds one frame (the window at tick {centres[0]}); pass "
                   f"--range 0:{src.n_frames} for the whole capture.", file=sys.stderr)

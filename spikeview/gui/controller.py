@@ -302,6 +302,7 @@ class Controller(QtCore.QObject):
         from spikeview.transfer import resolve_transfer
 
         params = dict(self.session.params)
+        params["tfi_half_window"] = self.session.tfi_search()  # a dark capture's search reaches further, as the CLI's
         if params.get("transfer") == "auto":
             src = self.session.source
             params["transfer"] = resolve_transfer("auto", getattr(src, "info", None))[0]
@@ -538,7 +539,7 @@ class Controller(QtCore.QObject):
             self.alpha_history.emit((ticks, np.array([self._alpha_hist[t] for t in ticks])))
             self.rates_ready.emit(result)
         elif channel == "alpha":
-            self.alpha, self.alpha_note, white, said = result
+            self.alpha, self.alpha_note, white, said, self.session.tfi_reach = result
             self.white_balance_said.emit(said or "", self.alpha)
             if self.alpha_note:
                 self._error(self.alpha_note)

@@ -58,14 +58,15 @@ def rates_job(req: PreviewRequest, mosaic: np.ndarray, ctx: Any) -> core.RatesRe
     return core.site_rates(mosaic, req.source.cfa, int(req.params["window"]), req.roi, tick=req.tick)
 
 
-def alpha_job(source: Any, recipe: Recipe, ctx: Any) -> tuple[np.ndarray | None, str | None, float | None, str | None]:
+def alpha_job(source: Any, recipe: Recipe, ctx: Any) -> tuple[np.ndarray | None, str | None, float | None, str | None, int | None]:
     """The sequence's gains α and white point from :func:`spikeview.pipeline.prepare_sequence`, with the
-    sentence for a channel without spikes (no warning: warnings are process-global in threads) and the line the CLI
-    prints about the white balance (which, why, the gains; ``None`` without gains)."""
+    sentence for a channel without spikes (no warning: warnings are process-global in threads), the line the CLI
+    prints about the white balance (which, why, the gains; ``None`` without gains) and how far a dark capture's TFI
+    searches at least (:attr:`spikeview.pipeline.SequenceState.tfi_reach`, ``None`` unless dark)."""
     from spikeview.pipeline import prepare_sequence, white_balance_line
 
     state = prepare_sequence(source, recipe, warn=False)
-    return state.alpha, state.note, state.white, white_balance_line(state)
+    return state.alpha, state.note, state.white, white_balance_line(state), state.tfi_reach
 
 
 def sequence_state(source: Any, recipe: Recipe, alpha: np.ndarray | None, ctx: Any) -> Any:

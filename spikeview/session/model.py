@@ -309,6 +309,9 @@ class Session:
         self.mark_in: int | None = None
         self.mark_out: int | None = None
         self.roi: tuple[int, int, int, int] | None = None
+        #: how far a dark capture's TFI searches at least (:attr:`spikeview.pipeline.SequenceState.tfi_reach`, set with
+        #: the capture's white point), ``None`` otherwise: :meth:`tfi_search`
+        self.tfi_reach: int | None = None
         self._play_accum = 0.0
         if params:
             self.update_params(params, record=False, strict=False)
@@ -331,6 +334,7 @@ class Session:
         old = self.stream
         self.stream = stream
         self.playing = False
+        self.tfi_reach = None  # the new capture's comes with its white point
         n = int(stream.source.n_frames)
         same_shape = old is not None and (old.source.height, old.source.width) == (stream.source.height, stream.source.width)
         if keep_position:
@@ -366,6 +370,13 @@ class Session:
         t = self.tick if tick is None else int(tick)
         a = min(max(t - w // 2, 0), max(n - w, 0))
         return a, a + w
+
+    def tfi_search(self) -> int:
+        """How far TFI searches around a tick: the TFI half-window setting, or further on a dark capture
+        (:func:`spikeview.pipeline.tfi_half_window`: the CLI's rule)."""
+        from spikeview.pipeline import SequenceState, tfi_half_window
+
+        return tfi_half_window(int(self.params["tfi_half_window"]), SequenceState(tfi_reach=self.tfi_reach))
 
     def set_tick(self, tick: int) -> None:
         """Move to ``tick`` (clamped into the stream: scrubbing past the end stops at the end)."""

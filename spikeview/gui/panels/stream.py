@@ -324,7 +324,9 @@ class StreamPanel(QtWidgets.QWidget):
         #: the tick the TFI pane shows (during playback it is refreshed a few times a second, so it trails)
         self.tfi_tick = int(tick)
         note = "  · refreshed 5×/s while playing" if self.session.playing else ""
-        self.tfi.set_title(f"TFI at tick {tick}  (±{int(self.session.get('tfi_half_window'))} ticks){note}")
+        reach = self.session.tfi_search()
+        dark = "" if reach == int(self.session.get("tfi_half_window")) else ", a dark capture's"
+        self.tfi.set_title(f"TFI at tick {tick}  (±{reach} ticks{dark}){note}")
 
     # ------------------------------------------------------------------------------ ROI
     def _toggle_roi(self, on: bool) -> None:
