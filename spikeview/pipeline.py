@@ -138,25 +138,24 @@ def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> Seque
         how += (f" over {span['ticks']}-tick windows (a {window}-tick window holds under {WHITE_LOW_COUNT:g} spikes at "
                 "the white: its count levels, not the scene, would set the percentile)")
     return SequenceState(a, white, note, why, how, span["window_white"] if longer else None,
-                         keep_balance=detail["keep_balance"], tfi_reach=tfi_reach(span["ticks"]) if longer else None)
+                         keep_balance=detail["keep_balance"], tfi_reach=tfi_reach(source) if longer else None)
 
 
-#: on a dark capture TFI searches far enough to find the interval of a photosite at this fraction of the white (a
-#: search too short caps the darker photosites' intervals at 2·half_window: they then all show 1/(2·half_window), a
-#: flat level near the white of a dark capture, tinted by the gains: a dark chelsea at 0.03 spikes a tick came out a
-#: uniform lilac with the ±32-tick default, and shows the cat with ±256)
-TFI_REACH_FRACTION = 1.0 / 8.0
+def tfi_reach(source: Any) -> int:
+    """The TFI half window of a dark capture: far enough that a photosite with no spike in the search reads the
+    capture's darkest floor (:func:`spikeview.classical.defects.darkest_floor`: its black, or its dark rate), not a level
+    above it: ``1 / (2·floor)`` ticks, within the setting's bounds (up to 512).
 
-
-def tfi_reach(white_ticks: int) -> int:
-    """The TFI half window of a dark capture whose white holds :data:`~spikeview.classical.colour_cast.WHITE_LOW_COUNT`
-    spikes in ``white_ticks`` ticks (:func:`~spikeview.classical.colour_cast.estimate_white`'s longer windows): one
-    interval of a photosite at :data:`TFI_REACH_FRACTION` of the white on each side, within the setting's bounds."""
-    from spikeview.classical.colour_cast import WHITE_LOW_COUNT
+    A search too short caps the darker photosites' intervals at 2·half_window: they all show 1/(2·half_window), one flat
+    level, tinted by the gains. With the ±32-tick default a dark chelsea at 0.03 spikes a tick (floor 0.005) came out a
+    uniform lilac; the real `uhsr.npz`, whose floor (0.016 spikes a tick) is that level, keeps its ±32 (a longer search
+    there only trades the floor for single-interval noise: detail 0.698 → 0.621 against its long exposure at ±187)."""
     from spikeview.classical.config import ClassicalConfig
+    from spikeview.classical.defects import find_defects
 
     hi = next(f.metadata["param"].hi for f in dataclasses.fields(ClassicalConfig) if f.name == "tfi_half_window")
-    return int(min(hi, np.ceil(float(white_ticks) / WHITE_LOW_COUNT / TFI_REACH_FRACTION)))
+    floor = float(find_defects(source).floor)
+    return int(hi if floor <= 1.0 / (2 * hi) else min(hi, np.ceil(1.0 / (2.0 * floor))))
 
 
 def tfi_half_window(configured: int, state: SequenceState | None) -> int:

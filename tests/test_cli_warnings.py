@@ -49,8 +49,11 @@ def test_a_dark_capture_tells_a_tfp_user_what_to_do(tmp_path):
 
 def test_a_dark_captures_tfi_searches_as_far_as_its_intervals_need(tmp_path):
     """TFI on a dark capture: the ±32-tick default search capped most intervals and showed a flat level; the search
-    now reaches as far as a photosite at 1/8 of the white needs (spikeview.pipeline.tfi_reach), said in one note, and
-    the frame is TFI at that reach. A bright capture keeps its setting and gets no note. Monochrome and Bayer."""
+    now reaches until an empty search reads the capture's darkest floor (spikeview.pipeline.tfi_reach), said in one
+    note, and the frame is TFI at that reach. A bright capture keeps its setting and gets no note. Mono and Bayer."""
+    import pytest
+
+    from spikeview.classical.defects import find_defects
     from spikeview.classical.tfi import tfi
     from spikeview.io import open_source
     from spikeview.io.plain import write_plain
@@ -84,13 +87,15 @@ def test_a_dark_captures_tfi_searches_as_far_as_its_intervals_need(tmp_path):
                 if name == "bright":
                     assert state.tfi_reach is None and hw == 32
                     continue
-                assert f"±{hw} ticks" in r.stderr and 100 <= hw <= 512
+                assert f"±{hw} ticks" in r.stderr and 40 <= hw <= 512 and hw == state.tfi_reach
                 assert tfi_half_window(1, state) == hw and tfi_half_window(512, state) == 512  # at least the setting
-                # the capped floor 1/(2·half_window): most of the darker part (from 1/6 of the white) sat on it with ±32,
-                # almost none of it now
-                dim = np.s_[:, 3:12]
-                assert (tfi(src, 200, 32)[dim] == np.float32(1 / 64)).mean() > 0.5
-                assert (raw[dim] == np.float32(1 / (2 * hw))).mean() < 0.05
+                # an empty search reads 1/(2·half_window): the capture's darkest floor now, not a level near the white
+                floor = find_defects(src).floor
+                assert 1 / (2 * hw) == pytest.approx(floor, rel=0.05)
+                # photosites firing at least once in half_window ticks are never capped now; with ±32 many of them were
+                seen = np.s_[:, ramp[0, 0] >= 1.0 / hw]
+                assert (raw[seen] == np.float32(1 / (2 * hw))).mean() == 0
+                assert (tfi(src, 200, 32)[seen] == np.float32(1 / 64)).mean() > 0.2
                 # the frame is TFI at that reach (the colour cast and demosaic applied to it as before)
                 ref = next(reconstruct_windows(src, [200], recipe.with_values({"classical.tfi_half_window": hw}),
                                                prepare_sequence(src, recipe, warn=False)))

@@ -913,13 +913,14 @@ def test_a_dark_captures_tfi_pane_searches_as_far_as_the_cli(window, qtbot, tmp_
     window.set_stream(core.open_file(path))
     qtbot.waitUntil(lambda: window.session.tfi_reach is not None, timeout=WAIT_MS)
     reach = window.session.tfi_reach
-    assert 100 <= reach <= 512 and window.session.tfi_search() == reach and window.session.get("tfi_half_window") == 32
+    assert 40 <= reach <= 512 and window.session.tfi_search() == reach and window.session.get("tfi_half_window") == 32
     assert window.controller.display_params()["tfi_half_window"] == reach
     window.session.set_tick(200)
     qtbot.waitUntil(lambda: f"TFI at tick 200  (±{reach} ticks, a dark capture's)" in window.stream_panel.tfi.title.text(),
                     timeout=WAIT_MS)
     req = window.controller._request(tick=200, factor=1)  # what the pane's job computes from
     assert req.params["tfi_half_window"] == reach
-    # at the ±32 setting most of the darker half shows the capped floor; at the reach almost none of it
-    assert (tfi(req.source, 200, 32)[:, 3:12] == np.float32(1 / 64)).mean() > 0.5
-    assert (tfi(req.source, 200, reach)[:, 3:12] == np.float32(1 / (2 * reach))).mean() < 0.05
+    # photosites firing at least once in `reach` ticks are never capped at the reach; with ±32 many of them were
+    seen = np.s_[:, ramp >= 1.0 / reach]
+    assert (tfi(req.source, 200, reach)[seen] == np.float32(1 / (2 * reach))).mean() == 0
+    assert (tfi(req.source, 200, 32)[seen] == np.float32(1 / 64)).mean() > 0.2

@@ -199,10 +199,11 @@ def test_demosaic_auto_is_bilinear_for_frames_too_small_for_malvar():
 
 @pytest.mark.parametrize("cfa", [None, "RGGB"])
 def test_q_reason_says_what_the_count_counts_when_windows_are_pooled(cfa):
-    """With temporal_radius > 0 the count compared with Q_COUNT is, in colour, the spikes pooled over Δτ_eff (a pooled
-    value is the aligned windows' spikes summed, on a 1/Δτ_eff grid): a rate of 0.3 spikes a window, which the own
-    window alone would quantise, is pooled to ~2 spikes: Q off. Monochrome keeps the pooled rate per 10-tick window
-    and Q on (Observation.quantise_window says why). The reason says which count and gives the own window's beside it."""
+    """With temporal_radius > 0 the count compared with Q_COUNT is, where the darkest floor is black, the spikes pooled
+    over Δτ_eff (a pooled value is the aligned windows' spikes summed, on a 1/Δτ_eff grid): a rate of 0.3 spikes a
+    window, which the own window alone would quantise, is pooled to ~2 spikes: Q off, in colour and monochrome alike
+    (a dark rate left in keeps the per-window count: test_a_dark_rate_left_in_keeps_q_on_the_window_grid). The reason
+    says which count and gives the own window's beside it."""
     from spikeview.guided.plan import Q_COUNT
 
     rates = np.full((32, 32), 0.03)
@@ -215,14 +216,9 @@ def test_q_reason_says_what_the_count_counts_when_windows_are_pooled(cfa):
     reason = plan.reasons["quantise"]
     own = pooled.own.mean_count()
     assert own < Q_COUNT <= pooled.mean_count() and f"{own:.2f} in its own 10-tick window" in reason
-    if cfa is None:
-        assert plan.quantise and pooled.quantise_window() == 10
-        assert (f"{pooled.window_count():.2f} spikes per photosite per 10-tick window, the rate pooled over the aligned "
-                "windows") in reason
-    else:
-        assert not plan.quantise and pooled.quantise_window() > 5 * 10
-        assert f"count {pooled.mean_count():.2f} spikes per photosite pooled over the aligned windows (Δτ_eff " in reason
-        assert f">= {Q_COUNT:g}" in reason
+    assert not plan.quantise and pooled.quantise_window() > 5 * 10
+    assert f"count {pooled.mean_count():.2f} spikes per photosite pooled over the aligned windows (Δτ_eff " in reason
+    assert f">= {Q_COUNT:g}" in reason
     alone = Observation.from_source(src, 60, 10, alpha=alpha, eta=1.0, radius=0)
     plan = make_plan(alone, GuidedConfig(diffusion="always"))
     assert plan.quantise and f"{alone.mean_count():.2f} spikes per photosite per window" in plan.reasons["quantise"]
@@ -231,9 +227,9 @@ def test_q_reason_says_what_the_count_counts_when_windows_are_pooled(cfa):
 
 @pytest.mark.parametrize("cfa", [None, "RGGB"])
 def test_q_of_a_pooled_observation_rounds_to_its_pooled_step(cfa):
-    """Where Q is on for a pooled colour observation its grid is 1/Δτ_eff, not 1/Δτ (k scaled with it): on the 10-tick
-    grid Q's soft floor (Q(0) ≈ 0.12/Δτ at k = 20) read a dark channel's pooled rate, a fraction of a spike a window,
-    as black. Monochrome keeps the 10-tick grid (its floor takes off the dark rate it cannot measure)."""
+    """Where Q is on for a pooled observation whose darkest floor is black its grid is 1/Δτ_eff, not 1/Δτ (k scaled
+    with it): on the 10-tick grid Q's soft floor (Q(0) ≈ 0.12/Δτ at k = 20) read a dark channel's pooled rate, a fraction
+    of a spike a window, as black (monochrome alike: its darker half went to 0)."""
     import torch
 
     from spikeview.guided.sampler import GuidedSampler
@@ -248,11 +244,8 @@ def test_q_of_a_pooled_observation_rounds_to_its_pooled_step(cfa):
     fm = GuidedSampler.forward_model(pooled, plan, GuidedConfig())
     assert plan.quantise and fm.quantise.window == q
     floor = float(fm.quantise(torch.zeros(1)))
-    if cfa is None:
-        assert q == 10 and "1/Δτ steps" in plan.reasons["quantise"] and floor > 0.1 / 10
-    else:
-        assert q >= 60 and f"1/{q}-tick steps" in plan.reasons["quantise"]
-        assert 0 < floor < 0.13 / q  # the pooled grid's floor, several times below the own window's
+    assert q >= 60 and f"1/{q}-tick steps" in plan.reasons["quantise"]
+    assert 0 < floor < 0.13 / q  # the pooled grid's floor, several times below the own window's
     alone = Observation.from_source(src, 60, 10, alpha=alpha, eta=1.0, radius=0)
     fm0 = GuidedSampler.forward_model(alone, make_plan(alone, GuidedConfig(diffusion="always")), GuidedConfig())
     assert fm0.quantise.window == 10 and float(fm0.quantise(torch.zeros(1))) > 0.1 / 10
@@ -276,11 +269,12 @@ def test_cast_reason_names_the_eta_and_the_alpha_it_divides():
     assert "monochrome" in make_plan(_obs(cfa=None)).reasons["cast"] or "no colour" in make_plan(_obs(cfa=None)).reasons["cast"]
 
 
-def test_a_dark_rate_left_in_keeps_q_on_the_window_grid():
-    """The same dim static colour scene without black (its darkest floor 0.03 spikes per tick: a dark rate no profile
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_a_dark_rate_left_in_keeps_q_on_the_window_grid(cfa):
+    """The same dim static scene without black (its darkest floor 0.03 spikes per tick: a dark rate no profile
     took off): Q stays on the own window's grid, whose floor takes the pedestal off, and decides per window."""
-    src = ArraySource(spikes_from_rates(np.full((32, 32), 0.03), 120, seed=2), cfa="RGGB")
-    pooled = Observation.from_source(src, 60, 10, alpha=CAST, eta=1.0, radius=3)
+    src = ArraySource(spikes_from_rates(np.full((32, 32), 0.03), 120, seed=2), cfa=cfa)
+    pooled = Observation.from_source(src, 60, 10, alpha=CAST if cfa else None, eta=1.0, radius=3)
     assert pooled.floor * pooled.window >= 0.03 and pooled.quantise_window() == 10
     plan = make_plan(pooled, GuidedConfig(diffusion="always"))
     assert plan.quantise and "per 10-tick window, the rate pooled" in plan.reasons["quantise"]

@@ -93,10 +93,10 @@ def test_the_real_dark_capture_pools_its_static_scene_and_the_plan_says_why():
 def test_simulated_low_light_guided_beats_tfi_and_keeps_its_detail(tmp_path, cfa):
     """A static scene at 0.03 spikes per tick (0.3 a window), through the CLI's defaults: the guided frame is ≥ 2 dB
     above TFI with the SpikeCV search (±32 ticks; one global gain) and keeps at least its detail (−0.02). The CLI's TFI
-    now searches as far as a dark capture needs (spikeview.pipeline.tfi_reach, ±187 ticks here): on Bayer the guided
-    frame is still ≥ 2 dB above it; in monochrome that TFI is the better frame (19.75 against 18.33 dB: the guided
-    frame's Q floor, which takes the simulator's dark rate off, also takes the darkest half of this scene to 0), a
-    known shortfall said in results/lowlight.md, held here to no worse than 2 dB below it."""
+    now searches as far as a dark capture needs (spikeview.pipeline.tfi_reach): on Bayer the guided frame is still ≥ 2 dB
+    above it; in monochrome that TFI can be the better frame (the guided frame's Q floor, which takes the simulator's
+    dark rate off, also takes the darkest half of this scene to 0), a known shortfall said in results/lowlight.md, held
+    here to no worse than 2 dB below it."""
     from PIL import Image
 
     from spikeview.bench.lowlight import _reconstruct

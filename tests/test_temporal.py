@@ -130,10 +130,10 @@ def test_data_term_uses_the_effective_window(cfa):
     assert float(obs.variance()[dtau == 30.0].mean()) < float(obs.variance()[dtau == 10.0].mean())
     plan = make_plan(obs, GuidedConfig(quantise=True))
     fm = GuidedSampler.forward_model(obs, plan, GuidedConfig(quantise=True, k=1000.0))
-    # half the photosites pooled 30 ticks, half 10: in colour Q on the 1/Δτ_eff grid of their mean (~20 ticks), k scaled
-    # with it; monochrome keeps the 1/Δτ grid
+    # half the photosites pooled 30 ticks, half 10: Q on the 1/Δτ_eff grid of their mean (~20 ticks), k scaled with it
+    # (no dark rate measured: floor 0), in monochrome too
     q = obs.quantise_window()
-    assert (15 <= q <= 25) if cfa is not None else q == 10
+    assert 15 <= q <= 25
     x = torch.rand(1, 1, 16, 16)
     np.testing.assert_allclose(fm.quantise(x).numpy(), soft_quantise(x, q, 1000.0 * q / 10).numpy(), atol=1e-6)
     assert fm(torch.rand(1, 1 if cfa is None else 3, 16, 16)).shape == (1, 1, 16, 16)
@@ -146,10 +146,10 @@ def test_q_is_decided_from_the_pooled_count(cfa):
     """A dim static colour scene (~0.5 spikes per photosite per window) pools several over ±3 windows: its value is a
     count of ~3.5 spikes over Δτ_eff, not a small integer, and Q is off, while its single window alone has Q on; a
     darker one (~0.1 a window, ~0.7 pooled) keeps Q on, on its pooled grid. The reason gives the pooled count.
-    Monochrome decides on the count per window (Q on for both)."""
+    Monochrome alike (its black corner: no dark rate in the rates)."""
     from spikeview.guided.plan import Q_COUNT
 
-    for rate, on in ((0.05, cfa is None), (0.01, True)):  # monochrome: the count per window (quantise_window)
+    for rate, on in ((0.05, False), (0.01, True)):
         rates = np.full((90, 32, 32), rate)
         rates[:, :16, :16] = 0.0  # a black corner: no dark rate in the rates (Observation.quantise_window)
         src = ArraySource(_spikes(rates, seed=4), cfa=cfa)
@@ -161,10 +161,7 @@ def test_q_is_decided_from_the_pooled_count(cfa):
         plan, single = make_plan(pooled, cfg), make_plan(alone, cfg)
         assert plan.quantise is on and single.quantise is True
         assert (pooled.quantise_count() < Q_COUNT) is on
-        if cfa is None:
-            assert f"{pooled.window_count():.2f} spikes per photosite per 10-tick window" in plan.reasons["quantise"]
-        else:
-            assert f"{pooled.mean_count():.2f} spikes per photosite pooled over the aligned windows" in plan.reasons["quantise"]
+        assert f"{pooled.mean_count():.2f} spikes per photosite pooled over the aligned windows" in plan.reasons["quantise"]
 
 
 @pytest.mark.parametrize("cfa", CFAS)

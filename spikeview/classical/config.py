@@ -64,8 +64,8 @@ class ClassicalConfig(Config):
                         help="TFP window Δτ in ticks (10 ticks = 0.5 ms at 20 kHz); also the guided sampler's observation.")
     tfi_half_window: int = param(DEFAULT_HALF_WINDOW, label="TFI half-window", unit="ticks", lo=1, hi=512, step=1,
                                  help="TFI searches at least this many ticks before and after the centre tick (a dark "
-                                      "capture's search reaches as far as its darker parts' intervals need, up to 512: the "
-                                      "CLI and the TFI pane's title say how far).")
+                                      "capture's search reaches until an empty search reads its darkest floor, up to 512: "
+                                      "the CLI and the TFI pane's title say how far).")
     demosaic: str = param("auto", label="Demosaicking", choices=DEMOSAICS,
                           help="Demosaicking of TFP/TFI outputs and of the guided start estimate: auto (the plan picks from "
                                "the measured noise: bilinear where noise dominates, malvar2004 where clean or denoised "

@@ -64,7 +64,7 @@ class Defects:
         ticks: how many ticks were measured.
         dark: the sensor's dark rate (spikes per tick) measured on a colour capture's darkest patches (:func:`dark_rate`),
             0 where it cannot be told from scene black (a monochrome capture, or channels whose floors differ).
-        floor: a colour capture's lowest channel floor in spikes per tick (:func:`darkest_floor`; 0 for monochrome).
+        floor: the capture's lowest floor in spikes per tick (:func:`darkest_floor`; monochrome too).
     """
 
     hot: np.ndarray
@@ -215,10 +215,24 @@ def dark_rate(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None)
 
 
 def darkest_floor(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None) -> float:
-    """A colour capture's lowest channel floor in spikes per tick (its darkest patches' weakest channel): ~0 where the
-    scene has black and the sensor no dark rate (0.0002–0.0015 on such simulated scenes at 0.03–0.15 spikes per tick),
-    the dark rate or more where one is in the rates (0.005 in the simulator); 0 for monochrome. The guided plan's Q
-    rule reads it (:meth:`spikeview.guided.observation.Observation.quantise_window`)."""
+    """A capture's lowest floor in spikes per tick (a colour capture's darkest patches' weakest channel; a monochrome
+    one's darkest 8×8 blocks): ~0 where the scene has black and the sensor no dark rate (0.0002–0.0015 on such
+    simulated scenes at 0.03–0.15 spikes per tick), the dark rate or more where one is in the rates (0.005 in the
+    simulator; 0.016 on the real `uhsr.npz`). The guided plan's Q rule reads it
+    (:meth:`spikeview.guided.observation.Observation.quantise_window`); unlike :func:`dark_rate` it does not say the
+    floor IS a dark rate (a monochrome capture cannot tell)."""
+    from spikeview.cfa import parse_cfa
+
+    if parse_cfa(cfa) is None:  # monochrome: the floor of its darkest blocks (8×8 photosites), hot ones left out
+        from spikeview.classical import white_balance as wb
+
+        r = np.asarray(rates, dtype=np.float64)
+        if hot is not None and hot.any():
+            r = r.copy()
+            r[hot] = np.median(r)
+        if min(r.shape[:2]) < 2 * wb.DARK_BLOCK:
+            return 0.0
+        return float(wb.channel_floors(np.repeat(r[..., None], 3, axis=-1))[0])
     stats = _floor_stats(rates, cfa, hot)
     return 0.0 if stats is None else float(stats[0].min())
 

@@ -179,11 +179,9 @@ class Observation:
             device: where the pooling's alignment runs (``guided.device``; ``None`` = the CPU).
         """
         a, b = window_range(center, window, source.n_frames)
-        floor = 0.0
-        if source.cfa is not None:
-            from spikeview.classical.defects import find_defects
+        from spikeview.classical.defects import find_defects
 
-            floor = find_defects(source).floor  # measured once per capture (cached on it)
+        floor = find_defects(source).floor  # measured once per capture (cached on it)
 
         def count(x: int, y: int) -> np.ndarray:  # through the sequence's cache (and its lock) when there is one
             return window_counts(source, x, y) if cache is None else cache.counts(source, x, y)
@@ -245,18 +243,19 @@ class Observation:
         return float(self.y.mean()) * self.window
 
     def quantise_window(self) -> int:
-        """The ticks whose count Q models: ``window``, or for a pooled colour observation without a dark rate in its
-        rates its mean Δτ_eff (the aligned windows' spikes summed, so its values step by 1/Δτ_eff; Q rounds to that
-        grid).
+        """The ticks whose count Q models: ``window``, or for a pooled observation without a dark rate in its rates its
+        mean Δτ_eff (the aligned windows' spikes summed, so its values step by 1/Δτ_eff; Q rounds to that grid).
 
         On the own window's 1/Δτ grid Q's soft floor (Q(0) ≈ 0.12/Δτ) crushes a rate of a fraction of one spike a
         window to black. Where the capture's darkest patches are black (:attr:`floor` × Δτ under
         :data:`PEDESTAL_COUNT`) that floor ate the least sensitive channel's pooled rate: dark colourful scenes without a
         dark current lost their blue and 8–20 dB (``benchmarks/results/colour.md``, section 8). Where a dark rate is left
         in the rates (no profile subtracted it), the same floor takes it off, and the per-window grid stays (without
-        it the bench's coffee sequences lost 0.05–0.17 SSIM, coins_rgb 3° of white balance). A monochrome
-        observation keeps the per-window grid too: it cannot measure its dark rate (the real dark capture and the
-        simulated dark gray scenes lost 0.02 detail and 4 dB without the floor)."""
+        it the bench's coffee sequences lost 0.05–0.17 SSIM, coins_rgb 3° of white balance). Monochrome alike: its
+        darkest floor tells black from a pedestal as well (a dark chelsea without a dark current, 0.03 spikes per tick,
+        had a third of its photosites at 0 and 19.3 dB; 28.8 dB on the pooled grid), while the real dark capture
+        (floor 0.16 a window) and the simulated ones with a dark current (0.07) keep the per-window floor, which takes
+        their dark rate off (they lost 0.02 detail and 4 dB without it)."""
         if self.dtau is None or not self._counts_pooled():
             return int(self.window)
         return max(int(self.window), int(round(float(np.mean(self.dtau)))))
@@ -267,8 +266,8 @@ class Observation:
         return self.mean_count() if (self.dtau is not None and self._counts_pooled()) else self.window_count()
 
     def _counts_pooled(self) -> bool:
-        """Q models the pooled count (:meth:`quantise_window`): a colour observation whose darkest floor is black."""
-        return self.cfa is not None and self.floor * self.window < PEDESTAL_COUNT
+        """Q models the pooled count (:meth:`quantise_window`): an observation whose darkest floor is black."""
+        return self.floor * self.window < PEDESTAL_COUNT
 
     def crop(self, y0: int, y1: int, x0: int, x1: int) -> "Observation":
         """The observation on the photosites ``[y0:y1, x0:x1]`` (``previous`` and ``own`` not kept)."""
