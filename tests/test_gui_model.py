@@ -464,3 +464,47 @@ def test_ground_truth_alignment_recovers_per_channel_sensor_gain():
     aligned = align_ground_truth(gt, y.astype(np.float32), "RGGB", alpha, eta)
     np.testing.assert_allclose(aligned, np.clip(expected, 0, 1), rtol=1e-5, atol=1e-6)
     assert psnr_ssim(np.clip(expected, 0, 1).astype(np.float32), gt)[0] < 30  # unaligned: scales differ
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", None], ids=["bayer", "mono"])
+def test_the_apps_tfp_and_tfi_previews_are_the_clis_frames_on_a_corrected_capture(tmp_path, cfa):
+    """A capture whose own dark rate and hot photosites are corrected (spikeview.classical.calibration.attach, as the CLI
+    and the app open it): the Stream panel's TFP and TFI previews are the CLI's PNG frames for the same settings
+    (within one code value: the CLI rounds its float frame once more). Before, the previews skipped the correction and
+    decided TFI's demosaic on the uncorrected mosaic: a dark capture's TFI pane was lilac where its export was not."""
+    import imageio.v3 as iio
+
+    from spikeview.classical.calibration import camera_of
+    from spikeview.cli.main import main
+    from spikeview.io import write_plain
+
+    rng = np.random.default_rng(5)
+    scene = 0.002 + 0.03 * np.kron(rng.random((8, 8)), np.ones((8, 8)))  # plus a dark rate everywhere
+    scene[:16, :16] = 0.004  # a dark patch (with the dark rate: a colour capture's floors agree there)
+    v = rng.random(scene.shape)
+    s = np.zeros((300, 64, 64), np.uint8)
+    for t in range(300):
+        v += scene
+        s[t] = v >= 1
+        v -= s[t]
+    s[:, 40, 41] = 1  # a hot photosite
+    path = write_plain(tmp_path / "c.dat", s, cfa=cfa)
+    st = core.open_file(path)
+    assert camera_of(st.source) is not None and camera_of(st.source).hot[40, 41]
+    sess = Session()
+    sess.open_stream(st)
+
+    class Ctx:
+        state: dict = {}
+
+    alpha, _note, white, _said, reach = jobs.alpha_job(st.source, sess.recipe(), Ctx())
+    sess.tfi_reach = reach
+    p = dict(sess.params, white=white, transfer="srgb", tfi_half_window=sess.tfi_search())
+    frames = core.stream_frames(st.source, 150, p, alpha, want_tfi=True)
+    assert np.array_equal(frames.tfi, core.tfi_frame(st.source, 150, p, alpha))
+    for method, shown in (("tfp", frames.tfp), ("tfi", frames.tfi)):
+        out = tmp_path / f"{method}.png"
+        assert main(["reconstruct", str(path), "--method", method, "--at", "150", "--out", str(out)]) == 0
+        cli = iio.imread(out)
+        cli = cli[..., :3] if cli.ndim == 3 else np.repeat(cli[..., None], 3, axis=-1)
+        assert np.abs(shown.astype(int) - cli.astype(int)).max() <= 1, method

@@ -69,6 +69,13 @@ def _reconstruct(source: SpikeSource, center: int, config: ClassicalConfig, alph
         y = tfp(source, center, config.window)
     else:
         y = tfi(source, center, config.tfi_half_window)
+    return finish_frame(source, y, config, alpha)
+
+
+def finish_frame(source: SpikeSource, y: np.ndarray, config: ClassicalConfig, alpha: np.ndarray | None) -> np.ndarray:
+    """A TFP or TFI rate mosaic of ``source`` as its frame: the camera profile's correction, the colour cast, the
+    demosaic (``auto``: decided on the corrected mosaic) and the clip of ``config`` — the CLI's frames, and the app's
+    previews where a profile (or the capture's own dark rate and hot photosites) corrects the rates."""
     y = correct_rates(source, y)  # the camera profile's dark, flat and hot-pixel correction (none without one)
     if source.cfa is not None:
         if alpha is not None:

@@ -361,6 +361,7 @@ def stream_frames(source: SpikeSource, tick: int, params: dict[str, Any], alpha:
     One read covers the TFP window and the TFI search span, so a frame costs one source access;
     the TFP image is :func:`spikeview.classical.preview_rgb` (the core's fast path) on that block.
     """
+    from spikeview.classical.calibration import camera_of
     from spikeview.classical.reconstruct import preview_rgb
     from spikeview.classical.tfi import tfi_array
     from spikeview.classical.tfp import counts_to_sfr
@@ -381,11 +382,14 @@ def stream_frames(source: SpikeSource, tick: int, params: dict[str, Any], alpha:
     levels = {"black": params["black"], "white": max(params["white"], params["black"] + 1e-3), "gamma": display_gamma(params)}
     sfr = counts_to_sfr(block[a - lo:b - lo].sum(axis=0, dtype=np.uint16), b - a)  # the classical TFP (same numbers)
     method = demosaic_for(sfr, cfa, params["demosaic"])
-    tfp_img = preview_rgb(sub, tick - lo, window, alpha=alpha, colour_cast=use_cast, eta=params["eta"],
-                          demosaic_method=method, **levels)
+    if camera_of(source) is None:  # the fast path: a table over the counts
+        tfp_img = preview_rgb(sub, tick - lo, window, alpha=alpha, colour_cast=use_cast, eta=params["eta"],
+                              demosaic_method=method, **levels)
+    else:  # the camera profile's (or the capture's own) dark rate, flat field and hot photosites: the CLI's frame
+        tfp_img = _cli_frame(source, sfr, params, alpha if use_cast else None)
     tfi_img = None
     if want_tfi:
-        tfi_img = _colour_frame(tfi_array(block, tick - lo, hw), cfa, params, alpha if use_cast else None)
+        tfi_img = _cli_frame(source, tfi_array(block, tick - lo, hw), params, alpha if use_cast else None)
     f = max(1, int(factor))
     return StreamFrames(tick=tick, a=a, b=b, raw=downsample(raw, f), tfp=downsample(tfp_img, f),
                         tfi=None if tfi_img is None else downsample(tfi_img, f),
@@ -402,7 +406,7 @@ def tfi_frame(source: SpikeSource, tick: int, params: dict[str, Any], alpha: np.
     img = tfi(source, int(tick), int(params["tfi_half_window"]))
     if use_cast and alpha is None:
         alpha = alpha_note(_channel_means(img[None], cfa))[0]
-    return downsample(_colour_frame(img, cfa, params, alpha if use_cast else None), factor)
+    return downsample(_cli_frame(source, img, params, alpha if use_cast else None), factor)
 
 
 def _channel_means(block: np.ndarray, cfa: str | None) -> np.ndarray:
@@ -411,14 +415,17 @@ def _channel_means(block: np.ndarray, cfa: str | None) -> np.ndarray:
     return cm(block.mean(axis=0, dtype=np.float32), cfa)
 
 
-def _colour_frame(mosaic: np.ndarray, cfa: str | None, params: dict[str, Any], alpha: np.ndarray | None) -> np.ndarray:
-    """Mosaicked rate → corrected, demosaicked uint8 RGB with the session's levels
-    (:func:`spikeview.classical.reconstruct.mosaic_display`, the classical colour path)."""
-    from spikeview.classical.reconstruct import mosaic_display
+def _cli_frame(source: SpikeSource, mosaic: np.ndarray, params: dict[str, Any], alpha: np.ndarray | None) -> np.ndarray:
+    """A TFP/TFI rate mosaic as the CLI makes its frame (:func:`spikeview.classical.reconstruct.finish_frame`: the
+    camera's correction, the cast, the demosaic decided on the corrected mosaic), shown with the session's levels."""
+    from spikeview.classical.config import ClassicalConfig
+    from spikeview.classical.display import to_display
+    from spikeview.classical.reconstruct import finish_frame
 
-    return mosaic_display(mosaic, cfa, alpha=alpha, eta=params["eta"], demosaic_method=params["demosaic"],
-                          black=params["black"], white=max(params["white"], params["black"] + 1e-3),
-                          gamma=display_gamma(params))
+    cfg = ClassicalConfig(eta=params["eta"], demosaic=params["demosaic"])
+    y = finish_frame(source, np.asarray(mosaic, dtype=np.float32), cfg, alpha)
+    out = to_display(y, params["black"], max(params["white"], params["black"] + 1e-3), display_gamma(params))
+    return out if out.ndim == 3 else np.repeat(out[..., None], 3, axis=-1)
 
 
 def demosaic_for(mosaic: np.ndarray, cfa: str | None, requested: str) -> str:
