@@ -176,7 +176,9 @@ def test_the_sampler_keeps_the_exposure_of_the_window_length_white(cfa):
         assert sampler_params(recipe, state).eta == pytest.approx(exposed_eta(recipe.classical.eta, state.exposure_white))
     again = state_from_attrs(state_to_attrs(state))
     assert again.white == state.white and again.exposure_white == state.exposure_white
+    assert state.tfi_reach is not None and again.tfi_reach == state.tfi_reach  # TFI's search too (pipeline.tfi_reach)
     # a bright capture has one white
     bright = prepare_sequence(ArraySource(_integrate_and_fire(0.6 * np.broadcast_to(ramp[None, :], (64, 96)), 200),
                                           cfa=cfa), recipe, warn=False)
     assert bright.exposure_white is None and "exposure_white" not in state_to_attrs(bright)
+    assert bright.tfi_reach is None and "tfi_reach" not in state_to_attrs(bright)

@@ -68,6 +68,9 @@ def state_to_attrs(state) -> dict[str, Any]:
         out["exposure_white"] = float(exposure)
     if getattr(state, "keep_balance", False):  # the guided frame keeps the gains' balance (spikeview.guided.balance)
         out["keep_balance"] = True
+    reach = getattr(state, "tfi_reach", None)
+    if reach is not None:  # a dark capture: TFI searches this far at least (spikeview.pipeline.tfi_half_window)
+        out["tfi_reach"] = int(reach)
     return out
 
 
@@ -78,7 +81,8 @@ def state_from_attrs(attrs: dict[str, Any]):
     alpha, white, exposure = attrs.get("alpha"), attrs.get("white_point"), attrs.get("exposure_white")
     return SequenceState(None if alpha is None else np.asarray(alpha, dtype=np.float64),
                          None if white is None else float(white), exposure_white=None if exposure is None else float(exposure),
-                         keep_balance=bool(attrs.get("keep_balance", False)))
+                         keep_balance=bool(attrs.get("keep_balance", False)),
+                         tfi_reach=None if attrs.get("tfi_reach") is None else int(attrs["tfi_reach"]))
 
 
 def compute_chunk(source, centres: Sequence[int], data: dict[str, Any], state, *,
