@@ -152,8 +152,9 @@ def tfi_reach(source: Any) -> int:
     there only trades the floor for single-interval noise: detail 0.698 → 0.621 against its long exposure at ±187)."""
     from spikeview.classical.config import ClassicalConfig
     from spikeview.classical.defects import find_defects
+    from spikeview.config import param_fields
 
-    hi = next(f.metadata["param"].hi for f in dataclasses.fields(ClassicalConfig) if f.name == "tfi_half_window")
+    hi = dict(param_fields(ClassicalConfig))["tfi_half_window"].hi
     floor = float(find_defects(source).floor)
     return int(hi if floor <= 1.0 / (2 * hi) else min(hi, np.ceil(1.0 / (2.0 * floor))))
 

@@ -201,7 +201,9 @@ def dark_rate(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None)
     is returned. A monochrome capture has no second witness:
     0 (its dark rate cannot be told from scene black without a dark capture; ``spikeview calibrate --dark``).
     """
-    stats = _floor_stats(rates, cfa, hot)
+    from spikeview.cfa import parse_cfa
+
+    stats = None if parse_cfa(cfa) is None else _floor_stats(rates, cfa, hot)
     if stats is None:
         return 0.0
     floors, means = stats
@@ -221,36 +223,22 @@ def darkest_floor(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = N
     simulator; 0.016 on the real `uhsr.npz`). The guided plan's Q rule reads it
     (:meth:`spikeview.guided.observation.Observation.quantise_window`); unlike :func:`dark_rate` it does not say the
     floor IS a dark rate (a monochrome capture cannot tell)."""
-    from spikeview.cfa import parse_cfa
-
-    if parse_cfa(cfa) is None:  # monochrome: the floor of its darkest blocks (8×8 photosites), hot ones left out
-        from spikeview.classical import white_balance as wb
-
-        r = np.asarray(rates, dtype=np.float64)
-        if hot is not None and hot.any():
-            r = r.copy()
-            r[hot] = np.median(r)
-        if min(r.shape[:2]) < 2 * wb.DARK_BLOCK:
-            return 0.0
-        return float(wb.channel_floors(np.repeat(r[..., None], 3, axis=-1))[0])
     stats = _floor_stats(rates, cfa, hot)
     return 0.0 if stats is None else float(stats[0].min())
 
 
 def _floor_stats(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(floors, means)`` per channel of a colour capture's mean rates (hot photosites replaced by the median), or
-    ``None`` (monochrome, or too small)."""
+    """``(floors, means)`` per channel of a capture's mean rates (hot photosites replaced by the median): a colour
+    capture's R, G, B cells, a monochrome one's photosites (its one channel three times), or ``None`` (too small)."""
     from spikeview.cfa import parse_cfa
     from spikeview.classical import white_balance as wb
 
     cfa = parse_cfa(cfa)
-    if cfa is None:
-        return None
     r = np.asarray(rates, dtype=np.float64)
     if hot is not None and hot.any():
         r = r.copy()
         r[hot] = np.median(r)
-    img = wb.cells_rgb(r, cfa)
+    img = np.repeat(r[..., None], 3, axis=-1) if cfa is None else wb.cells_rgb(r, cfa)
     if min(img.shape[:2]) < 2 * wb.DARK_BLOCK:
         return None
     return wb.channel_floors(img), img.reshape(-1, 3).mean(axis=0)

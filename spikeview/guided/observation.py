@@ -83,7 +83,7 @@ def _bayer_planes(y: np.ndarray) -> list[tuple[slice, slice]]:
 
 
 #: spikes per photosite per window: a capture's darkest floor below this is black (no dark rate in its rates), and a
-#: pooled colour observation's Q models its pooled count (:meth:`Observation.quantise_window`); a quarter of Q's own floor
+#: pooled observation's Q models its pooled count (:meth:`Observation.quantise_window`); a quarter of Q's own floor
 #: (0.12 of a level at k = 20). Simulated scenes without a dark current: 0.002–0.015 a 10-tick window; the simulator's
 #: dark rate: 0.05
 PEDESTAL_COUNT = 0.03

@@ -280,11 +280,11 @@ def make_plan(obs: Observation, params: GuidedConfig | None = None) -> Plan:
     elif p.guidance == "dps" or p.prior == "sd":
         quantise, r["quantise"] = True, "DPS guidance: the residual of the non-squared loss sees the TFP's 1/Δτ steps"
     else:
-        # the spikes Q's value is made of: over Δτ_eff ticks (a pooled colour value without a dark rate in it), else
-        # per window (Observation.quantise_window says why)
+        # the spikes Q's value is made of: over Δτ_eff ticks (a pooled value without a dark rate in it), else per
+        # window (Observation.quantise_window says why)
         count, qw = obs.quantise_count(), obs.quantise_window()
         per_window = qw == obs.window
-        step = "1/Δτ" if qw == obs.window else f"1/{qw}-tick"
+        step = "1/Δτ" if per_window else f"1/{qw}-tick"
         if count < Q_COUNT:
             quantise, r["quantise"] = True, (f"low count ({_count_words(obs, count, per_window)} < {Q_COUNT:g}): the "
                                              f"counts are small integers and Q models their {step} steps")

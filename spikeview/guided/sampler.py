@@ -174,7 +174,7 @@ class GuidedSampler:
                           eta=obs.eta if alpha is not None else 1.0, k=params.k if plan.quantise else None,
                           dense_grad=params.dense_gradient, cast=alpha is not None, bands=plan.levels + 1, norm="l2",
                           quantise_window=obs.quantise_window())
-        # a pooled colour observation's value is its spikes over Δτ_eff ticks, so Q rounds to its 1/Δτ_eff steps
+        # a pooled observation's value is its spikes over Δτ_eff ticks, so Q rounds to its 1/Δτ_eff steps
         # (Observation.quantise_window says why); Δτ_eff also enters the noise weights (obs.variance)
         return fm
 

@@ -167,8 +167,12 @@ class _Arrays:
     def zeros(self, shape: tuple[int, int], dtype: Any) -> Any:
         return self.put(np.zeros(shape, dtype=dtype))
 
-    def where(self, cond: Any, a: Any, b: float) -> Any:
-        return np.where(cond, a, np.float32(b)) if self.torch is None else self.torch.where(cond, a, b)
+    def add_where(self, total: Any, a: Any, cond: Any) -> None:
+        """``total += a`` where ``cond``, in place."""
+        if self.torch is None:
+            np.add(total, a, out=total, where=cond)
+        else:
+            total += self.torch.where(cond, a, 0.0)
 
 
 # --------------------------------------------------------------------------------- window reads
@@ -641,7 +645,7 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
             sides[side] += weight
             oks[k] = (weight, aligned)
         for k, (weight, aligned) in oks.items():
-            total += xp.where(weight, aligned, 0.0)
+            xp.add_where(total, aligned, weight)
             pooled += weight
     total, pooled, still = xp.get(total), xp.get(pooled), xp.get(still)
     chain = {k: xp.get(v) for k, v in chain.items()}

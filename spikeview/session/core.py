@@ -381,10 +381,9 @@ def stream_frames(source: SpikeSource, tick: int, params: dict[str, Any], alpha:
         alpha = alpha_note(_channel_means(block[a - lo:b - lo], cfa))[0]
     levels = {"black": params["black"], "white": max(params["white"], params["black"] + 1e-3), "gamma": display_gamma(params)}
     sfr = counts_to_sfr(block[a - lo:b - lo].sum(axis=0, dtype=np.uint16), b - a)  # the classical TFP (same numbers)
-    method = demosaic_for(sfr, cfa, params["demosaic"])
     if camera_of(source) is None:  # the fast path: a table over the counts
         tfp_img = preview_rgb(sub, tick - lo, window, alpha=alpha, colour_cast=use_cast, eta=params["eta"],
-                              demosaic_method=method, **levels)
+                              demosaic_method=demosaic_for(sfr, cfa, params["demosaic"]), **levels)
     else:  # the camera profile's (or the capture's own) dark rate, flat field and hot photosites: the CLI's frame
         tfp_img = _cli_frame(source, sfr, params, alpha if use_cast else None)
     tfi_img = None
