@@ -132,6 +132,24 @@ def test_open_npy_and_drop_a_file(window, qtbot, tmp_path):
     assert window.session.source.shape == (100, 64, 64) and window.session.source.cfa == "RGGB"
 
 
+@pytest.mark.parametrize("cfa", ["RGGB", "none"])
+def test_a_sheared_width_is_said_with_a_button_that_reopens_it_right(window, qtbot, tmp_path, cfa):
+    """The CLI refuses to write a capture whose rows the spikes show sheared (tests/test_geometry_guess.py); the app
+    opens it as asked, says so, and its notice's button reopens it at the size the spikes point to."""
+    from tests.test_geometry_guess import write_capture
+
+    path = write_capture(tmp_path / "c.dat", 128, 96, 200, cfa=cfa != "none")
+    window.open_path(path, width=192, height=64, cfa=cfa)
+    qtbot.waitUntil(lambda: window.session.stream is not None and window.notice.is_shown(), timeout=WAIT_MS)
+    assert window.notice.kind == "warning" and "do not line up" in window.notice.text()
+    buttons = [b for b in window.notice.findChildren(QtWidgets.QPushButton) if b.text() == "Reopen as 128×96"]
+    assert len(buttons) == 1, [b.text() for b in window.notice.findChildren(QtWidgets.QPushButton)]
+    buttons[0].click()
+    qtbot.waitUntil(lambda: window.session.source.shape[1:] == (96, 128), timeout=WAIT_MS)
+    assert (window.session.source.cfa or "none") == cfa
+    assert window.session.source.info.likely_size is None and not window.notice.is_shown()
+
+
 @pytest.mark.parametrize("content", [None, b"", b"not numpy at all"])
 def test_a_bad_file_is_an_error_message_not_a_crash(window, qtbot, tmp_path, content):
     path = tmp_path / ("missing.npy" if content is None else "bad.npy")

@@ -527,9 +527,19 @@ class MainWindow(QtWidgets.QMainWindow):
         if warnings:  # each reader warning already starts with the file name: say it once
             label = f"{stream.label}: "
             text = " ".join(w[len(label):] if w.startswith(label) else w for w in warnings)
-            self.notice.show_message(app_words(label + text), "warning")
+            self.notice.show_message(app_words(label + text), "warning", self._geometry_actions(stream))
         self._restore_truth(stream)  # after the "Opened" line: its own line says which truth came back
         self.stream_opened.emit(stream)
+
+    def _geometry_actions(self, stream: OpenedStream) -> list[tuple[str, Any]]:
+        """The warning's button for a capture whose rows the spikes show sheared at its width
+        (``info.likely_size``, the size the CLI names when it refuses to write): reopen it at the size they point to
+        (the CLI's ``--width W --height H``); none for a capture in memory or one that lines up."""
+        likely = getattr(stream.source.info, "likely_size", None)
+        if likely is None or stream.path is None:
+            return []
+        path, kwargs = stream.path, {**stream.open_kwargs, "width": int(likely[0]), "height": int(likely[1])}
+        return [(f"Reopen as {likely[0]}×{likely[1]}", lambda *_: self.open_path(path, **kwargs))]
 
     def ask_stream_settings(self, path: Path, initial: dict[str, Any] | None = None,
                             candidates: list[tuple[int, int]] | None = None, note: str = "") -> StreamSettingsDialog:
