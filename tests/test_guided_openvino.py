@@ -5,6 +5,7 @@ metadata name it (Bayer and monochrome alike)."""
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 
@@ -261,3 +262,19 @@ def test_openvino_strips_are_sized_by_bytes(monkeypatch):
     rgb = 96 * 4
     assert ffdnet.STRIP_BYTES // (500 * rgb) - 2 * 12 >= 500 - 2 * 12
     assert ffdnet.STRIP_BYTES // (1000 * rgb) - 2 * 12 <= 300
+
+
+def test_openvino_is_imported_without_its_network_telemetry():
+    """``import openvino`` imports its model converter, whose telemetry sends an event over the network (and printed
+    a child process's traceback on Ctrl-C): spikeview's import leaves the telemetry package out, the converter's own
+    no-op stub in its place. In a fresh process, as the CLI starts."""
+    import subprocess
+
+    pytest.importorskip("openvino", reason="the optional extra openvino is not installed")
+
+    code = ("import sys; from spikeview.guided.priors import ov_backend as o; assert o.version(); o.available(); "
+            "print(sorted(m for m in sys.modules if 'telemetry' in m))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "CI": ""})
+    assert out.returncode == 0, out.stderr
+    assert "openvino_telemetry" not in out.stdout and "telemetry_stub" in out.stdout, out.stdout

@@ -22,11 +22,16 @@ bfloat16 was not faster than torch's on that CPU and its error was larger (1.3â€
 it fails the prior keeps torch's path (:mod:`spikeview.guided.precision` decides which steps use
 this). A pass runs asynchronously and polls the job's cancel flag every few milliseconds, so Cancel
 still takes effect inside a pass.
+
+OpenVINO is imported through :func:`_openvino`: ``import openvino`` also imports its model converter, whose telemetry
+sends an event over the network on import (and on Ctrl-C printed a child process's traceback); spikeview uses the
+runtime only, and imports it with the telemetry package blocked, so the converter takes its own no-op stub.
 """
 
 from __future__ import annotations
 
 import functools
+import sys
 import threading
 
 import torch
@@ -34,6 +39,22 @@ import torch
 from spikeview.errors import check_cancelled
 
 __all__ = ["OVStack", "OpenVINOFallbackWarning", "available", "give_up", "stack_for", "version"]
+
+def _openvino():
+    """The ``openvino`` module, imported (once) with ``openvino_telemetry`` unimportable: its model converter then
+    takes its no-op telemetry stub instead of sending an event over the network (see the module docstring)."""
+    if "openvino" in sys.modules:
+        return sys.modules["openvino"]
+    block = "openvino_telemetry" not in sys.modules
+    if block:
+        sys.modules["openvino_telemetry"] = None  # type: ignore[assignment]  # an ImportError for whoever imports it
+    try:
+        import openvino
+    finally:
+        if block and sys.modules.get("openvino_telemetry", 0) is None:
+            del sys.modules["openvino_telemetry"]
+    return openvino
+
 
 #: how often (ms) a running pass looks at the cancel flag
 POLL_MS = 20
@@ -43,7 +64,7 @@ POLL_MS = 20
 def version() -> str:
     """OpenVINO's version (``""`` where it is not installed or does not import)."""
     try:
-        import openvino as ov
+        ov = _openvino()
 
         return str(ov.__version__).split("-")[0]
     except Exception:  # noqa: BLE001 - a broken install raises anything from ImportError to OSError
@@ -53,7 +74,8 @@ def version() -> str:
 def _build(weights: list[torch.Tensor], biases: list[torch.Tensor]):
     """The conv stack as an OpenVINO model: input ``(N, Cin, H, W)`` float32 (all dynamic but Cin)."""
     import numpy as np
-    import openvino as ov
+
+    ov = _openvino()
     import openvino.opset13 as ops
 
     x = ops.parameter([-1, int(weights[0].shape[1]), -1, -1], np.float32, name="feats")
@@ -74,8 +96,7 @@ class OVStack:
     its thread's Python state was torn down, and the app crashed on quitting after a guided run)."""
 
     def __init__(self, weights: list[torch.Tensor], biases: list[torch.Tensor], threads: int | None = None):
-        import openvino as ov
-
+        ov = _openvino()
         self.threads = int(threads or torch.get_num_threads())
         core = ov.Core()
         self.compiled = core.compile_model(_build(weights, biases), "CPU", {
@@ -93,8 +114,8 @@ class OVStack:
         (a new tensor). Raises :class:`~spikeview.errors.Cancelled` within :data:`POLL_MS` of the
         job's Cancel."""
         import numpy as np
-        import openvino as ov
 
+        ov = _openvino()
         # the request reads this memory without owning it: ``x`` stays referenced until the pass is over
         x = feats.detach().to(torch.float32).contiguous().numpy()
         with self._lock:
