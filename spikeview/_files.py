@@ -78,19 +78,22 @@ def _same(a: Path, b: Path) -> bool:
 
 
 def check_writable(path: str | os.PathLike[str], overwrite: bool = False,
-                   inputs: Iterable[str | os.PathLike[str] | None] = ()) -> Path:
+                   inputs: Iterable[str | os.PathLike[str] | None] = (), *, owner: str | os.PathLike[str] | None = None) -> Path:
     """Raise :class:`OutputFileError` unless writing ``path`` destroys nothing that must be kept.
 
     Args:
         path: an output file about to be written.
         overwrite: an existing ``path`` may be replaced (``--overwrite``).
-        inputs: files this run reads; ``path`` may never be one of them (compared after resolving
-            links, and by inode when both exist), even with ``overwrite``. ``None`` entries are
-            ignored.
+        inputs: files this run reads; ``path`` may never be one of them nor an input's sidecar (compared after
+            resolving links, and by inode when both exist), even with ``overwrite``. ``None`` entries are ignored.
+        owner: the output whose settings file ``path`` is (``clip.mp4`` for ``clip.mp4.preset.toml``): where that
+            output is gone, the message says so.
 
     Returns:
         ``path`` as a :class:`~pathlib.Path`.
     """
+    from spikeview.io.sidecar import sidecar_path
+
     path = Path(path)
     for inp in inputs:
         if inp is None or str(inp) == "":
@@ -98,16 +101,17 @@ def check_writable(path: str | os.PathLike[str], overwrite: bool = False,
         if _same(path, Path(inp)):
             raise OutputFileError(f"{path}: this is an input of the run ({Path(inp).name}), which is never "
                                   "overwritten, even with --overwrite; choose another output name.")
+        side = sidecar_path(inp)
+        if (side.exists() or side.is_symlink()) and _same(path, side):
+            raise OutputFileError(f"{path}: this is the sidecar of an input of the run ({Path(inp).name}: how to read "
+                                  "it), which is never overwritten, even with --overwrite; choose another output name.")
     if path.is_dir():
         raise OutputFileError(f"{path}: is a folder; give a file name inside it.")
     if (path.exists() or path.is_symlink()) and not overwrite:
-        for companion in (".preset.toml", ".toml"):  # the settings written beside an earlier output
-            if path.name.endswith(companion) and len(path.name) > len(companion):
-                owner = path.with_name(path.name[: -len(companion)])
-                if not owner.exists():
-                    raise OutputFileError(
-                        f"{path}: the settings file of an earlier run whose output {owner.name} is gone is still there "
-                        f"and would be replaced; delete it, choose another output name, or pass --overwrite.")
+        if owner is not None and not Path(owner).exists():
+            raise OutputFileError(
+                f"{path}: the settings file of an earlier run whose output {Path(owner).name} is gone is still there "
+                f"and would be replaced; delete it, choose another output name, or pass --overwrite.")
         raise OutputFileError(f"{path}: the file already exists; choose another name, or pass --overwrite to replace it.")
     return path
 

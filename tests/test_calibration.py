@@ -260,7 +260,12 @@ def test_cli_calibrate_info_and_reconstruct_with_camera(tmp_path, capsys, cfa):
            (["reconstruct", str(tmp_path / "cap.dat"), "--camera", str(tmp_path / "nothere.toml"), "--out",
              str(tmp_path / "z.npy")], "nothere.toml"),
            (["calibrate", "--out", str(tmp_path / "p.toml")], "--dark"),
-           (["calibrate", "--flat", str(tmp_path / "dark.dat"), "--out", str(tmp_path / "p.toml")], "too dark")]
+           (["calibrate", "--flat", str(tmp_path / "dark.dat"), "--out", str(tmp_path / "p.toml")], "too dark"),
+           # the input's sidecar (how to read it) is never replaced, even with --overwrite
+           (["calibrate", "--dark", str(tmp_path / "dark.dat"), "--out", str(tmp_path / "dark.dat.toml"),
+             "--overwrite"], "the sidecar of an input of the run (dark.dat"),
+           # an existing profile: it exists (not "the settings file of an earlier run whose output ... is gone")
+           (["calibrate", "--dark", str(tmp_path / "dark.dat"), "--out", str(prof)], "cam.toml: the file already exists")]
     if cfa != "none":
         bad.append((["reconstruct", str(tmp_path / "cap.dat"), "--cfa", "GRBG", "--camera", str(prof), "--out",
                      str(tmp_path / "z.npy")], "CFA"))
@@ -269,6 +274,8 @@ def test_cli_calibrate_info_and_reconstruct_with_camera(tmp_path, capsys, cfa):
         text = capsys.readouterr().err.strip()
         assert text.startswith("spikeview: error:") and needle in text and "Traceback" not in text, text
         assert len(text.splitlines()) == 1, text
+    assert main(["info", str(tmp_path / "dark.dat")]) == 0  # its sidecar still says how to read it
+    capsys.readouterr()
 
 
 def test_the_plan_turns_q_off_on_rates_a_profile_moved_off_the_tfp_grid(sensor):

@@ -289,7 +289,7 @@ def _check_output_first(out: Path, args: argparse.Namespace) -> None:
     inputs = [getattr(args, "input", None), getattr(args, "preset", None)]
     if "%" not in out.name:
         check_writable(out, overwrite, inputs)
-    check_writable(preset_path(out), overwrite, inputs)
+    check_writable(preset_path(out), overwrite, inputs, owner=None if "%" in out.name else out)
 
 
 def _parse(text: str, step: int) -> tuple[int, int, int]:
