@@ -65,6 +65,15 @@ def test_info_without_geometry_lists_candidates(capture, capsys):
     (["simulate", "--demo", "--size", "16", "--ticks", "10", "--out", "{tmp}/old.dat"], "--overwrite"),
     (["simulate", "--demo", "--size", "16", "--ticks", "10", "--config", "{tmp}/old.dat.toml", "--overwrite",
       "--out", "{tmp}/old.dat"], "input of the run"),
+    # the synthetic motion flags: finite numbers, a zoom above 0, none with --demo (which has its own motion)
+    (["simulate", "{tmp}/img.png", "--rotation", "inf", "--ticks", "10", "--out", "{tmp}/x.dat"], "--rotation inf"),
+    (["simulate", "{tmp}/img.png", "--pan", "nan", "0", "--ticks", "10", "--out", "{tmp}/x.dat"], "--pan nan"),
+    (["simulate", "{tmp}/img.png", "--zoom", "0", "--ticks", "10", "--out", "{tmp}/x.dat"], "--zoom 0"),
+    (["simulate", "{tmp}/img.png", "--fan", "nan", "--ticks", "10", "--out", "{tmp}/x.dat"], "--fan nan"),
+    (["simulate", "--demo", "--zoom", "2", "--ticks", "10", "--out", "{tmp}/x.dat"], "leave them out with --demo"),
+    (["bench", "--quick", "--frames", "0"], "--frames 0"),
+    (["bench", "--quick", "--size", "3"], "--size 3"),
+    (["info", "{tmp}/bogus.dat"], "transfer = 'bogus'"),
 ])
 def test_bad_input_gets_one_clear_sentence(capture, tmp_path, capsys, bad, needle):
     path, _ = capture
@@ -74,6 +83,12 @@ def test_bad_input_gets_one_clear_sentence(capture, tmp_path, capsys, bad, needl
     (tmp_path / "empty.toml").write_text("# nothing here\n")
     (tmp_path / "nokeys.dat").write_bytes(bytes(64))
     (tmp_path / "nokeys.dat.toml").write_text('[stream]\nformat = "plain"\n')
+    (tmp_path / "bogus.dat").write_bytes(bytes(64))
+    (tmp_path / "bogus.dat.toml").write_text('[stream]\nformat = "plain"\nwidth = 8\nheight = 8\n\n'
+                                             '[display]\ntransfer = "bogus"\n')
+    from PIL import Image
+
+    Image.fromarray(np.zeros((16, 16, 3), np.uint8)).save(tmp_path / "img.png")
     argv = [a.format(cap=path, tmp=tmp_path) for a in bad]
     assert main(argv) == 1
     out = capsys.readouterr().err.strip()
@@ -86,6 +101,37 @@ def test_bad_input_gets_one_clear_sentence(capture, tmp_path, capsys, bad, needl
     assert (tmp_path / "old.npy").read_bytes() == b"keep me" and (tmp_path / "old.dat").read_bytes() == b"keep me too"
     assert (tmp_path / "old.dat.toml").read_text() == "n_ticks = 10\n"
     assert not list(tmp_path.glob("x*")), "no output may be left behind by a failed run"
+
+
+@pytest.mark.parametrize("word, needle", [("infoo", "did you mean 'info'"), ("reconstrct", "did you mean 'reconstruct'"),
+                                          ("frobnicate", "the commands are")])
+def test_a_mistyped_command_is_named_not_opened_as_a_file(tmp_path, capsys, word, needle):
+    """``spikeview infoo x.dat`` was read as the app opening ``infoo`` and failed on "unrecognized arguments: x.dat"."""
+    assert main([word, str(tmp_path / "x.dat")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"spikeview: error: '{word}' is not a command nor a file") and needle in err, err
+    assert len(err.splitlines()) == 1
+
+
+def test_sigterm_ends_a_simulation_as_ctrl_c_does_and_leaves_no_file(tmp_path):
+    """``kill``/``timeout`` send SIGTERM: the run stops, says so, and removes its unfinished output (the default action
+    left the hidden temporary capture and ground truth behind)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    p = subprocess.Popen([sys.executable, "-m", "spikeview", "simulate", "--demo", "--size", "128", "--ticks", "20000",
+                          "--out", str(tmp_path / "s.dat")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not any(tmp_path.iterdir()):  # it has begun writing
+        time.sleep(0.05)
+    time.sleep(0.5)
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 143, err
+    assert "spikeview: error: terminated" in err and "Traceback" not in err, err
+    assert list(tmp_path.iterdir()) == [], list(tmp_path.iterdir())
 
 
 def test_reconstruct_npy_matches_library_and_preset_reproduces(capture, tmp_path, capsys):

@@ -24,8 +24,19 @@ def add_args(p: argparse.ArgumentParser) -> None:
                    help="only the sequences benchmark: back-to-back windows of static, slow and fast scenes, PSNR/SSIM and temporal error (temporal.md)")
 
 
+#: the frame sizes the benchmark's scenes can be made at (smaller: too few pixels for the prior's tiles and the
+#: scores' windows; larger: more memory than a bench needs)
+SIZE_RANGE = (32, 4096)
+
+
 def run(args: argparse.Namespace) -> int:
     from spikeview.bench.guided import main as bench_main
+
+    if args.frames < 1:
+        raise ParameterError(f"--frames {args.frames} is not valid: give 1 or more windows per scene.")
+    if args.size is not None and not (SIZE_RANGE[0] <= args.size <= SIZE_RANGE[1] and args.size % 2 == 0):
+        raise ParameterError(f"--size {args.size} is not valid: give an even frame size from {SIZE_RANGE[0]} to "
+                             f"{SIZE_RANGE[1]} pixels.")
 
     if getattr(args, "real", None) or getattr(args, "low_light", False):
         return _lowlight(args)
@@ -34,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         argv.append("--quick")
     if getattr(args, "sequences", False):
         argv.append("--sequences")
-    if args.size:
+    if args.size is not None:
         argv += ["--size", str(args.size)]
     if args.out:
         if not Path(args.out).is_dir():

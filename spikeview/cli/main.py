@@ -127,6 +127,51 @@ def _format_warning(message, category, filename, lineno, line=None) -> str:  # n
     return f"spikeview: warning: {message}\n"
 
 
+#: what to do when a command runs out of memory (the end of its one sentence)
+MEMORY_FIX = {
+    "reconstruct": "reconstruct a shorter range or a smaller region.",
+    "export": "export a shorter range.",
+    "simulate": "simulate a smaller --size or fewer --ticks.",
+    "bench": "run it with a smaller --size.",
+    "calibrate": "calibrate from shorter captures.",
+    "info": "the capture is too large to describe here.",
+}
+
+
+def _unknown_command(word: str, commands: list[str]) -> str | None:
+    """The sentence for a first word that is neither a command nor a file (``spikeview infoo x.dat``: it would be
+    opened in the app, and argparse would name the wrong thing); ``None`` where the word may be a capture to open."""
+    import difflib
+
+    path = Path(word)
+    if path.exists() or path.suffix or any(c in word for c in "/\\*?") or not word.isidentifier():
+        return None
+    near = difflib.get_close_matches(word, commands, n=1)
+    hint = f"did you mean '{near[0]}'? " if near else ""
+    return (f"{word!r} is not a command nor a file; {hint}the commands are {', '.join(commands)} "
+            "(spikeview --help), or give a capture to open in the app.")
+
+
+def _on_sigterm(flag: list) -> tuple[object] | None:
+    """A SIGTERM (``kill``, ``timeout``) ends the command as Ctrl-C does, removing its unfinished output (the default
+    action left a simulation's hidden temporary files, 655 MB, behind); returns ``(the handler it replaces,)``
+    (``None`` off the main thread, where Python cannot set one)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum: int, frame: object) -> None:
+        flag.append(signum)
+        raise KeyboardInterrupt
+
+    try:
+        return (signal.signal(signal.SIGTERM, handler),)
+    except (ValueError, OSError):
+        return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the process exit status (0 ok, 1 failed, 2 bad usage, 130 interrupted)."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -137,6 +182,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     # `spikeview` alone or `spikeview FILE` opens the app.
     if not argv or (argv[0] not in COMMANDS and not argv[0].startswith("-")):
+        unknown = _unknown_command(argv[0], list(COMMANDS)) if argv else None
+        if unknown is not None:
+            _print_error(unknown)
+            return 2
         argv = ["app", *argv]
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -152,16 +201,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             _print_error(problem)
             return 1
     run: Callable[[argparse.Namespace], int] = args.func
+    terminated = []
+    previous = _on_sigterm(terminated) if args.command not in ("app", "live") else None
     try:
         return int(run(args) or 0)
     except SpikeviewError as e:
         _print_error(str(e))
         return 1
     except (Cancelled, KeyboardInterrupt):
-        _print_error("interrupted; files already finished are kept, the unfinished one was removed.")
-        return 130
+        _print_error(("terminated" if terminated else "interrupted")
+                     + "; files already finished are kept, the unfinished one was removed.")
+        return 143 if terminated else 130
     except MemoryError:
-        _print_error("out of memory; reconstruct a shorter range or a smaller region.")
+        _print_error("out of memory; " + MEMORY_FIX.get(args.command, MEMORY_FIX["reconstruct"]))
         return 1
     except Exception as e:  # last resort: one line, never a traceback (set SPIKEVIEW_DEBUG=1 to see it)
         if isinstance(e, BrokenPipeError) and _stdout_closed():
@@ -170,6 +222,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         _print_error(f"unexpected {type(e).__name__}: {e} (this is a bug; rerun with SPIKEVIEW_DEBUG=1 and report the traceback).")
         return 1
+    finally:
+        if previous is not None:
+            import signal
+
+            signal.signal(signal.SIGTERM, previous[0] if previous[0] is not None else signal.SIG_DFL)
 
 
 if __name__ == "__main__":  # pragma: no cover

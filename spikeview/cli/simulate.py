@@ -110,13 +110,32 @@ def _config(args: argparse.Namespace):
         raise _in_user_words(e, args, changes) from None
 
 
+def _check_motion(args: argparse.Namespace) -> None:
+    """The synthetic-motion flags are finite numbers (``--zoom`` above 0), or one sentence naming the flag."""
+    import math
+
+    values = [("--pan", v) for v in (args.pan or ())] + [
+        (flag, getattr(args, name)) for flag, name in (("--zoom", "zoom"), ("--rotation", "rotation"), ("--fan", "fan"))
+        if getattr(args, name) is not None]
+    for flag, v in values:
+        if not math.isfinite(v):
+            raise ParameterError(f"{flag} {v:g} is not valid: give a finite number.")
+    if args.zoom is not None and args.zoom <= 0:
+        raise ParameterError(f"--zoom {args.zoom:g} is not valid: the scale factor per second must be above 0 "
+                             "(1 = no zoom).")
+
+
 def _scene(args: argparse.Namespace, cfg):
     from spikeview.sim import Fan, MotionScene, demo_scene, open_scene
 
     motion = args.pan is not None or args.zoom is not None or args.rotation is not None or args.fan is not None
+    _check_motion(args)
     if args.demo:
         if args.input:
             raise ParameterError("give either an INPUT file or --demo, not both.")
+        if motion:
+            raise ParameterError("the demo scene has its own motion: --pan/--zoom/--rotation/--fan move a still image "
+                                 "INPUT; leave them out with --demo.")
         size = cfg.width or cfg.height or 256
         if cfg.width and cfg.height and cfg.width != cfg.height:
             raise ParameterError("the demo scene is square: give --size N (or equal --width and --height).")
@@ -135,7 +154,7 @@ def _scene(args: argparse.Namespace, cfg):
                                  "file, not a folder or pattern.")
         size = (cfg.height, cfg.width) if cfg.width and cfg.height else None
         fans = [Fan(rev_per_s=args.fan)] if args.fan is not None else []
-        return MotionScene(path, size, pan=tuple(args.pan or (0.0, 0.0)), zoom=args.zoom or 1.0,
+        return MotionScene(path, size, pan=tuple(args.pan or (0.0, 0.0)), zoom=1.0 if args.zoom is None else args.zoom,
                            rotation=args.rotation or 0.0, fans=fans)
     if path.is_dir():
         return _image_folder(path, args.fps)

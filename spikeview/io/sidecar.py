@@ -124,6 +124,14 @@ def read_sidecar(path: str | os.PathLike[str]) -> Sidecar | None:
             stream = StreamSettings.from_dict(stream_data, where=f"{side} [stream]")
         except SpikeviewError as e:
             raise InputFileError(f"{side}: {_strip_where(str(e), side)} Fix or delete the sidecar.") from None
+    display = data.get("display")
+    if display is not None:
+        from spikeview.transfer import TRANSFERS
+
+        shown = display.get("transfer") if isinstance(display, dict) else None
+        if not isinstance(display, dict) or ("transfer" in display and shown not in TRANSFERS):
+            raise InputFileError(f"{side}: [display] transfer = {shown!r} is not a display curve; use one of "
+                                 f"{', '.join(repr(t) for t in TRANSFERS)}, or delete the line.")
     return Sidecar(path=side, stream=stream, tables=data)
 
 
