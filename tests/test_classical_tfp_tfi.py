@@ -61,9 +61,19 @@ def _tfi_reference(spikes, t, hw):
     out = np.empty((h, w))
     for y in range(h):
         for x in range(w):
-            prev = next((k for k in range(t, max(0, t - hw) - 1, -1) if spikes[k, y, x]), None)
-            nxt = next((k for k in range(t + 1, min(n - 1, t + hw) + 1) if spikes[k, y, x]), None)
-            interval = 2 * hw if prev is None or nxt is None else nxt - prev
+            cut_lo, cut_hi = t - hw < 0, t + hw >= n  # the stream cuts the search: the other side reaches 2·hw
+            deep_lo, deep_hi = hw * (2 if cut_hi else 1), hw * (2 if cut_lo else 1)
+            before = [k for k in range(t, max(0, t - deep_lo) - 1, -1) if spikes[k, y, x]]  # nearest first
+            after = [k for k in range(t + 1, min(n - 1, t + deep_hi) + 1) if spikes[k, y, x]]
+            if before and after:
+                interval = after[0] - before[0]
+            elif not before and cut_lo and len(after) >= 2:  # the stream's start cut the search
+                interval = after[1] - after[0]
+            elif not after and cut_hi and len(before) >= 2:  # its end did
+                interval = before[0] - before[1]
+            else:
+                interval = 2 * hw
+            interval = min(interval, 2 * hw)
             out[y, x] = 1.0 / interval
     return out
 
@@ -85,6 +95,30 @@ def test_tfi_hand_cases():
     out = tfi_array(spikes, t=10, half_window=5)
     np.testing.assert_allclose(out, [[1 / 3, 1.0, 1 / 10, 1 / 10]], rtol=1e-6)
     assert np.isfinite(out).all()
+
+
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_tfi_at_the_ends_of_a_stream_reads_the_nearest_whole_interval(cfa):
+    """At the first and last ticks the search is cut by the stream, not by the photosite: TFI takes the nearest
+    whole interval on the other side instead of the cap (a Spike-Zoo clip's last TFI frame was black, 0.03 against
+    0.45 a tick before); a dark photosite (no second spike within reach) keeps the cap."""
+    n, h, w = 300, 4, 6
+    spikes = np.zeros((n, h, w), np.uint8)
+    periods = np.array([[3, 4, 5, 6, 7, 9]] * h)
+    for y in range(h):
+        for x in range(w):
+            spikes[(y + x) % periods[y, x]::periods[y, x], y, x] = 1
+    spikes[:, 0, 0] = 0
+    spikes[150, 0, 0] = 1  # one spike in the whole stream: dark wherever it is imaged from
+    src = ArraySource(spikes, cfa=cfa)
+    want = 1.0 / periods
+    want[0, 0] = 1 / 64
+    for t in (0, 1, 150, 298, 299):
+        got = tfi(src, t, 32)
+        np.testing.assert_allclose(got[1:], want[1:], rtol=1e-6, err_msg=f"tick {t}")
+        np.testing.assert_allclose(got[0, 1:], want[0, 1:], rtol=1e-6, err_msg=f"tick {t}")
+        if t != 150:
+            assert got[0, 0] == np.float32(1 / 64)
 
 
 @pytest.mark.parametrize("seed, hw", [(0, 3), (1, 6), (2, 1)])

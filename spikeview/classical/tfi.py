@@ -8,12 +8,18 @@ after ``t`` (the SpikeCV convention):
 * ``next`` = first tick in ``[t + 1, t + half_window]`` with a spike,
 * ``interval = next - prev`` (``1 <= interval <= 2·half_window``), output ``1 / interval``.
 
-If either spike is missing within ``half_window`` ticks (a dark photosite, or the stream starts or
-ends), the interval is **capped at** ``2·half_window``, the longest interval the search could have
-found, as SpikeCV does. So the output is always finite, lies in ``[1/(2·half_window), 1]`` and a
-photosite with no spike at all reads ``1/(2·half_window)`` rather than 0. Near the ends of the
-stream the search range is cut at the stream boundary (not shifted: ``t`` is the instant being
-imaged), so more photosites take the capped value there.
+If either spike is missing within ``half_window`` ticks (a dark photosite), the interval is **capped at**
+``2·half_window``, the longest interval the search could have found, as SpikeCV does. So the output is always
+finite, lies in ``[1/(2·half_window), 1]`` and a photosite with no spike at all reads ``1/(2·half_window)`` rather
+than 0.
+
+Near the ends of the stream the search range is cut at the stream boundary (not shifted: ``t`` is the instant being
+imaged). Where the cut, not the photosite, leaves one side without a spike, the interval containing ``t`` began
+before the stream or ends after it: TFI takes the nearest whole interval on the other side (the two spikes after
+``t`` at the start, the two before it at the end, searched ``2·half_window`` ticks deep, as far as an interval in
+the stream's middle may span), and the cap only where that side has fewer than two spikes within reach; an
+interval longer than ``2·half_window`` is capped as everywhere. (SpikeCV caps there too, and a capture's first and last frames came out black or flat: a Spike-Zoo clip's
+last frame at 0.03 where the frames before it read 0.45.)
 
 Like TFP, TFI works per photosite and never mixes neighbours (mosaicked output on a Bayer sensor).
 """
@@ -30,32 +36,52 @@ from spikeview.classical.config import DEFAULT_HALF_WINDOW  # noqa: E402  (one h
 
 
 @numba.njit(cache=True, nogil=True)
-def _tfi_kernel(spikes: np.ndarray, ti: int, cap: int) -> np.ndarray:  # pragma: no cover - compiled
+def _tfi_kernel(spikes: np.ndarray, ti: int, cap: int, cut_lo: bool, cut_hi: bool) -> np.ndarray:  # pragma: no cover - compiled
     # Frame-major passes with "last write wins": scanning from the far end towards ti, every
-    # spike overwrites the distance, so the nearest spike's distance remains. Branch-free and
-    # contiguous, which vectorises (about 10x faster than scanning each pixel's time line).
+    # spike overwrites the distance, so the nearest spike's distance remains (and the one it
+    # overwrote, the second nearest). Branch-free and contiguous, which vectorises (about 10x
+    # faster than scanning each pixel's time line).
     t_len, h, w = spikes.shape
     n = h * w
     flat = spikes.reshape(t_len, n)
     none = np.int32(1 << 30)
     dprev = np.full(n, none, dtype=np.int32)  # ti - (last spike tick <= ti)
+    dprev2 = np.full(n, none, dtype=np.int32)  # ... the one before it
     dnext = np.full(n, none, dtype=np.int32)  # (first spike tick > ti) - ti
+    dnext2 = np.full(n, none, dtype=np.int32)  # ... the one after it
     for k in range(0, ti + 1):
         frame = flat[k]
         d = np.int32(ti - k)
         for i in range(n):
+            dprev2[i] = dprev[i] if frame[i] != 0 else dprev2[i]
             dprev[i] = d if frame[i] != 0 else dprev[i]
     for k in range(t_len - 1, ti, -1):
         frame = flat[k]
         d = np.int32(k - ti)
         for i in range(n):
+            dnext2[i] = dnext[i] if frame[i] != 0 else dnext2[i]
             dnext[i] = d if frame[i] != 0 else dnext[i]
     out = np.empty(n, dtype=np.float32)
     capped = np.float32(1.0) / np.float32(cap)
     for i in range(n):
         interval = np.int64(dprev[i]) + np.int64(dnext[i])  # >= 1; >= 2**30 when a spike is missing
-        out[i] = capped if interval >= none else np.float32(1.0) / np.float32(interval)
+        if interval >= none:
+            # the stream's end cut the search: the nearest whole interval on the other side
+            if cut_lo and dprev[i] >= none and dnext2[i] < none:
+                interval = np.int64(dnext2[i]) - np.int64(dnext[i])
+            elif cut_hi and dnext[i] >= none and dprev2[i] < none:
+                interval = np.int64(dprev2[i]) - np.int64(dprev[i])
+        out[i] = capped if interval >= cap else np.float32(1.0) / np.float32(interval)
     return out.reshape(h, w)
+
+
+def _block(t: int, hw: int, n: int) -> tuple[int, int, bool, bool]:
+    """The ticks ``[lo, hi)`` TFI reads at ``t`` and whether the stream cuts the search before / after ``t``: where it
+    does, the other side reaches ``2·half_window`` ticks (the longest interval the search finds inside the stream)."""
+    cut_lo, cut_hi = t - hw < 0, t + hw + 1 > n
+    lo = max(0, t - hw - (hw if cut_hi else 0))
+    hi = min(n, t + hw + 1 + (hw if cut_lo else 0))
+    return lo, hi, cut_lo, cut_hi
 
 
 def _check_half_window(half_window: int) -> int:
@@ -84,11 +110,11 @@ def tfi_array(spikes: np.ndarray, t: int, half_window: int = DEFAULT_HALF_WINDOW
     if not 0 <= int(t) < t_len:
         raise ParameterError(f"t={t} is outside the spike block, which holds ticks [0, {t_len}); choose a tick inside it.")
     t = int(t)
-    lo, hi = max(0, t - hw), min(t_len, t + hw + 1)
+    lo, hi, cut_lo, cut_hi = _block(t, hw, t_len)
     block = spikes[lo:hi]
     if block.dtype != np.uint8:
         block = block.astype(np.uint8)
-    return _tfi_kernel(np.ascontiguousarray(block), t - lo, 2 * hw)
+    return _tfi_kernel(np.ascontiguousarray(block), t - lo, 2 * hw, cut_lo, cut_hi)
 
 
 def tfi(source: SpikeSource, center: int, half_window: int = DEFAULT_HALF_WINDOW) -> np.ndarray:
@@ -113,6 +139,6 @@ def tfi(source: SpikeSource, center: int, half_window: int = DEFAULT_HALF_WINDOW
     if isinstance(center, bool) or not isinstance(center, (int, np.integer)) or not 0 <= center < n:
         raise ParameterError(f"center tick {center!r} is outside the stream, which holds ticks [0, {n}); choose a tick inside it.")
     center = int(center)
-    lo, hi = max(0, center - hw), min(n, center + hw + 1)
+    lo, hi, cut_lo, cut_hi = _block(center, hw, n)
     block = source.read(lo, hi)
-    return _tfi_kernel(np.ascontiguousarray(block, dtype=np.uint8), center - lo, 2 * hw)
+    return _tfi_kernel(np.ascontiguousarray(block, dtype=np.uint8), center - lo, 2 * hw, cut_lo, cut_hi)
