@@ -93,3 +93,30 @@ def test_load_ground_truth_reads_8_and_16_bit_images_and_refuses_another_size(tm
     (tmp_path / "bad.png").write_bytes(b"not an image")
     with pytest.raises(ParameterError, match="Cannot read bad.png as an image"):
         core.load_ground_truth(tmp_path / "bad.png", (4, 6), colour=True)
+
+
+@pytest.mark.parametrize("cfa", ["none", "RGGB"])
+def test_scores_do_not_depend_on_the_capture_s_rate_scale(cfa):
+    """A capture is scored with its white point at the sampler's exposure level, so the same scene at half the rate
+    scores alike (monochrome was scored in spikes per tick with a data range of 1: a Spike-Zoo clip, white 0.6 spikes
+    per tick, 4.4 dB above its exported frames, and a capture at half the rate 6 dB above that)."""
+    from spikeview.guided.observation import EXPOSURE_LEVEL
+    from spikeview.pipeline import output_white
+    from spikeview.session.model import Session
+    from spikeview.sim.demo import demo_capture
+
+    tfp = {}
+    for rate in (0.6, 0.3):
+        cap = demo_capture(size=32, n_ticks=60, seed=5, cfa=cfa, rate=rate)
+        st = core.memory_stream(cap, "compare", cap.gt_at)
+        s = Session()
+        s.open_stream(st)
+        req = jobs.CompareRequest(st.source, 30, dict(s.params, transfer="srgb"), None, None, st.ground_truth,
+                                  s.recipe(), ("tfp",))
+        v = jobs.compare_job(req, _Ctx())
+        tfp[rate] = v.scores["tfp"]["psnr_1gain"]
+        state = jobs.sequence_state(st.source, s.recipe().with_values({"run.method": "guided"}), None, _Ctx())
+        k, _ = jobs.scoring_units(state, s.recipe(), None)
+        if cfa == "none":
+            assert float(k) * float(output_white(s.recipe(), state)) == pytest.approx(EXPOSURE_LEVEL, rel=1e-5)
+    assert abs(tfp[0.6] - tfp[0.3]) < 3.5, tfp  # the noise of half the spikes: 2.2 dB in colour

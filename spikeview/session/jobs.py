@@ -233,7 +233,7 @@ def guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
 def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     from spikeview import metrics
     from spikeview.cfa import crop_roi
-    from spikeview.pipeline import guided_scale, reconstruct_windows
+    from spikeview.pipeline import reconstruct_windows
 
     p = req.params
     recipe = req.recipe.with_values({"run.method": "guided"})
@@ -250,7 +250,7 @@ def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
 
     # frames come back in linear-frame units; they are scored at the sampler's exposure, where the
     # ground truth is aligned to the exposed observation and both lie in [0, 1]
-    to_exposed = np.float32(1.0 / guided_scale(state))
+    to_exposed, gt = scoring_units(state, recipe, gt)
 
     def score(img: np.ndarray) -> tuple[float | None, float | None]:
         if gt is None or gt.shape != img.shape:
@@ -278,6 +278,24 @@ def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
     truth = None if gt is None else core.show(gt / to_exposed, p)
     return GuidedResult(req.run, req.tick, image, core.show(image, p), origin, str(plan),
                         elapsed, psnr, ssim, recipe.to_dict(), scores, truth)
+
+
+def scoring_units(state: Any, recipe: Recipe, gt: np.ndarray | None) -> tuple[np.float32, np.ndarray | None]:
+    """The factor from linear frames to the units they are scored in, and the aligned ground truth ``gt`` in them:
+    the sampler's exposure (the sequence's white at :data:`~spikeview.guided.observation.EXPOSURE_LEVEL`). A capture
+    the sampler sees without a colour cast (monochrome) is exposed as its rates: it is scored with its white point
+    brought to that level alike (in spikes per tick, with a data range of 1, a Spike-Zoo clip scored 4.4 dB above its
+    exported frames: its white is 0.6 spikes per tick)."""
+    from spikeview.guided.observation import EXPOSURE_LEVEL
+    from spikeview.pipeline import guided_scale, output_white
+
+    to_exposed = 1.0 / guided_scale(state)
+    if state.alpha is None:
+        white = float(output_white(recipe, state))
+        k = EXPOSURE_LEVEL / white if np.isfinite(white) and white > 0 else 1.0
+        to_exposed *= k
+        gt = None if gt is None else np.clip(gt * np.float32(k), 0.0, 1.0).astype(np.float32)
+    return np.float32(to_exposed), gt
 
 
 def aligned_truth(ground_truth: Callable[[int], Any] | None, tick: int, roi: tuple[int, int, int, int] | None,
@@ -345,7 +363,7 @@ def compare_job(req: CompareRequest, ctx: Any) -> CompareView:
     them as the guided runs are scored (same observation, same aligned ground truth, same exposure)."""
     from spikeview.cfa import crop_roi
     from spikeview.errors import cancel_scope
-    from spikeview.pipeline import guided_scale, plan_window, reconstruct_windows
+    from spikeview.pipeline import plan_window, reconstruct_windows
 
     with cancel_scope(ctx.cancelled):
         base = req.recipe.with_values({"run.method": "guided"})
@@ -355,7 +373,7 @@ def compare_job(req: CompareRequest, ctx: Any) -> CompareView:
         if req.ground_truth is not None:
             wp = plan_window(req.source, base, req.tick, state=state, roi=req.roi)
             gt = aligned_truth(req.ground_truth, req.tick, req.roi, wp.obs)
-        to_exposed = 1.0 / guided_scale(state)
+        to_exposed, gt = scoring_units(state, base, gt)
         images: dict[str, np.ndarray] = {}
         scores: dict[str, dict[str, float]] = {}
         for m in req.methods:
