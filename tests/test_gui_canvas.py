@@ -266,6 +266,30 @@ def test_screenshot_without_a_sidecar_says_the_geometry_it_took(tmp_path, capsys
     assert "nosidecar.dat has no sidecar: opened with the settings dialog's first guess (" in err
 
 
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+@pytest.mark.parametrize("flags, needle", [(["--tick", "5000"], "--tick 5000 is outside the capture"),
+                                           (["--tick", "-5"], "--tick -5 is outside the capture"),
+                                           (["--roi", "50,40,20,20"], "does not lie inside the 64x48 frame"),
+                                           (["--pixel", "64,10"], "--pixel 64,10 is outside the 64x48 frame"),
+                                           (["--export", "{tmp}/old.png"], "the file already exists")])
+def test_screenshot_flags_outside_the_capture_are_refused_in_one_sentence(tmp_path, capsys, flags, needle, cfa):
+    """A tick past the end showed the last one, a region past the frame was cut to what lay inside, a pixel outside
+    it printed nothing, and an export onto an existing file waited forever for the app's Replace? question: each is
+    one sentence now, and nothing is written."""
+    from spikeview.cli.main import main
+    from spikeview.io.plain import write_plain
+
+    rng = np.random.default_rng(0)
+    path = tmp_path / "c.dat"
+    write_plain(path, (rng.random((40, 48, 64)) < 0.3).astype(np.uint8), cfa=cfa, sidecar=True)
+    (tmp_path / "old.png").write_bytes(b"keep me")
+    argv = ["app", str(path), "--screenshot", str(tmp_path / "x.png"), *[f.format(tmp=tmp_path) for f in flags]]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip()
+    assert needle in err and "Traceback" not in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "x.png").exists() and (tmp_path / "old.png").read_bytes() == b"keep me"
+
+
 def test_qt_messages_reach_the_terminal_less_the_offscreen_notice(capsys):
     from spikeview.gui.app import _qt_message
 

@@ -178,10 +178,20 @@ def _act(app: Any, w: Any, path: Any, run: str | None, view: tuple[str, str | No
     step("open")
     if truth is not None and not w.load_truth(truth):
         raise RuntimeError(f"screenshot: the ground truth was refused: {w.notice.text()}")
+    n, h, wd = s.source.n_frames, s.source.height, s.source.width
     if tick is not None:
+        if not 0 <= int(tick) < n:
+            raise ValueError(f"--tick {tick} is outside the capture, which holds ticks 0 to {n - 1}; choose one inside it.")
         s.set_tick(int(tick))
     if roi is not None:
-        s.set_roi(tuple(int(v) for v in roi))
+        x, y, rw, rh = (int(v) for v in roi)
+        if x < 0 or y < 0 or rw < 1 or rh < 1 or x + rw > wd or y + rh > h:
+            raise ValueError(f"--roi {x},{y},{rw},{rh} does not lie inside the {wd}x{h} frame; give X,Y,W,H with "
+                             f"X+W <= {wd} and Y+H <= {h}.")
+        s.set_roi((x, y, rw, rh))
+    if pixel is not None and not (0 <= pixel[0] < wd and 0 <= pixel[1] < h):
+        raise ValueError(f"--pixel {pixel[0]},{pixel[1]} is outside the {wd}x{h} frame; give X,Y with X < {wd} and "
+                         f"Y < {h}.")
     _wait(app, lambda: c.last_frames is not None and c.last_frames.tick == s.tick, f"frames at tick {s.tick}", c.errors)
     if run == "guided":
         n = c.run_guided()
@@ -193,6 +203,11 @@ def _act(app: Any, w: Any, path: Any, run: str | None, view: tuple[str, str | No
     if run is not None:
         step("run")
     if export is not None:
+        from spikeview.export.base import existing_frame_files
+
+        if existing_frame_files(str(export)):  # the app would ask before replacing them; no one is there to answer
+            raise ValueError(f"--export {export}: the file already exists; choose another name or delete it first "
+                             "(the app asks before replacing files, and a screenshot run has no one to answer).")
         fmt = Path(str(export)).suffix.lower().lstrip(".")
         if fmt in ("png", "exr", "mp4"):
             s.set("export_format", fmt)
