@@ -69,6 +69,9 @@ class ExportPanel(QtWidgets.QWidget):
         self.slowmo.setMinimumHeight(2 * self.slowmo.fontMetrics().lineSpacing() + 2)
         self.count = QtWidgets.QLabel()
         self.count.setObjectName("export_count")
+        # the count line can say that Export writes TFP, not the guided result shown: it wraps rather than widen the
+        # panel past a laptop's screen (cut off there, behind a horizontal scroll bar)
+        self.count.setWordWrap(True)
         self.cluster = QtWidgets.QLineEdit()
         self.cluster.setObjectName("export_cluster")
         self.cluster.setPlaceholderText("optional: local:2 or tcp://HOST:8786")
