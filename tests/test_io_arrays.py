@@ -107,8 +107,16 @@ def test_damaged_files(tmp_path, spikes):
     np.save(good, spikes)
     cut = tmp_path / "cut.npy"
     cut.write_bytes(good.read_bytes()[:300])
-    with pytest.raises(InputFileError, match="cut.npy.*not a readable .npy"):
+    with pytest.raises(InputFileError, match="cut.npy: the .npy file looks truncated or damaged"):
         NpySource(cut)
+    zipped = tmp_path / "z.npz"
+    np.savez_compressed(zipped, spk=spikes)
+    cutz = tmp_path / "cutz.npz"
+    cutz.write_bytes(zipped.read_bytes()[: zipped.stat().st_size // 2])
+    from spikeview.io import open_source
+
+    with pytest.raises(InputFileError, match="cutz.npz: the .npz file looks truncated or damaged"):
+        open_source(cutz)
     text = tmp_path / "t.npy"
     text.write_text("hello")
     with pytest.raises(InputFileError, match="t.npy"):

@@ -189,7 +189,7 @@ def _run_one(args: argparse.Namespace) -> int:
     _check_output_first(out, args)
     src = open_source_from_args(args, recipe, writes=True)
     if chosen:  # once the input is known to be a capture
-        print(f"no --out given: writing {out} in the current folder (--out NAME.png for an 8-bit sRGB image)", file=sys.stderr)
+        print(f"no --out given: writing {out} in the current folder (--out NAME.png for an 8-bit image)", file=sys.stderr)
     with src:
         recipe = recipe.with_values({f"stream.{k}": v for k, v in StreamTable.from_info(src.info, getattr(args, "layout", None)).to_dict().items()})
         centres, step = window_centres(recipe, src.n_frames)

@@ -86,6 +86,13 @@ def _load_array(path: Path, key: str | None) -> tuple[np.ndarray, str | None]:
                              f"instead (spikeview memory-maps those).") from None
     except Exception as e:  # numpy/zipfile raise many types for damaged files
         kind = ".npz" if is_zip else ".npy"
+        import zipfile
+
+        text = str(e).lower()
+        if isinstance(e, (zipfile.BadZipFile, EOFError)) or any(w in text for w in ("eof", "truncat", "greater than file size",
+                                                                                  "cannot reshape array of size")):
+            raise InputFileError(f"{path}: the {kind} file looks truncated or damaged ({type(e).__name__}: {e}); copy "
+                                 "it again from where it was recorded or saved.") from None
         raise InputFileError(f"{path}: not a readable {kind} spike array ({type(e).__name__}: {e}); "
                              f"save the spikes with numpy.save as a (T, H, W) uint8 array.") from None
 
