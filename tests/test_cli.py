@@ -216,3 +216,14 @@ def test_simulate_then_guided_reconstruct_prints_plan_and_preset_reproduces(tmp_
     assert main(["reconstruct", str(dat), "--preset", str(tmp_path / "g.npy.preset.toml"), "--seed", "2",
                  "--out", str(other)]) == 0
     assert not np.array_equal(np.load(other), frames)
+
+
+def test_a_shorter_sequence_over_a_longer_one_says_the_earlier_frames_remain(capture, tmp_path, capsys):
+    path, _ = capture
+    out = str(tmp_path / "f_%03d.png")
+    assert main(["reconstruct", str(path), *GEOM, "--range", "0:200:20", "--out", out]) == 0
+    assert "earlier run" not in capsys.readouterr().err
+    assert main(["reconstruct", str(path), *GEOM, "--range", "0:100:20", "--out", out, "--overwrite"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: 5 files named like f_005.png" in err and "this one wrote 5" in err, err
+    assert len(list(tmp_path.glob("f_*.png"))) == 10  # said, not deleted: no one named them

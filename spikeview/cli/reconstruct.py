@@ -261,11 +261,29 @@ def _run_one(args: argparse.Namespace) -> int:
                         pass
                 raise
         _write_preset(out, recipe, src)
+    _say_stale_frames(out, len(centres))
     at = "" if len(centres) != 1 else (f" (the window centred on tick {centres[0]}"
                                        + (", the middle of the capture: --at T for another)" if getattr(args, "at", None) is None
                                           and not getattr(args, "range", None) and not getattr(args, "preset", None) else ")"))
     print(f"wrote {len(centres)} frame{'s' if len(centres) != 1 else ''}{at} to {out}; settings in {preset_path(out)}")
     return 0
+
+
+def _say_stale_frames(out: Path, n: int) -> None:
+    """A frame sequence written over an earlier, longer one (``--overwrite``) leaves that run's later frames beside
+    its own: say so (they would be read as one sequence) rather than delete files no one named."""
+    if "%" not in out.name:
+        return
+    from spikeview.export.base import existing_frame_files
+    from spikeview.export.settings import ExportConfig
+
+    first = ExportConfig().first_frame
+    ours = {out.with_name(out.name % (first + i)).name for i in range(n)}
+    stale = [p for p in existing_frame_files(out) if p.name not in ours]
+    if stale:
+        print(f"spikeview: warning: {len(stale)} file{'s' if len(stale) != 1 else ''} named like {stale[0].name} in "
+              f"{out.parent} {'are' if len(stale) != 1 else 'is'} from an earlier run (this one wrote {n}); delete "
+              f"{'them' if len(stale) != 1 else 'it'} if the sequence should end at its last frame.", file=sys.stderr)
 
 
 def _check_output_first(out: Path, args: argparse.Namespace) -> None:
