@@ -680,9 +680,10 @@ def odd_width_warning(cfa: str, width: int) -> str:
 
 #: the frame size the rates point to is taken as the likely one (the CLI refuses the given one) only when its rows
 #: line up at least this well (mean correlation 1–4 rows down; a sheared Spike-Zoo clip's true size: 0.98, a dark
-#: simulated 256² capture's: 0.53) and it holds at least LIKELY_SIDE pixels a side (a 16x16 flat test stream's rates
-#: "line up" best at 15x8)
-LIKELY_SPATIAL = 0.5
+#: simulated 256² capture's: 0.53, the 64x64 demo's: 0.48, read at width 65 it was only warned about) and it holds
+#: at least LIKELY_SIDE pixels a side (a 16x16 flat test stream's rates "line up" best at 15x8). The given width
+#: must look sheared first (:func:`rate_warnings`), so this bounds only how sure the size it names must be
+LIKELY_SPATIAL = 0.4
 LIKELY_SIDE = 16
 
 
