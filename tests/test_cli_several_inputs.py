@@ -48,3 +48,30 @@ def test_several_inputs_need_an_existing_folder_for_out(tmp_path, capsys):
                "--out", str(tmp_path / "missing")])
     assert rc == 1 and "names an existing folder" in capsys.readouterr().err
     assert not (tmp_path / "missing").exists()
+
+
+@pytest.mark.parametrize("cfa", ["none", "RGGB"])
+def test_captures_of_one_name_from_two_folders_and_a_profile_s_maps_in_a_folder(tmp_path, capsys, cfa):
+    """Two folders' ``x.npy``: each output takes its folder's name (the second had collided with the first); a camera
+    profile's maps (``cam.npz`` beside ``cam.toml``) in an input folder are not read as a capture; every input failing
+    is said as such."""
+    rng = np.random.default_rng(2)
+    for d in ("m1", "m2"):
+        (tmp_path / d).mkdir()
+        np.save(tmp_path / d / "x.npy", (rng.random((40, 16, 16)) < 0.3).astype(np.uint8))
+    out = tmp_path / "out"
+    out.mkdir()
+    assert main(["reconstruct", str(tmp_path / "m1" / "x.npy"), str(tmp_path / "m2" / "x.npy"), "--cfa", cfa,
+                 "--at", "20", "--out", str(out)]) == 0
+    assert sorted(p.name for p in out.glob("*.exr")) == ["m1_x_tfp_t20.exr", "m2_x_tfp_t20.exr"]
+    np.savez(tmp_path / "m1" / "cam.npz", dark=np.zeros((16, 16)))
+    (tmp_path / "m1" / "cam.toml").write_text("# a camera profile\n")
+    out2 = tmp_path / "out2"
+    out2.mkdir()
+    assert main(["reconstruct", str(tmp_path / "m1"), "--cfa", cfa, "--at", "20", "--out", str(out2)]) == 0
+    assert [p.name for p in out2.glob("*.exr")] == ["x_tfp_t20.exr"]
+    capsys.readouterr()
+    (tmp_path / "bad1.npy").write_bytes(b"junk")
+    (tmp_path / "bad2.npy").write_bytes(b"junk")
+    assert main(["reconstruct", str(tmp_path / "bad1.npy"), str(tmp_path / "bad2.npy"), "--out", str(out2)]) == 1
+    assert "all 2 inputs failed (said above); nothing was written" in capsys.readouterr().err

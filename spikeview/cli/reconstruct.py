@@ -122,8 +122,10 @@ def _inputs(names: list[str]) -> list[Path]:
     for n in names:
         p = Path(n)
         if p.is_dir():
+            # not a camera profile's maps (``cam.npz`` beside ``cam.toml``, spikeview calibrate's pair)
             found = sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in CAPTURE_SUFFIXES
-                           and not q.name.endswith((".gt.npz",)) and not q.name.endswith(".preset.npz"))
+                           and not q.name.endswith((".gt.npz",)) and not q.name.endswith(".preset.npz")
+                           and not (q.suffix.lower() == ".npz" and q.with_suffix(".toml").is_file()))
             if not found:
                 raise ParameterError(f"{n}: the folder holds no spike capture ({', '.join(CAPTURE_SUFFIXES)}); name the files instead.")
             out += found
@@ -152,6 +154,9 @@ def run(args: argparse.Namespace) -> int:
     if batch.wants_zarr(args):
         raise ParameterError("a .zarr store takes one input; run the inputs one by one.")
     failed = 0
+    from collections import Counter
+
+    stems = Counter(p.stem for p in inputs)  # captures of one name from several folders: their outputs take the folder's
     for i, path in enumerate(inputs, 1):
         one = copy.copy(args)
         one.input = str(path)
@@ -160,6 +165,8 @@ def run(args: argparse.Namespace) -> int:
         try:
             if folder is not None:
                 name = default_out(one, recipe_from_args(one)).name
+                if stems[path.stem] > 1:
+                    name = f"{path.resolve().parent.name}_{name}"
                 one.out = str(folder / name)
             _run_one(one)
         except SpikeviewError as e:
@@ -167,7 +174,8 @@ def run(args: argparse.Namespace) -> int:
             msg = str(e)
             print(f"spikeview: error: {msg if str(path) in msg else f'{path}: {msg}'}", file=sys.stderr)
     if failed:
-        print(f"spikeview: {failed} of {len(inputs)} inputs failed (said above); the others were written.", file=sys.stderr)
+        print(f"spikeview: {failed} of {len(inputs)} inputs failed (said above); the others were written." if failed < len(inputs)
+              else f"spikeview: all {len(inputs)} inputs failed (said above); nothing was written.", file=sys.stderr)
         return 1
     return 0
 
