@@ -91,6 +91,11 @@ PRIOR_BROAD = 1.0
 COMBINED_SIGMA = 0.25
 
 
+#: fixed gains R,G,B must lie within this factor of each other (no sensor's channels differ more; beyond it the white
+#: point the gains imply leaves every output's range)
+GAIN_SPREAD = 1000.0
+
+
 def parse_white_balance(text: str, name: str = "--white-balance") -> str | list[float]:
     """``text`` as a method name of :data:`CHOICES` or as three fixed gains ``R,G,B`` (finite, positive).
 
@@ -107,6 +112,9 @@ def parse_white_balance(text: str, name: str = "--white-balance") -> str | list[
         except ValueError:
             gains = []
         if len(gains) == 3 and all(np.isfinite(g) and g > 0 for g in gains):
+            if max(gains) > GAIN_SPREAD * min(gains):
+                raise ParameterError(f"{name} {text!r}: the three gains lie {max(gains) / min(gains):.3g}x apart; give "
+                                     f"gains within {GAIN_SPREAD:g}x of each other (e.g. 1.6,1,2.1).")
             return gains
     raise ParameterError(f"{name} {text!r} is not one of {', '.join(CHOICES)} nor three positive gains R,G,B "
                          "(e.g. 1.6,1,2.1).")

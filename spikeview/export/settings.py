@@ -84,7 +84,7 @@ class ExportConfig(Config):
     png_bits: int = 8
     black: float = param(0.0, label="Black level", lo=0.0, hi=1.0, step=0.01,
                          help="Linear value shown as black in PNG/MP4 and the app (fixed, never per frame).")
-    white: float | None = param(None, label="White point", lo=0.0, lo_open=True, hi=16.0, step=0.01,
+    white: float | None = param(None, label="White point", lo=WHITE_MIN, hi=16.0, step=0.01,
                                 help="Exposure: the linear value (Y·α/η with a colour cast, Y in spikes per tick for monochrome) that becomes 1.0 in EXR and full scale in "
                                      "npy/PNG/MP4 and the app; unset, the sequence's 99.9th percentile, chosen once and "
                                      "printed (a file without a sidecar within 25 % of 0.6 spikes per tick takes 0.6, the "
