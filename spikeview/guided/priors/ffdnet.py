@@ -265,14 +265,16 @@ class FFDNetDenoiser(nn.Module):
         self.channels, self.features, self.n_layers = _architecture(self.color)
         if pretrained:
             path = Path(weights) if weights is not None else ffdnet_weights_path(self.color)
+            if path.is_dir():
+                raise InputFileError(f"{path}: is a folder; --model names the FFDNet weights file itself (a .pth file).")
             if not path.is_file():
                 raise PriorUnavailableError(f"FFDNet weights file {path} not found; pass an existing .pth file or {_INSTALL_HINT}.")
             try:
                 state = torch.load(path, map_location="cpu", weights_only=True)
             except Exception as e:  # noqa: BLE001 - torch raises RuntimeError/UnpicklingError/EOFError/... for a bad file
-                raise InputFileError(
-                    f"{path}: not a readable FFDNet weights file ({type(e).__name__}); reinstall with {_INSTALL_HINT}."
-                ) from None
+                fix = (f"reinstall with {_INSTALL_HINT}" if weights is None
+                       else "give an FFDNet .pth file (the ffdnet package's own are used without --model)")
+                raise InputFileError(f"{path}: not a readable FFDNet weights file ({type(e).__name__}); {fix}.") from None
             if not isinstance(state, dict):
                 raise InputFileError(
                     f"{path}: holds a {type(state).__name__}, not an FFDNet state dict; use the files shipped with {_INSTALL_HINT}."
