@@ -82,7 +82,7 @@ def _lowlight(args: argparse.Namespace) -> int:
                 f"Machine: {cpu_model()} ({flags}), {os.cpu_count()} CPU cores, Python {platform.python_version()}. "
                 f"Command: `spikeview bench{' --low-light' if args.low_light else ''}"
                 f"{' --real ' + ' '.join(Path(f).name for f in args.real) if args.real else ''} --out DIR`.\n\n"
-                + "**What runs" + how.split("**What runs", 1)[1].strip() + "\n\n")
+                + "**What runs" + how.split("**What runs", 1)[1].rstrip() + "\n\n")
         out = head + out
         (Path(args.out) / "lowlight.md").write_text(out + "\n", encoding="utf-8")
     return 0

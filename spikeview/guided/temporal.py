@@ -451,6 +451,37 @@ def _box_same_colour(c: Any, cfa: str | None) -> Any:
     return out
 
 
+def _lone(rejected: Any, accepted: Any, cfa: str | None) -> Any:
+    """Photosites of ``rejected`` whose same-colour neighbours (the 8 around it within its Bayer plane, those inside
+    the frame) are all in ``accepted`` but at most one (a pair of false alarms): numpy or torch boolean arrays alike
+    (integer counts, so both give the same)."""
+    def plane(r: Any, a: Any) -> Any:
+        h, w = r.shape
+        if isinstance(a, np.ndarray):
+            ap, ones = np.pad(a.astype(np.int16), 1), np.pad(np.ones((h, w), np.int16), 1)
+        else:
+            import torch
+
+            pad = torch.nn.functional.pad
+            ap = pad(a.to(torch.int16)[None], (1, 1, 1, 1))[0]
+            ones = pad(torch.ones((1, h, w), dtype=torch.int16, device=a.device), (1, 1, 1, 1))[0]
+        n_acc = n_all = 0
+        for dy in (0, 1, 2):
+            for dx in (0, 1, 2):
+                if dy != 1 or dx != 1:
+                    n_acc = n_acc + ap[dy:dy + h, dx:dx + w]
+                    n_all = n_all + ones[dy:dy + h, dx:dx + w]
+        return r & (n_acc >= n_all - 1)
+
+    if cfa is None:
+        return plane(rejected, accepted)
+    out = rejected & False
+    for i in (0, 1):
+        for j in (0, 1):
+            out[i::2, j::2] = plane(rejected[i::2, j::2], accepted[i::2, j::2])
+    return out
+
+
 def _box_torch(c: Any) -> Any:
     """``uniform_filter(c, 3, mode="nearest") * 9`` of a float32 torch tensor, as scipy rounds it: a 3-tap mean along
     the rows, then the columns, each summed in float64 and stored as float32."""
@@ -626,7 +657,8 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
             tile_ok_px = xp.put(ok_tile)[ty_px][:, tx_px]
             side = 1 if k > 0 else -1
             if not best.any():  # every tile at rest (a static scene, the common case): no gather, nothing moved
-                weight = chain[side] & tile_ok_px & pixel_ok(refs, _box_same_colour(nk, cfa), factors[k])
+                candidate = chain[side] & tile_ok_px
+                ok = pixel_ok(refs, _box_same_colour(nk, cfa), factors[k])
                 aligned = nk
             else:
                 best_px = xp.put(best * f)[ty_px][:, tx_px]
@@ -639,7 +671,15 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
                 # the centre window's photosite sees: such photosites are left out unless the shift is zero
                 margin = (ys >= 2) & (ys < h - 2) & (xs >= 2) & (xs < w - 2)
                 zero = (best_px[..., 0] == 0) & (best_px[..., 1] == 0)
-                weight = chain[side] & tile_ok_px & inside & (margin | zero) & pixel_ok(refs, boxk, factors[k])
+                candidate = chain[side] & tile_ok_px & inside & (margin | zero)
+                ok = pixel_ok(refs, boxk, factors[k])
+            weight = candidate & ok
+            # a lone photosite (or pair) failing the test among same-colour neighbours that passed it (their 3×3 sums
+            # hold its count) is the test's false alarm, not motion, which moves a patch: it pools with them. Without
+            # this, a regular (noise-free) integrate-and-fire capture's dark photosites whose ±1 windows swung from
+            # an empty 3×3 sum to a full one kept their own 10-tick window: isolated black or white dots
+            weight = weight | _lone(candidate & ~ok, weight, cfa)
+            if best.any():
                 still &= ~weight | zero
             chain[side] = weight
             sides[side] += weight
@@ -970,7 +1010,9 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
             vv = np.where(has, core_var + _countvar(sm, cap, curve) * 4.0 / np.maximum(sn_, 1.0), 0.0)
             chi_side = _tile_sum(dv * dv, tile_g) / (factor * _tile_sum(vv, tile_g) + 1e-6)
             ok_tile = _fit_tiles((chi <= REST_CHI) & (chi_side <= SIDE_CHI), th, tw)[ty_of][:, tx_of]
-            weight = cand & ok_tile & pixel_ok(refs, _box_same_colour(nk, cfa), factor)
+            ok = pixel_ok(refs, _box_same_colour(nk, cfa), factor)
+            weight = cand & ok_tile & ok
+            weight = weight | _lone(cand & ok_tile & ~ok, weight, cfa)  # the test's false alarm (pool_counts)
             chain[side] = weight
             if weight.any():
                 oks[k] = (weight, nk)
