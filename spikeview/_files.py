@@ -77,6 +77,16 @@ def _same(a: Path, b: Path) -> bool:
     return os.path.abspath(os.path.realpath(a)) == os.path.abspath(os.path.realpath(b))
 
 
+#: a spike file's sidecar is its name plus this (``scene.dat`` → ``scene.dat.toml``; :mod:`spikeview.io.sidecar`)
+SIDECAR_SUFFIX = ".toml"
+
+
+def sidecar_path(path: str | os.PathLike[str]) -> Path:
+    """The sidecar of spike file ``path``: the same name plus ``.toml`` (``scene.dat`` → ``scene.dat.toml``)."""
+    path = Path(path)
+    return path.with_name(path.name + SIDECAR_SUFFIX)
+
+
 def check_writable(path: str | os.PathLike[str], overwrite: bool = False,
                    inputs: Iterable[str | os.PathLike[str] | None] = (), *, owner: str | os.PathLike[str] | None = None) -> Path:
     """Raise :class:`OutputFileError` unless writing ``path`` destroys nothing that must be kept.
@@ -92,8 +102,6 @@ def check_writable(path: str | os.PathLike[str], overwrite: bool = False,
     Returns:
         ``path`` as a :class:`~pathlib.Path`.
     """
-    from spikeview.io.sidecar import sidecar_path
-
     path = Path(path)
     for inp in inputs:
         if inp is None or str(inp) == "":

@@ -418,8 +418,10 @@ def add_flags(parser: Any, tables: Iterable[str] = ("classical", "guided", "expo
             kind = p.kind()
             if kind is bool:
                 g.add_argument(p.flag, dest=p.dest, action=argparse.BooleanOptionalAction, default=None, help=text)
-            elif p.choices:
-                g.add_argument(p.flag, dest=p.dest, choices=list(p.choices), default=None, help=text)
+            elif p.choices:  # lower-case choices take any case (--method TFP, as --cfa rggb)
+                lower = all(isinstance(c, str) and c == c.lower() for c in p.choices)
+                g.add_argument(p.flag, dest=p.dest, choices=list(p.choices), default=None, help=text,
+                               type=str.lower if lower else str)
             else:
                 g.add_argument(p.flag, dest=p.dest, type=kind if kind in (int, float) else str, default=None,
                                metavar=p.unit.split()[0].upper() if p.unit and " " not in p.unit else None, help=text)

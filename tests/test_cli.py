@@ -227,3 +227,19 @@ def test_a_shorter_sequence_over_a_longer_one_says_the_earlier_frames_remain(cap
     err = capsys.readouterr().err
     assert "warning: 5 files named like f_005.png" in err and "this one wrote 5" in err, err
     assert len(list(tmp_path.glob("f_*.png"))) == 10  # said, not deleted: no one named them
+
+
+def test_a_mistyped_option_names_the_nearest_and_a_choice_takes_any_case(capture, tmp_path, capsys):
+    """argparse printed ~40 lines of usage before its error, and ``--methd`` was said by the top-level parser without
+    the command's options; ``--method TFP`` was refused while ``--cfa rggb`` was taken."""
+    path, _ = capture
+    assert main(["reconstruct", str(path), *GEOM, "--methd", "tfp"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == ("spikeview reconstruct: error: unrecognized arguments: --methd tfp (did you mean --method?); "
+                   "spikeview reconstruct --help lists the options"), err
+    with pytest.raises(SystemExit) as e:
+        main(["reconstruct", str(path), *GEOM, "--method", "fast"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "invalid choice: 'fast'" in err and "usage:" not in err, err
+    assert main(["reconstruct", str(path), *GEOM, "--method", "TFP", "--at", "100", "--out", str(tmp_path / "a.npy")]) == 0

@@ -143,7 +143,7 @@ class CameraProfile:
             n = int(self.hot.sum())
             dark = float(self.stats.get("dark_rate_mean", 0.0) or 0.0)
             also = f", its dark rate {dark:.3g} spikes/tick subtracted" if dark > 0 else ""
-            return (f"none given; the capture's own {n} hot pixel{'s' if n != 1 else ''} filled from their neighbours"
+            return (f"none given; the capture's own {n} hot pixel{'s' if n != 1 else ''} filled from {'their' if n != 1 else 'its'} neighbours"
                     f"{also} (defects below).")
         parts = []
         if self.captures.get("dark"):

@@ -77,7 +77,7 @@ class Defects:
     def describe(self) -> str:
         """One line for ``spikeview info``."""
         n = int(self.hot.sum())
-        parts = [f"{n} hot pixel{'s' if n != 1 else ''} (filled from their neighbours)"]
+        parts = [f"{n} hot pixel{'s' if n != 1 else ''} (filled from {'their' if n != 1 else 'its'} neighbours)"]
         names = ("top", "bottom", "left", "right")
         b = [f"{n} {v}" for n, v in zip(names, self.border) if v]
         e = [f"{n} {v}" for n, v in zip(names, self.edges) if v]

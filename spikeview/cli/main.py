@@ -26,15 +26,37 @@ EPILOG = """examples:
 """
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors in the CLI's one-sentence form: the mistake and where the options are listed (its
+    default printed the whole usage, ~40 lines for ``reconstruct``, before the one line that mattered)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]  # argparse's signature
+        self.exit(2, f"{self.prog}: error: {message} ({self.prog} --help lists the options)\n")
+
+
+def _unknown_options(parser: argparse.ArgumentParser, args: argparse.Namespace, extras: list[str]) -> str:
+    """The sentence for options the command does not know, with the nearest one it does (``--methd`` → ``--method``)."""
+    import difflib
+
+    sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)  # noqa: SLF001
+    command = sub.choices.get(getattr(args, "command", None) or "") if sub is not None else None
+    known = [o for a in (command or parser)._actions for o in a.option_strings]  # noqa: SLF001
+    prog = command.prog if command is not None else parser.prog
+    hints = [near[0] for e in extras if e.startswith("--")
+             for near in [difflib.get_close_matches(e.split("=")[0], known, n=1)] if near]
+    return (f"{prog}: error: unrecognized arguments: {' '.join(extras)}"
+            + (f" (did you mean {' or '.join(hints)}?)" if hints else "") + f"; {prog} --help lists the options")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="spikeview",
         description="View, simulate and reconstruct chromatic spike-camera captures.",
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"spikeview {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     from spikeview.cli._common import add_geometry_flags
     from spikeview.cli.commands import COMMANDS
@@ -188,7 +210,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         argv = ["app", *argv]
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extras = parser.parse_known_args(argv)
+    if extras:
+        print(_unknown_options(parser, args, extras), file=sys.stderr)
+        return 2
     if args.command == "app":
         inp = getattr(args, "input", None)
         if inp and not Path(str(inp)).exists():  # the file first: a display would not help a missing file

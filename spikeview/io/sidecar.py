@@ -27,12 +27,11 @@ import os
 from pathlib import Path
 from typing import Any
 
+from spikeview._files import SIDECAR_SUFFIX, sidecar_path  # noqa: F401  (their home: the file rules)
 from spikeview.cfa import cfa_to_str, parse_cfa
 from spikeview.config import Config, load_toml
 from spikeview.errors import InputFileError, ParameterError, SpikeviewError
 from spikeview.io.source import DEFAULT_TICK_RATE, FORMATS, StreamInfo, check_tick_rate
-
-SIDECAR_SUFFIX = ".toml"
 
 
 @dataclasses.dataclass
@@ -81,12 +80,6 @@ class Sidecar:
     path: Path
     stream: StreamSettings | None
     tables: dict[str, Any]
-
-
-def sidecar_path(path: str | os.PathLike[str]) -> Path:
-    """The sidecar of spike file ``path``: the same name plus ``.toml`` (``scene.dat`` → ``scene.dat.toml``)."""
-    path = Path(path)
-    return path.with_name(path.name + SIDECAR_SUFFIX)
 
 
 def is_sidecar(path: str | os.PathLike[str]) -> bool:
