@@ -137,6 +137,9 @@ def prepare_sequence(source: Any, recipe: Recipe, *, warn: bool = True) -> Seque
     if longer and white == estimate:
         how += (f" over {span['ticks']}-tick windows (a {window}-tick window holds under {WHITE_LOW_COUNT:g} spikes at "
                 "the white: its count levels, not the scene, would set the percentile)")
+    if span.get("no_spikes"):
+        how = ("the capture has no spikes in the windows sampled, so every frame is black whatever the white point: "
+               "a covered lens, or not the file meant?")
     return SequenceState(a, white, note, why, how, span["window_white"] if longer else None,
                          keep_balance=detail["keep_balance"], tfi_reach=tfi_reach(source) if longer else None)
 

@@ -182,3 +182,18 @@ def test_the_sampler_keeps_the_exposure_of_the_window_length_white(cfa):
                                           cfa=cfa), recipe, warn=False)
     assert bright.exposure_white is None and "exposure_white" not in state_to_attrs(bright)
     assert bright.tfi_reach is None and "tfi_reach" not in state_to_attrs(bright)
+
+
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_a_capture_without_spikes_says_so_in_its_white_point_line(cfa):
+    """An all-zero capture took a white point of 1 'by the 99.9th percentile', which was 0: it says its frames are
+    black whatever the white point."""
+    from spikeview.io.source import ArraySource
+    from spikeview.pipeline import prepare_sequence
+    from spikeview.recipe import Recipe
+
+    state = prepare_sequence(ArraySource(np.zeros((40, 16, 16), np.uint8), cfa=cfa), Recipe(), warn=False)
+    assert "has no spikes in the windows sampled" in state.white_how
+    state = prepare_sequence(ArraySource((np.random.default_rng(0).random((40, 16, 16)) < 0.3).astype(np.uint8), cfa=cfa),
+                             Recipe(), warn=False)
+    assert "no spikes" not in state.white_how

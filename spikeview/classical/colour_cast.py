@@ -579,6 +579,8 @@ def estimate_white(source: SpikeSource, alpha: np.ndarray | list[float] | None, 
         lo, hi, weights = lo[keep], hi[keep], weights[keep]
         total = float(weights.sum())
         if total <= 0 or spiking <= 0:  # no spike at all: any white point shows black; the gray-world mean
+            if detail is not None:
+                detail["no_spikes"] = True
             return 1.0 / eta
         target = float(percentile) / 100.0 * total
         a, b = float(lo.min()), float(hi.max())
