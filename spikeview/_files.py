@@ -109,8 +109,7 @@ def check_writable(path: str | os.PathLike[str], overwrite: bool = False,
         if _same(path, Path(inp)):
             raise OutputFileError(f"{path}: this is an input of the run ({Path(inp).name}), which is never "
                                   "overwritten, even with --overwrite; choose another output name.")
-        side = sidecar_path(inp)
-        if (side.exists() or side.is_symlink()) and _same(path, side):
+        if _same(path, sidecar_path(inp)):  # existing or not: written, it would be read as the input's sidecar
             raise OutputFileError(f"{path}: this is the sidecar of an input of the run ({Path(inp).name}: how to read "
                                   "it), which is never overwritten, even with --overwrite; choose another output name.")
     if path.is_dir():

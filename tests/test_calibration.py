@@ -253,6 +253,7 @@ def test_cli_calibrate_info_and_reconstruct_with_camera(tmp_path, capsys, cfa):
     capsys.readouterr()
     # refusals: one sentence each, no traceback
     (tmp_path / "junk.toml").write_text("garbage = = =\n")
+    np.save(tmp_path / "d0.npy", np.zeros((50, N, N), np.uint8))
     simulate_to_file(StaticScene(np.zeros((N, N + 8, 3), np.float32), srgb=False), _cfg(cfa, 20), tmp_path / "wide.dat")
     bad = [(["info", str(tmp_path / "wide.dat"), "--camera", str(prof)], f"{N}x{N}"),
            (["reconstruct", str(tmp_path / "cap.dat"), "--camera", str(tmp_path / "junk.toml"), "--out",
@@ -264,6 +265,9 @@ def test_cli_calibrate_info_and_reconstruct_with_camera(tmp_path, capsys, cfa):
            # the input's sidecar (how to read it) is never replaced, even with --overwrite
            (["calibrate", "--dark", str(tmp_path / "dark.dat"), "--out", str(tmp_path / "dark.dat.toml"),
              "--overwrite"], "the sidecar of an input of the run (dark.dat"),
+           # ... nor written where there is none yet: the capture would read the profile as its sidecar
+           (["calibrate", "--dark", str(tmp_path / "d0.npy"), "--out", str(tmp_path / "d0.npy.toml")],
+            "the sidecar of an input of the run (d0.npy"),
            # an existing profile: it exists (not "the settings file of an earlier run whose output ... is gone")
            (["calibrate", "--dark", str(tmp_path / "dark.dat"), "--out", str(prof)], "cam.toml: the file already exists")]
     if cfa != "none":

@@ -61,16 +61,18 @@ def _tfi_reference(spikes, t, hw):
     out = np.empty((h, w))
     for y in range(h):
         for x in range(w):
-            cut_lo, cut_hi = t - hw < 0, t + hw >= n  # the stream cuts the search: the other side reaches 2·hw
-            deep_lo, deep_hi = hw * (2 if cut_hi else 1), hw * (2 if cut_lo else 1)
-            before = [k for k in range(t, max(0, t - deep_lo) - 1, -1) if spikes[k, y, x]]  # nearest first
-            after = [k for k in range(t + 1, min(n - 1, t + deep_hi) + 1) if spikes[k, y, x]]
+            cut_lo, cut_hi = t - hw < 0, t + hw >= n  # the stream cuts the search
+            before = [k for k in range(t, max(0, t - hw) - 1, -1) if spikes[k, y, x]]  # nearest first
+            after = [k for k in range(t + 1, min(n - 1, t + hw) + 1) if spikes[k, y, x]]
+            # the side the stream does not cut is searched 2·hw deep for a whole interval
+            deep_after = [k for k in range(t + 1, min(n - 1, t + 2 * hw) + 1) if spikes[k, y, x]]
+            deep_before = [k for k in range(t, max(0, t - 2 * hw) - 1, -1) if spikes[k, y, x]]
             if before and after:
                 interval = after[0] - before[0]
-            elif not before and cut_lo and len(after) >= 2:  # the stream's start cut the search
-                interval = after[1] - after[0]
-            elif not after and cut_hi and len(before) >= 2:  # its end did
-                interval = before[0] - before[1]
+            elif not before and cut_lo and len(deep_after) >= 2:  # the stream's start cut the search
+                interval = deep_after[1] - deep_after[0]
+            elif not after and cut_hi and len(deep_before) >= 2:  # its end did
+                interval = deep_before[0] - deep_before[1]
             else:
                 interval = 2 * hw
             interval = min(interval, 2 * hw)
@@ -121,11 +123,13 @@ def test_tfi_at_the_ends_of_a_stream_reads_the_nearest_whole_interval(cfa):
             assert got[0, 0] == np.float32(1 / 64)
 
 
-@pytest.mark.parametrize("seed, hw", [(0, 3), (1, 6), (2, 1)])
-def test_tfi_matches_slow_reference_on_random_streams(seed, hw):
-    spikes = _random_spikes(seed, (30, 6, 7), p=0.15)
+@pytest.mark.parametrize("seed, hw, n, p", [(0, 3, 30, 0.15), (1, 6, 30, 0.15), (2, 1, 30, 0.15), (3, 8, 30, 0.05),
+                                           (4, 20, 30, 0.1), (5, 40, 30, 0.05), (6, 5, 7, 0.3)])
+def test_tfi_matches_slow_reference_on_random_streams(seed, hw, n, p):
+    """Both ends of the stream (search cut there, one end or both: streams shorter than the search) and inside."""
+    spikes = _random_spikes(seed, (n, 6, 7), p=p)
     src = ArraySource(spikes)
-    for t in (0, 1, 14, 28, 29):  # both ends of the stream (search cut there) and inside
+    for t in sorted({0, 1, 2, n // 2, n - 3, n - 2, n - 1} & set(range(n))):
         expected = _tfi_reference(spikes, t, hw)
         np.testing.assert_allclose(tfi(src, t, hw), expected, rtol=1e-6)
         np.testing.assert_allclose(tfi_array(spikes.astype(bool), t, hw), expected, rtol=1e-6)
@@ -142,3 +146,29 @@ def test_tfi_range():
 def test_tfi_bad_arguments(kwargs):
     with pytest.raises(ParameterError):
         tfi(ArraySource(np.zeros((20, 2, 2), dtype=np.uint8)), **kwargs)
+
+
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_the_app_preview_s_tfi_is_the_cli_s_at_both_ends_of_a_stream(cfa):
+    """The Stream panel reads one block for TFP and TFI: its TFI must be cut where the stream is, not where the block
+    is (it read the cap at a stream's ends where the CLI read the photosite's interval)."""
+    from spikeview.classical.tfi import tfi_block, tfi_span
+    from spikeview.session import core
+    from spikeview.session.model import Session
+
+    n, h, w = 200, 8, 8
+    spikes = np.zeros((n, h, w), np.uint8)
+    rng = np.random.default_rng(0)
+    for y in range(h):
+        for x in range(w):
+            period = int(rng.integers(20, 60))
+            spikes[int(rng.integers(0, period))::period, y, x] = 1
+    src = ArraySource(spikes, cfa=cfa)
+    for t in (0, 3, 100, 196, 199):
+        lo, hi = tfi_span(t, 32, n)
+        np.testing.assert_array_equal(tfi_block(spikes[max(0, lo - 5):], max(0, lo - 5), t, 32, n), tfi(src, t, 32))
+        params = dict(Session().params, tfi_half_window=32, colour_cast=False)
+        frames = core.stream_frames(src, t, params, None)
+        np.testing.assert_array_equal(frames.tfi, core.tfi_frame(src, t, params, None))
+    with pytest.raises(ParameterError, match="does not cover"):
+        tfi_block(spikes[10:], 10, 0, 32, n)

@@ -64,6 +64,12 @@ def test_captures_of_one_name_from_two_folders_and_a_profile_s_maps_in_a_folder(
     assert main(["reconstruct", str(tmp_path / "m1" / "x.npy"), str(tmp_path / "m2" / "x.npy"), "--cfa", cfa,
                  "--at", "20", "--out", str(out)]) == 0
     assert sorted(p.name for p in out.glob("*.exr")) == ["m1_x_tfp_t20.exr", "m2_x_tfp_t20.exr"]
+    np.savez(tmp_path / "m2" / "x.npz", spikes=(rng.random((40, 16, 16)) < 0.3).astype(np.uint8))  # one folder, one stem
+    out3 = tmp_path / "out3"
+    out3.mkdir()
+    assert main(["reconstruct", str(tmp_path / "m2" / "x.npy"), str(tmp_path / "m2" / "x.npz"), "--cfa", cfa,
+                 "--at", "20", "--out", str(out3)]) == 0
+    assert sorted(p.name for p in out3.glob("*.exr")) == ["m2_x_tfp_t20.exr", "m2_x_tfp_t20_2.exr"]
     np.savez(tmp_path / "m1" / "cam.npz", dark=np.zeros((16, 16)))
     (tmp_path / "m1" / "cam.toml").write_text("# a camera profile\n")
     out2 = tmp_path / "out2"

@@ -101,7 +101,6 @@ def test_scores_do_not_depend_on_the_capture_s_rate_scale(cfa):
     scores alike (monochrome was scored in spikes per tick with a data range of 1: a Spike-Zoo clip, white 0.6 spikes
     per tick, 4.4 dB above its exported frames, and a capture at half the rate 6 dB above that)."""
     from spikeview.guided.observation import EXPOSURE_LEVEL
-    from spikeview.pipeline import output_white
     from spikeview.session.model import Session
     from spikeview.sim.demo import demo_capture
 
@@ -118,5 +117,8 @@ def test_scores_do_not_depend_on_the_capture_s_rate_scale(cfa):
         state = jobs.sequence_state(st.source, s.recipe().with_values({"run.method": "guided"}), None, _Ctx())
         k, _ = jobs.scoring_units(state, s.recipe(), None)
         if cfa == "none":
-            assert float(k) * float(output_white(s.recipe(), state)) == pytest.approx(EXPOSURE_LEVEL, rel=1e-5)
+            assert float(k) * float(state.sampler_white) == pytest.approx(EXPOSURE_LEVEL, rel=1e-5)
+            # the display's White control does not move a score
+            k2, _ = jobs.scoring_units(state, s.recipe().with_values({"export.white": 0.05}), None)
+            assert k2 == k
     assert abs(tfp[0.6] - tfp[0.3]) < 3.5, tfp  # the noise of half the spikes: 2.2 dB in colour

@@ -411,6 +411,10 @@ def test_a_lone_false_alarm_pools_with_its_neighbours_and_a_patch_does_not(cfa):
     accepted2 = accepted.copy()
     accepted2[4 * step, 5 * step] = accepted2[5 * step, 5 * step] = False
     assert not _lone(rejected, accepted2, cfa)[4 * step, 4 * step]
+    # a frame too small for neighbours, or a photosite none of whose neighbours passed: nothing to rescue it by
+    tiny = np.ones((2 * step, 2 * step) if cfa else (1, 1), bool)
+    assert not _lone(tiny, ~tiny, cfa).any()
+    assert not _lone(np.ones((step, 5 * step), bool), np.zeros((step, 5 * step), bool), cfa).any()
 
 
 @pytest.mark.parametrize("cfa", CFAS)

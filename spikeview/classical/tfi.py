@@ -17,8 +17,9 @@ Near the ends of the stream the search range is cut at the stream boundary (not 
 imaged). Where the cut, not the photosite, leaves one side without a spike, the interval containing ``t`` began
 before the stream or ends after it: TFI takes the nearest whole interval on the other side (the two spikes after
 ``t`` at the start, the two before it at the end, searched ``2·half_window`` ticks deep, as far as an interval in
-the stream's middle may span), and the cap only where that side has fewer than two spikes within reach; an
-interval longer than ``2·half_window`` is capped as everywhere. (SpikeCV caps there too, and a capture's first and last frames came out black or flat: a Spike-Zoo clip's
+the stream's middle may span), and the cap only where that side has fewer than two spikes within reach (the spikes
+on both sides of ``t`` are searched ``half_window`` ticks deep there as everywhere); an interval longer than
+``2·half_window`` is capped as everywhere. (SpikeCV caps there too, and a capture's first and last frames came out black or flat: a Spike-Zoo clip's
 last frame at 0.03 where the frames before it read 0.45.)
 
 Like TFP, TFI works per photosite and never mixes neighbours (mosaicked output on a Bayer sensor).
@@ -63,13 +64,16 @@ def _tfi_kernel(spikes: np.ndarray, ti: int, cap: int, cut_lo: bool, cut_hi: boo
             dnext[i] = d if frame[i] != 0 else dnext[i]
     out = np.empty(n, dtype=np.float32)
     capped = np.float32(1.0) / np.float32(cap)
+    half = cap // 2  # the search reaches half_window ticks each way (the block may hold more: the deeper side)
     for i in range(n):
-        interval = np.int64(dprev[i]) + np.int64(dnext[i])  # >= 1; >= 2**30 when a spike is missing
+        p = dprev[i] if dprev[i] <= half else none
+        q = dnext[i] if dnext[i] <= half else none
+        interval = np.int64(p) + np.int64(q)  # >= 1; >= 2**30 when a spike is missing
         if interval >= none:
-            # the stream's end cut the search: the nearest whole interval on the other side
-            if cut_lo and dprev[i] >= none and dnext2[i] < none:
+            # the stream's end cut the search: the nearest whole interval on the other side (2·half_window deep)
+            if cut_lo and p >= none and dnext2[i] < none:
                 interval = np.int64(dnext2[i]) - np.int64(dnext[i])
-            elif cut_hi and dnext[i] >= none and dprev2[i] < none:
+            elif cut_hi and q >= none and dprev2[i] < none:
                 interval = np.int64(dprev2[i]) - np.int64(dprev[i])
         out[i] = capped if interval >= cap else np.float32(1.0) / np.float32(interval)
     return out.reshape(h, w)
@@ -139,6 +143,24 @@ def tfi(source: SpikeSource, center: int, half_window: int = DEFAULT_HALF_WINDOW
     if isinstance(center, bool) or not isinstance(center, (int, np.integer)) or not 0 <= center < n:
         raise ParameterError(f"center tick {center!r} is outside the stream, which holds ticks [0, {n}); choose a tick inside it.")
     center = int(center)
-    lo, hi, cut_lo, cut_hi = _block(center, hw, n)
-    block = source.read(lo, hi)
-    return _tfi_kernel(np.ascontiguousarray(block, dtype=np.uint8), center - lo, 2 * hw, cut_lo, cut_hi)
+    lo, hi = tfi_span(center, hw, n)
+    return tfi_block(source.read(lo, hi), lo, center, hw, n)
+
+
+def tfi_span(t: int, half_window: int, n_frames: int) -> tuple[int, int]:
+    """The ticks ``[lo, hi)`` TFI at ``t`` reads in a stream of ``n_frames`` ticks (see the module docstring)."""
+    lo, hi, _, _ = _block(int(t), _check_half_window(half_window), int(n_frames))
+    return lo, hi
+
+
+def tfi_block(block: np.ndarray, start: int, t: int, half_window: int, n_frames: int) -> np.ndarray:
+    """TFI at stream tick ``t`` from ``block``, the stream's ticks ``[start, start + len(block))``, which must cover
+    :func:`tfi_span` (a preview reads one block for TFP and TFI): the stream's own ends decide the cut, not the
+    block's."""
+    hw = _check_half_window(half_window)
+    lo, hi, cut_lo, cut_hi = _block(int(t), hw, int(n_frames))
+    if start > lo or start + len(block) < hi:
+        raise ParameterError(f"the block of ticks [{start}, {start + len(block)}) does not cover TFI's span [{lo}, {hi}) "
+                             f"at tick {t}; read that span.")
+    sub = np.asarray(block[lo - start:hi - start])
+    return _tfi_kernel(np.ascontiguousarray(sub, dtype=np.uint8), int(t) - lo, 2 * hw, cut_lo, cut_hi)

@@ -71,8 +71,9 @@ def run(args: argparse.Namespace) -> int:
 
     # the output's folder and the files it would replace, before any informational line (as reconstruct does)
     check_output_folder(out)
-    for path in ([out] if "%" not in out.name else []) + [preset_path(out)]:
-        check_writable(path, bool(args.overwrite), [store])
+    if "%" not in out.name:
+        check_writable(out, bool(args.overwrite), [store])
+    check_writable(preset_path(out), bool(args.overwrite), [store], owner=None if "%" in out.name else out)
     if out.suffix.lower() == ".mp4":
         print(f"{n} frames, one per {step} ticks, at {ecfg.fps:g} fps: "
               f"{describe_slow_motion(slow_motion_factor(float(attrs['tick_rate']), step, ecfg.fps))}", file=sys.stderr)

@@ -42,8 +42,9 @@ def _unknown_options(parser: argparse.ArgumentParser, args: argparse.Namespace, 
     command = sub.choices.get(getattr(args, "command", None) or "") if sub is not None else None
     known = [o for a in (command or parser)._actions for o in a.option_strings]  # noqa: SLF001
     prog = command.prog if command is not None else parser.prog
-    hints = [near[0] for e in extras if e.startswith("--")
-             for near in [difflib.get_close_matches(e.split("=")[0], known, n=1)] if near]
+    names = {o.lstrip("-"): o for o in known if o.startswith("--")}  # the shared "--" made unrelated names look alike
+    hints = [names[near[0]] for e in extras if e.startswith("--")
+             for near in [difflib.get_close_matches(e.split("=")[0].lstrip("-"), list(names), n=1, cutoff=0.7)] if near]
     return (f"{prog}: error: unrecognized arguments: {' '.join(extras)}"
             + (f" (did you mean {' or '.join(hints)}?)" if hints else "") + f"; {prog} --help lists the options")
 

@@ -157,6 +157,7 @@ def run(args: argparse.Namespace) -> int:
     from collections import Counter
 
     stems = Counter(p.stem for p in inputs)  # captures of one name from several folders: their outputs take the folder's
+    taken: set[str] = set()
     for i, path in enumerate(inputs, 1):
         one = copy.copy(args)
         one.input = str(path)
@@ -167,6 +168,10 @@ def run(args: argparse.Namespace) -> int:
                 name = default_out(one, recipe_from_args(one)).name
                 if stems[path.stem] > 1:
                     name = f"{path.resolve().parent.name}_{name}"
+                stem, suffix, k = Path(name).stem, Path(name).suffix, 2
+                while name in taken:  # still one name for two inputs (a.npy and a.npz of one folder): _2, _3, ...
+                    name, k = f"{stem}_{k}{suffix}", k + 1
+                taken.add(name)
                 one.out = str(folder / name)
             _run_one(one)
         except SpikeviewError as e:
@@ -269,7 +274,7 @@ def _run_one(args: argparse.Namespace) -> int:
                         pass
                 raise
         _write_preset(out, recipe, src)
-    _say_stale_frames(out, len(centres))
+    _say_stale_frames(out, len(centres), recipe.export.first_frame)
     at = "" if len(centres) != 1 else (f" (the window centred on tick {centres[0]}"
                                        + (", the middle of the capture: --at T for another)" if getattr(args, "at", None) is None
                                           and not getattr(args, "range", None) and not getattr(args, "preset", None) else ")"))
@@ -277,15 +282,13 @@ def _run_one(args: argparse.Namespace) -> int:
     return 0
 
 
-def _say_stale_frames(out: Path, n: int) -> None:
+def _say_stale_frames(out: Path, n: int, first: int) -> None:
     """A frame sequence written over an earlier, longer one (``--overwrite``) leaves that run's later frames beside
     its own: say so (they would be read as one sequence) rather than delete files no one named."""
     if "%" not in out.name:
         return
     from spikeview.export.base import existing_frame_files
-    from spikeview.export.settings import ExportConfig
 
-    first = ExportConfig().first_frame
     ours = {out.with_name(out.name % (first + i)).name for i in range(n)}
     stale = [p for p in existing_frame_files(out) if p.name not in ours]
     if stale:

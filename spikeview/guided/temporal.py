@@ -471,7 +471,7 @@ def _lone(rejected: Any, accepted: Any, cfa: str | None) -> Any:
                 if dy != 1 or dx != 1:
                     n_acc = n_acc + ap[dy:dy + h, dx:dx + w]
                     n_all = n_all + ones[dy:dy + h, dx:dx + w]
-        return r & (n_acc >= n_all - 1)
+        return r & (n_acc >= n_all - 1) & (n_acc >= 1)  # a photosite with no accepted neighbour is not rescued
 
     if cfa is None:
         return plane(rejected, accepted)

@@ -363,14 +363,17 @@ def stream_frames(source: SpikeSource, tick: int, params: dict[str, Any], alpha:
     """
     from spikeview.classical.calibration import camera_of
     from spikeview.classical.reconstruct import preview_rgb
-    from spikeview.classical.tfi import tfi_array
+    from spikeview.classical.tfi import tfi_block, tfi_span
     from spikeview.classical.tfp import counts_to_sfr
 
     n = source.n_frames
     window = int(min(params["window"], n))
     a, b = window_range(tick, window, n)
     hw = int(params["tfi_half_window"])
-    lo, hi = (min(a, max(0, tick - hw)), max(b, min(n, tick + hw + 1))) if want_tfi else (a, b)
+    lo, hi = a, b
+    if want_tfi:
+        t_lo, t_hi = tfi_span(tick, hw, n)
+        lo, hi = min(a, t_lo), max(b, t_hi)
     block = source.read(lo, hi)
     raw = block[tick - lo] * np.uint8(255)
     cfa = source.cfa
@@ -388,7 +391,7 @@ def stream_frames(source: SpikeSource, tick: int, params: dict[str, Any], alpha:
         tfp_img = _cli_frame(source, sfr, params, alpha if use_cast else None)
     tfi_img = None
     if want_tfi:
-        tfi_img = _cli_frame(source, tfi_array(block, tick - lo, hw), params, alpha if use_cast else None)
+        tfi_img = _cli_frame(source, tfi_block(block, lo, tick, hw, n), params, alpha if use_cast else None)
     f = max(1, int(factor))
     return StreamFrames(tick=tick, a=a, b=b, raw=downsample(raw, f), tfp=downsample(tfp_img, f),
                         tfi=None if tfi_img is None else downsample(tfi_img, f),

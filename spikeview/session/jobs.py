@@ -283,15 +283,16 @@ def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
 def scoring_units(state: Any, recipe: Recipe, gt: np.ndarray | None) -> tuple[np.float32, np.ndarray | None]:
     """The factor from linear frames to the units they are scored in, and the aligned ground truth ``gt`` in them:
     the sampler's exposure (the sequence's white at :data:`~spikeview.guided.observation.EXPOSURE_LEVEL`). A capture
-    the sampler sees without a colour cast (monochrome) is exposed as its rates: it is scored with its white point
-    brought to that level alike (in spikes per tick, with a data range of 1, a Spike-Zoo clip scored 4.4 dB above its
+    the sampler sees without a colour cast (monochrome) is exposed as its rates: it is scored with the sequence's
+    white point brought to that level alike (``recipe`` is not read: the display's White control does not move a
+    score) (in spikes per tick, with a data range of 1, a Spike-Zoo clip scored 4.4 dB above its
     exported frames: its white is 0.6 spikes per tick)."""
     from spikeview.guided.observation import EXPOSURE_LEVEL
-    from spikeview.pipeline import guided_scale, output_white
+    from spikeview.pipeline import guided_scale
 
     to_exposed = 1.0 / guided_scale(state)
-    if state.alpha is None:
-        white = float(output_white(recipe, state))
+    if state.alpha is None:  # the sequence's exposure white, as guided_scale takes it (not the display's White control)
+        white = float(state.sampler_white) if state.sampler_white is not None else 1.0
         k = EXPOSURE_LEVEL / white if np.isfinite(white) and white > 0 else 1.0
         to_exposed *= k
         gt = None if gt is None else np.clip(gt * np.float32(k), 0.0, 1.0).astype(np.float32)

@@ -40,20 +40,30 @@ from spikeview.errors import check_cancelled
 
 __all__ = ["OVStack", "OpenVINOFallbackWarning", "available", "give_up", "stack_for", "version"]
 
+_IMPORT_LOCK = threading.Lock()
+_OV = None
+
+
 def _openvino():
     """The ``openvino`` module, imported (once) with ``openvino_telemetry`` unimportable: its model converter then
-    takes its no-op telemetry stub instead of sending an event over the network (see the module docstring)."""
-    if "openvino" in sys.modules:
-        return sys.modules["openvino"]
-    block = "openvino_telemetry" not in sys.modules
-    if block:
-        sys.modules["openvino_telemetry"] = None  # type: ignore[assignment]  # an ImportError for whoever imports it
-    try:
-        import openvino
-    finally:
-        if block and sys.modules.get("openvino_telemetry", 0) is None:
-            del sys.modules["openvino_telemetry"]
-    return openvino
+    takes its no-op telemetry stub instead of sending an event over the network (see the module docstring). The
+    import runs under a lock and the module is handed out only once it has finished (another thread had taken a
+    half-imported module from ``sys.modules``)."""
+    global _OV
+    if _OV is not None and sys.modules.get("openvino") is _OV:
+        return _OV
+    with _IMPORT_LOCK:
+        if _OV is None or sys.modules.get("openvino") is not _OV:
+            block = "openvino_telemetry" not in sys.modules
+            if block:
+                sys.modules["openvino_telemetry"] = None  # type: ignore[assignment]  # an ImportError for whoever imports it
+            try:
+                import openvino
+            finally:
+                if block and sys.modules.get("openvino_telemetry", 0) is None:
+                    del sys.modules["openvino_telemetry"]
+            _OV = openvino
+    return _OV
 
 
 #: how often (ms) a running pass looks at the cancel flag
