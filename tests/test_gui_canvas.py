@@ -381,3 +381,14 @@ def test_zoom_and_pan_are_shared_by_every_view_of_the_frame(window, qtbot, cfa):
     assert np.allclose(centre(canvas), centre(raw), atol=1.0)
     w.canvas.fit()  # Fit in one fits them all
     qtbot.waitUntil(lambda: all(p.covers_image() for p in (canvas, raw, deg)), timeout=WAIT_MS)
+
+
+def test_the_readout_of_a_monochrome_capture_gives_one_value_per_image():
+    """A monochrome capture's guided frame is one channel and its TFI an RGB gray: the readout gave '75' beside
+    '(69, 69, 69)'; one value each now, and three for a colour capture's pixels even where they are gray."""
+    from spikeview.gui.canvas import _values
+
+    assert _values(np.array([75], np.uint8), gray=True) == "75"
+    assert _values(np.array([69, 69, 69], np.uint8), gray=True) == "69"
+    assert _values(np.array([69, 69, 69], np.uint8)) == "(69, 69, 69)"
+    assert _values(np.array([1, 2, 3], np.uint8)) == "(1, 2, 3)"

@@ -560,12 +560,17 @@ class ImageCanvas(QtWidgets.QWidget):
             if v is None:
                 continue
             label = name if name == "truth" else f"{name} {SOURCES[key].split(' (')[0]}"
-            parts.append(f"{label} {_values(v)}")
+            parts.append(f"{label} {_values(v, getattr(self.session.source, 'cfa', None) is None)}")
         return "   ".join(parts)
 
 
-def _values(v: np.ndarray) -> str:
-    return str(int(v[0])) if v.size == 1 else "(" + ", ".join(str(int(c)) for c in v[:3]) + ")"
+def _values(v: np.ndarray, gray: bool = False) -> str:
+    """One value for a one-channel image or any image of a monochrome capture (``gray``: its RGB images are gray, and
+    the readout mixed 75 with (69, 69, 69)), else (R, G, B)."""
+    flat = np.asarray(v).ravel()
+    if flat.size == 1 or gray:
+        return str(int(flat[0]))
+    return "(" + ", ".join(str(int(c)) for c in flat[:3]) + ")"
 
 
 def _hint(a: str, b: str, missing: list[str]) -> str:
