@@ -115,10 +115,11 @@ def test_scores_do_not_depend_on_the_capture_s_rate_scale(cfa):
         v = jobs.compare_job(req, _Ctx())
         tfp[rate] = v.scores["tfp"]["psnr_1gain"]
         state = jobs.sequence_state(st.source, s.recipe().with_values({"run.method": "guided"}), None, _Ctx())
-        k, _ = jobs.scoring_units(state, s.recipe(), None)
+        k, _ = jobs.scoring_units(state, None)
         if cfa == "none":
             assert float(k) * float(state.sampler_white) == pytest.approx(EXPOSURE_LEVEL, rel=1e-5)
-            # the display's White control does not move a score
-            k2, _ = jobs.scoring_units(state, s.recipe().with_values({"export.white": 0.05}), None)
-            assert k2 == k
+            # the display's White control does not move a score (the units come from the sequence's state alone)
+            req2 = jobs.CompareRequest(st.source, 30, dict(s.params, transfer="srgb", white=0.05), None, None,
+                                       st.ground_truth, s.recipe().with_values({"export.white": 0.05}), ("tfp",))
+            assert jobs.compare_job(req2, _Ctx()).scores["tfp"]["psnr_1gain"] == pytest.approx(tfp[rate], abs=1e-6)
     assert abs(tfp[0.6] - tfp[0.3]) < 3.5, tfp  # the noise of half the spikes: 2.2 dB in colour

@@ -17,10 +17,10 @@ Near the ends of the stream the search range is cut at the stream boundary (not 
 imaged). Where the cut, not the photosite, leaves one side without a spike, the interval containing ``t`` began
 before the stream or ends after it: TFI takes the nearest whole interval on the other side (the two spikes after
 ``t`` at the start, the two before it at the end, searched ``2·half_window`` ticks deep, as far as an interval in
-the stream's middle may span), and the cap only where that side has fewer than two spikes within reach (the spikes
-on both sides of ``t`` are searched ``half_window`` ticks deep there as everywhere); an interval longer than
-``2·half_window`` is capped as everywhere. (SpikeCV caps there too, and a capture's first and last frames came out black or flat: a Spike-Zoo clip's
-last frame at 0.03 where the frames before it read 0.45.)
+the stream's middle may span), and the cap only where that side has fewer than two spikes within reach. The spikes
+on both sides of ``t`` are searched ``half_window`` ticks deep there as everywhere, and an interval longer than
+``2·half_window`` is capped as everywhere. (SpikeCV caps at the ends too: a capture's first and last frames came out
+black or flat, a Spike-Zoo clip's last frame at 0.03 where the frames before it read 0.45.)
 
 Like TFP, TFI works per photosite and never mixes neighbours (mosaicked output on a Bayer sensor).
 """

@@ -613,8 +613,8 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     # search's best of ~50 velocities beats rest by about that on a static tile by chance, and more so on a real
     # sensor's bright pixels, which fire almost regularly (a photosite's adjacent windows anticorrelate: 2, 3, 2, 3 …
     # spikes). A static regular capture had a third of its tiles 'aligned' by up to 4 px and pooled ±3 on 87 %
-    best = np.mean([chis[k] for k in offsets], axis=0)
-    held = (rest_cost <= TILE_CHI) & (rest_cost - best < REST_MARGIN)
+    best_cost = np.mean([chis[k] for k in offsets], axis=0)
+    held = (rest_cost <= TILE_CHI) & (rest_cost - best_cost < REST_MARGIN)
     at_rest = (searched | ((rest_cost <= REST_CHI) & dim) | held) if pan is None else searched
     for k in offsets:
         motion[k] = np.where(at_rest[..., None], 0, motion[k])
@@ -688,7 +688,9 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
             # hold its count) is the test's false alarm, not motion, which moves a patch: it pools with them. Without
             # this, a regular (noise-free) integrate-and-fire capture's dark photosites whose ±1 windows swung from
             # an empty 3×3 sum to a full one kept their own 10-tick window: isolated black or white dots
-            weight = weight | _lone(candidate & ~ok, weight, cfa)
+            missed = candidate & ~ok
+            if missed.any():  # most windows reject no photosite: nothing to rescue
+                weight = weight | _lone(missed, weight, cfa)
             if best.any():
                 still &= ~weight | zero
             chain[side] = weight
@@ -1022,7 +1024,9 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
             ok_tile = _fit_tiles((chi <= REST_CHI) & (chi_side <= SIDE_CHI), th, tw)[ty_of][:, tx_of]
             ok = pixel_ok(refs, _box_same_colour(nk, cfa), factor)
             weight = cand & ok_tile & ok
-            weight = weight | _lone(cand & ok_tile & ~ok, weight, cfa)  # the test's false alarm (pool_counts)
+            missed = cand & ok_tile & ~ok
+            if missed.any():
+                weight = weight | _lone(missed, weight, cfa)  # the test's false alarm (pool_counts)
             chain[side] = weight
             if weight.any():
                 oks[k] = (weight, nk)

@@ -250,7 +250,7 @@ def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
 
     # frames come back in linear-frame units; they are scored at the sampler's exposure, where the
     # ground truth is aligned to the exposed observation and both lie in [0, 1]
-    to_exposed, gt = scoring_units(state, recipe, gt)
+    to_exposed, gt = scoring_units(state, gt)
 
     def score(img: np.ndarray) -> tuple[float | None, float | None]:
         if gt is None or gt.shape != img.shape:
@@ -280,13 +280,12 @@ def _guided_job(req: GuidedRequest, ctx: Any) -> GuidedResult:
                         elapsed, psnr, ssim, recipe.to_dict(), scores, truth)
 
 
-def scoring_units(state: Any, recipe: Recipe, gt: np.ndarray | None) -> tuple[np.float32, np.ndarray | None]:
+def scoring_units(state: Any, gt: np.ndarray | None) -> tuple[np.float32, np.ndarray | None]:
     """The factor from linear frames to the units they are scored in, and the aligned ground truth ``gt`` in them:
     the sampler's exposure (the sequence's white at :data:`~spikeview.guided.observation.EXPOSURE_LEVEL`). A capture
-    the sampler sees without a colour cast (monochrome) is exposed as its rates: it is scored with the sequence's
-    white point brought to that level alike (``recipe`` is not read: the display's White control does not move a
-    score) (in spikes per tick, with a data range of 1, a Spike-Zoo clip scored 4.4 dB above its
-    exported frames: its white is 0.6 spikes per tick)."""
+    the sampler sees without a colour cast (monochrome) is exposed as its rates; it is scored with the sequence's
+    exposure white brought to that level alike, not the display's White control (in spikes per tick with a data range
+    of 1, a Spike-Zoo clip, white 0.6, scored 4.4 dB above its exported frames)."""
     from spikeview.guided.observation import EXPOSURE_LEVEL
     from spikeview.pipeline import guided_scale
 
@@ -374,7 +373,7 @@ def compare_job(req: CompareRequest, ctx: Any) -> CompareView:
         if req.ground_truth is not None:
             wp = plan_window(req.source, base, req.tick, state=state, roi=req.roi)
             gt = aligned_truth(req.ground_truth, req.tick, req.roi, wp.obs)
-        to_exposed, gt = scoring_units(state, base, gt)
+        to_exposed, gt = scoring_units(state, gt)
         images: dict[str, np.ndarray] = {}
         scores: dict[str, dict[str, float]] = {}
         for m in req.methods:
