@@ -37,31 +37,67 @@ from spikeview.classical.config import DEFAULT_HALF_WINDOW  # noqa: E402  (one h
 
 
 @numba.njit(cache=True, nogil=True)
-def _tfi_kernel(spikes: np.ndarray, ti: int, cap: int, cut_lo: bool, cut_hi: bool) -> np.ndarray:  # pragma: no cover - compiled
+def _tfi_kernel(spikes: np.ndarray, ti: int, cap: int) -> np.ndarray:  # pragma: no cover - compiled
     # Frame-major passes with "last write wins": scanning from the far end towards ti, every
-    # spike overwrites the distance, so the nearest spike's distance remains (and the one it
-    # overwrote, the second nearest). Branch-free and contiguous, which vectorises (about 10x
-    # faster than scanning each pixel's time line).
+    # spike overwrites the distance, so the nearest spike's distance remains. Branch-free and
+    # contiguous, which vectorises (about 10x faster than scanning each pixel's time line).
     t_len, h, w = spikes.shape
     n = h * w
     flat = spikes.reshape(t_len, n)
     none = np.int32(1 << 30)
     dprev = np.full(n, none, dtype=np.int32)  # ti - (last spike tick <= ti)
-    dprev2 = np.full(n, none, dtype=np.int32)  # ... the one before it
     dnext = np.full(n, none, dtype=np.int32)  # (first spike tick > ti) - ti
-    dnext2 = np.full(n, none, dtype=np.int32)  # ... the one after it
     for k in range(0, ti + 1):
         frame = flat[k]
         d = np.int32(ti - k)
         for i in range(n):
-            dprev2[i] = dprev[i] if frame[i] != 0 else dprev2[i]
             dprev[i] = d if frame[i] != 0 else dprev[i]
     for k in range(t_len - 1, ti, -1):
         frame = flat[k]
         d = np.int32(k - ti)
         for i in range(n):
-            dnext2[i] = dnext[i] if frame[i] != 0 else dnext2[i]
             dnext[i] = d if frame[i] != 0 else dnext[i]
+    out = np.empty(n, dtype=np.float32)
+    capped = np.float32(1.0) / np.float32(cap)
+    for i in range(n):
+        interval = np.int64(dprev[i]) + np.int64(dnext[i])  # >= 1; >= 2**30 when a spike is missing
+        out[i] = capped if interval >= none else np.float32(1.0) / np.float32(interval)
+    return out.reshape(h, w)
+
+
+@numba.njit(cache=True, nogil=True)
+def _tfi_kernel_ends(spikes: np.ndarray, ti: int, cap: int, cut_lo: bool, cut_hi: bool) -> np.ndarray:  # pragma: no cover - compiled
+    # _tfi_kernel where the stream's end cuts the search (the first and last half_window ticks only: the block reaches
+    # 2·half_window on the other side, and the second-nearest spikes are kept for its whole interval)
+    t_len, h, w = spikes.shape
+    n = h * w
+    flat = spikes.reshape(t_len, n)
+    none = np.int32(1 << 30)
+    dprev = np.full(n, none, dtype=np.int32)
+    dprev2 = np.full(n, none, dtype=np.int32)  # the spike before the last one
+    dnext = np.full(n, none, dtype=np.int32)
+    dnext2 = np.full(n, none, dtype=np.int32)  # the spike after the next one
+    for k in range(0, ti + 1):  # the nearest spikes, as in _tfi_kernel
+        frame = flat[k]
+        d = np.int32(ti - k)
+        for i in range(n):
+            dprev[i] = d if frame[i] != 0 else dprev[i]
+    for k in range(t_len - 1, ti, -1):
+        frame = flat[k]
+        d = np.int32(k - ti)
+        for i in range(n):
+            dnext[i] = d if frame[i] != 0 else dnext[i]
+    # then the second nearest: the nearest beyond the first (one store a pass, so these vectorise too)
+    for k in range(0, ti + 1):
+        frame = flat[k]
+        d = np.int32(ti - k)
+        for i in range(n):
+            dprev2[i] = d if (frame[i] != 0) & (d > dprev[i]) else dprev2[i]
+    for k in range(t_len - 1, ti, -1):
+        frame = flat[k]
+        d = np.int32(k - ti)
+        for i in range(n):
+            dnext2[i] = d if (frame[i] != 0) & (d > dnext[i]) else dnext2[i]
     out = np.empty(n, dtype=np.float32)
     capped = np.float32(1.0) / np.float32(cap)
     half = cap // 2  # the search reaches half_window ticks each way (the block may hold more: the deeper side)
@@ -77,6 +113,14 @@ def _tfi_kernel(spikes: np.ndarray, ti: int, cap: int, cut_lo: bool, cut_hi: boo
                 interval = np.int64(dprev2[i]) - np.int64(dprev[i])
         out[i] = capped if interval >= cap else np.float32(1.0) / np.float32(interval)
     return out.reshape(h, w)
+
+
+def _kernel(block: np.ndarray, ti: int, hw: int, cut_lo: bool, cut_hi: bool) -> np.ndarray:
+    """TFI of ``block`` at its tick ``ti``: the branch-free kernel inside the stream, the ends' rule where it is cut."""
+    block = np.ascontiguousarray(block, dtype=np.uint8)
+    if cut_lo or cut_hi:
+        return _tfi_kernel_ends(block, ti, 2 * hw, cut_lo, cut_hi)
+    return _tfi_kernel(block, ti, 2 * hw)
 
 
 def _block(t: int, hw: int, n: int) -> tuple[int, int, bool, bool]:
@@ -116,9 +160,7 @@ def tfi_array(spikes: np.ndarray, t: int, half_window: int = DEFAULT_HALF_WINDOW
     t = int(t)
     lo, hi, cut_lo, cut_hi = _block(t, hw, t_len)
     block = spikes[lo:hi]
-    if block.dtype != np.uint8:
-        block = block.astype(np.uint8)
-    return _tfi_kernel(np.ascontiguousarray(block), t - lo, 2 * hw, cut_lo, cut_hi)
+    return _kernel(block, t - lo, hw, cut_lo, cut_hi)
 
 
 def tfi(source: SpikeSource, center: int, half_window: int = DEFAULT_HALF_WINDOW) -> np.ndarray:
@@ -162,5 +204,4 @@ def tfi_block(block: np.ndarray, start: int, t: int, half_window: int, n_frames:
     if start > lo or start + len(block) < hi:
         raise ParameterError(f"the block of ticks [{start}, {start + len(block)}) does not cover TFI's span [{lo}, {hi}) "
                              f"at tick {t}; read that span.")
-    sub = np.asarray(block[lo - start:hi - start])
-    return _tfi_kernel(np.ascontiguousarray(sub, dtype=np.uint8), int(t) - lo, 2 * hw, cut_lo, cut_hi)
+    return _kernel(np.asarray(block[lo - start:hi - start]), int(t) - lo, hw, cut_lo, cut_hi)
