@@ -128,6 +128,9 @@ class Pooling:
     support: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
     #: the frame's drift (photosites a window, y, x) that bounded the low-light extension (:func:`frame_drift`)
     drift: tuple[float, float] | None = None
+    #: a dim frame's velocity (photosites a window, y, x; :func:`frame_velocity`) by which every neighbouring window
+    #: was moved back before pooling (:class:`_Glide`); ``None``: read where it lies
+    glide: tuple[float, float] | None = None
 
     @property
     def active(self) -> bool:
@@ -207,6 +210,41 @@ class WindowCache:
         while len(self._d) > self.size:
             self._d.popitem(last=False)
         return c
+
+
+class _Glide:
+    """A :class:`WindowCache` seen through a dim frame's measured velocity ``v`` (photosites a window): the window ``k``
+    windows from the centre ``[a, a + window)`` is moved back by ``round(k v)`` (whole photosites; on a Bayer mosaic
+    whole 2×2 cells, which keep the colour pattern), so the pooling sees a static scene. The photosites moved in from
+    outside the frame read 0 and are left out (:meth:`valid`)."""
+
+    def __init__(self, cache: "WindowCache", a: int, window: int, v: tuple[float, float], cfa: str | None):
+        self.cache, self.a, self.window, self.v = cache, int(a), int(window), v
+        self.step = 2 if cfa is not None else 1
+
+    def shift(self, a: int) -> tuple[int, int]:
+        k = (int(a) - self.a) / self.window
+        return tuple(self.step * int(round(k * c / self.step)) for c in self.v)  # type: ignore[return-value]
+
+    def counts(self, source: Any, a: int, b: int) -> np.ndarray:
+        c = self.cache.counts(source, a, b)
+        dy, dx = self.shift(a)
+        if dy == 0 and dx == 0:
+            return c
+        out = np.zeros_like(c)
+        h, w = c.shape
+        # content at (y, x) of the centre window is at (y + dy, x + dx) of this one
+        out[max(0, -dy):min(h, h - dy), max(0, -dx):min(w, w - dx)] = \
+            c[max(0, dy):min(h, h + dy), max(0, dx):min(w, w + dx)]
+        return out
+
+    def valid(self, a: int, shape: tuple[int, int]) -> np.ndarray:
+        """Where the moved window ``[a, …)`` holds data (photosites moved in from outside the frame do not)."""
+        dy, dx = self.shift(a)
+        m = np.zeros(shape, bool)
+        h, w = shape
+        m[max(0, -dy):min(h, h - dy), max(0, -dx):min(w, w - dx)] = True
+        return m
 
 
 def neighbour_offsets(a: int, b: int, n_frames: int, radius: int) -> tuple[int, ...]:
@@ -567,6 +605,27 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
         h0, w0 = n0.shape
         return n0, Pooling(radius, window, kind="unavailable",
                            reason=f"a {w0}x{h0} frame is too small to align neighbouring windows (own window only)")
+    # a dim frame that moves as a whole (a pan, a drifting mount) is aligned by its measured velocity before anything
+    # else: no tile shows a pan of a photosite a window above its noise at 0.03 spikes per tick, so the windows were
+    # pooled at rest and the scene smeared along the pan (±16 windows: 33 photosites at a photosite a window)
+    reads: Any = cache
+    glide = None
+    glide_depth = LOW_LIGHT_RADIUS
+    if float(n0.mean()) * (2 * radius + 1) < LOW_LIGHT_COUNT:
+        # a slow drift (≤ GLIDE_REST photosites over ±radius windows) pools at rest, its support bounded by the drift
+        # (_extend_at_rest): the real dark capture (0.32-0.46 photosites a window, a spinning rotor) lost detail
+        # (0.694 -> 0.675 against its long exposure, NIQE 10.0 -> 11.5) when its far windows glided, where simulated
+        # slow pans gained 2-3 dB; what no tile sees, a rotor's blades, a far window may hold moved
+        v = frame_velocity(source, a, b, cache, cfa, GLIDE_SPAN)
+        speed = 0.0 if v is None else float(np.hypot(*v))
+        whole = frame_velocity(source, a, b, cache, cfa) if speed * radius > GLIDE_REST else None
+        # the velocity over the whole span must tell the same motion (a change of speed, not another direction)
+        change = np.inf if v is None or whole is None else float(np.hypot(whole[0] - v[0], whole[1] - v[1]))
+        if v is not None and change <= GLIDE_AGREE * speed:
+            glide_depth = int(min(LOW_LIGHT_RADIUS, max(GLIDE_SPAN, np.floor(DRIFT_LIMIT / max(change, 1e-9)))))
+            # a steady motion: the whole span's estimate (twice the pairs) aligns the far windows more precisely
+            glide = whole if change * LOW_LIGHT_RADIUS <= 2 * DRIFT_LIMIT else v
+            reads = _Glide(cache, a, window, glide, cfa)
     f = 2  # guide pixels are 2×2 super-pixels: shifts keep the CFA phase, and the search costs a quarter
     tile_g = max(1, TILE // f)
     raw0 = _guide_raw(n0, cfa)
@@ -583,7 +642,7 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     # photosite -> tile index (tiles of TILE photosites)
     th, tw = -(-h // TILE), -(-w // TILE)
     ty_of, tx_of = np.arange(h) // TILE, np.arange(w) // TILE
-    counts = {k: cache.counts(source, a + k * window, b + k * window) for k in offsets}
+    counts = {k: reads.counts(source, a + k * window, b + k * window) for k in offsets}
     raws = {k: _guide_raw(counts[k], cfa) for k in offsets}
     guides = {k: gaussian_filter(raws[k], SMOOTH, mode="reflect") for k in offsets}
     # the noise of a window-to-window difference, measured: the model's variance (κ by level, measured on the
@@ -684,6 +743,8 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
                 candidate = chain[side] & tile_ok_px & inside & (margin | zero)
                 ok = pixel_ok(refs, boxk, factors[k])
             weight = candidate & ok
+            if glide is not None:  # photosites the glide moved in from outside the frame hold no data
+                weight = weight & xp.put(reads.valid(a + k * window, (h, w)))
             # a lone photosite (or pair) failing the test among same-colour neighbours that passed it (their 3×3 sums
             # hold its count) is the test's false alarm, not motion, which moves a patch: it pools with them. Without
             # this, a regular (noise-free) integrate-and-fire capture's dark photosites whose ±1 windows swung from
@@ -707,8 +768,16 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
     ext: tuple[int, ...] = ()
     drift: list = []  # the frame's drift that bounded the extension (photosites a window)
     if pan is None:  # a panning frame does not grow its support at rest
-        ext = _extend_at_rest(source, a, b, cfa, cache, total, pooled, chain, at_rest, curve, cap, tile_g, reference, pixel_ok,
-                              far, radius, accepted, max(factors[k] for k in offsets if abs(k) == far), sides, drift)
+        ext = _extend_at_rest(source, a, b, cfa, reads, total, pooled, chain, at_rest, curve, cap, tile_g, reference, pixel_ok,
+                              far, radius, accepted, max(factors[k] for k in offsets if abs(k) == far), sides, drift,
+                              valid=reads.valid if glide is not None else None, limit=glide_depth)
+    if glide is not None:
+        # a photosite's own history (interval_rates) saw the scene move under it: it is read over the windows in which
+        # the glide moved the scene by a photosite at most (the real dark capture, 0.32 a window: ±3, as at rest; at a
+        # photosite a window, ±1)
+        near = int(np.floor(GLIDE_HISTORY / float(np.hypot(*glide)) + 1e-9))
+        for side in (-1, 1):
+            sides[side] = np.minimum(sides[side], near)
     for k in ext:
         shifts[k] = np.zeros((th, tw, 2), np.int64)
     lo = np.where(still, a - window * sides[-1], -1)
@@ -717,6 +786,7 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
                    support=(lo, hi))
     if drift:
         pool.drift = drift[0]
+    pool.glide = glide
     pool.kind, pool.reason = describe(pool)
     if pan is not None:
         v = _pan_measured(counts, cfa)
@@ -866,25 +936,25 @@ DRIFT_LIMIT = 0.5
 DRIFT_PEAK = 3.0
 
 
-def frame_drift(first: np.ndarray, second: np.ndarray, sigma: float = 1.0) -> tuple[float, float] | None:
-    """The sub-pixel shift ``(dy, dx)`` that moves ``first`` onto ``second`` (two sums of counts of one frame, in the
-    same units), from the peak of their cross-correlation after a Gaussian of ``sigma`` (a parabola through the peak
-    and its neighbours, each axis); ``None`` when the peak is not clear (:data:`DRIFT_PEAK`): a flat or too dark
-    frame. The whole frame is one measurement, so a drift of a third of a photosite a window that no 16-px tile
-    shows above its noise at 0.03 spikes per tick is measured to a few hundredths."""
+def _band_fft(x: np.ndarray, sigma: float = 1.0) -> np.ndarray:
+    """The 2-D FFT of ``x`` band-passed (Gaussians of ``sigma`` and ``4 sigma``: the scene's large areas make a broad
+    peak that hides a shift of a few photosites) under a Hann window (:func:`frame_drift`, :func:`frame_velocity`)."""
     from scipy.ndimage import gaussian_filter
 
-    # band-pass (σ and 4σ): the scene's large areas make a broad peak that hides a shift of a few photosites
-    a = gaussian_filter(np.asarray(first, np.float64), sigma) - gaussian_filter(np.asarray(first, np.float64), 4 * sigma)
-    b = gaussian_filter(np.asarray(second, np.float64), sigma) - gaussian_filter(np.asarray(second, np.float64), 4 * sigma)
-    h, w = a.shape
-    if min(h, w) < 16 or not (a.std() > 0 and b.std() > 0):
-        return None
-    win = np.outer(np.hanning(h), np.hanning(w))
-    xc = np.fft.ifft2(np.conj(np.fft.fft2(a * win)) * np.fft.fft2(b * win)).real
+    x = np.asarray(x, np.float64)
+    a = gaussian_filter(x, sigma) - gaussian_filter(x, 4 * sigma)
+    return np.fft.fft2(a * np.outer(np.hanning(a.shape[0]), np.hanning(a.shape[1])))
+
+
+def _correlation_peak(xc: np.ndarray, r: int, centre: tuple[int, int] = (0, 0)) -> tuple[float, float, float] | None:
+    """``(dy, dx, z)``: the sub-pixel peak of the cross-correlation ``xc`` (unshifted FFT layout) within ``±r`` pixels
+    of the shift ``centre`` (a parabola through the peak and its neighbours, each axis) and its height in standard
+    deviations of the surface away from it; ``None`` on the search's border or below :data:`DRIFT_PEAK`."""
+    h, w = xc.shape
     xc = np.fft.fftshift(xc)
-    cy, cx = h // 2, w // 2
-    r = 8  # shifts beyond ±8 photosites are not a drift (the search handles motion)
+    cy, cx = h // 2 + int(centre[0]), w // 2 + int(centre[1])
+    if cy - r < 0 or cx - r < 0 or cy + r >= h or cx + r >= w:
+        return None
     sub = xc[cy - r:cy + r + 1, cx - r:cx + r + 1]
     iy, ix = np.unravel_index(int(np.argmax(sub)), sub.shape)
     if iy in (0, 2 * r) or ix in (0, 2 * r):
@@ -892,16 +962,114 @@ def frame_drift(first: np.ndarray, second: np.ndarray, sigma: float = 1.0) -> tu
     far = np.ones_like(sub, bool)
     far[max(0, iy - 3):iy + 4, max(0, ix - 3):ix + 4] = False
     spread = float(sub[far].std())
-    if spread <= 0 or (sub[iy, ix] - sub[far].mean()) / spread < DRIFT_PEAK:
+    z = (sub[iy, ix] - sub[far].mean()) / spread if spread > 0 else 0.0
+    if z < DRIFT_PEAK:
         return None
 
     def vertex(m: float, c: float, p: float) -> float:
         d = m - 2 * c + p
         return 0.0 if d >= 0 else 0.5 * (m - p) / d
 
-    dy = iy - r + vertex(sub[iy - 1, ix], sub[iy, ix], sub[iy + 1, ix])
-    dx = ix - r + vertex(sub[iy, ix - 1], sub[iy, ix], sub[iy, ix + 1])
-    return float(dy), float(dx)
+    dy = centre[0] + iy - r + vertex(sub[iy - 1, ix], sub[iy, ix], sub[iy + 1, ix])
+    dx = centre[1] + ix - r + vertex(sub[iy, ix - 1], sub[iy, ix], sub[iy, ix + 1])
+    return float(dy), float(dx), float(z)
+
+
+def frame_drift(first: np.ndarray, second: np.ndarray, sigma: float = 1.0) -> tuple[float, float] | None:
+    """The sub-pixel shift ``(dy, dx)`` that moves ``first`` onto ``second`` (two sums of counts of one frame, in the
+    same units), from the peak of their cross-correlation after a Gaussian of ``sigma`` (a parabola through the peak
+    and its neighbours, each axis); ``None`` when the peak is not clear (:data:`DRIFT_PEAK`): a flat or too dark
+    frame. The whole frame is one measurement, so a drift of a third of a photosite a window that no 16-px tile
+    shows above its noise at 0.03 spikes per tick is measured to a few hundredths."""
+    h, w = np.shape(first)
+    if min(h, w) < 16 or not (np.std(first) > 0 and np.std(second) > 0):
+        return None
+    xc = np.fft.ifft2(np.conj(_band_fft(first, sigma)) * _band_fft(second, sigma)).real
+    peak = _correlation_peak(xc, 8)  # shifts beyond ±8 photosites are not a drift (the search handles motion)
+    return None if peak is None else peak[:2]
+
+
+#: :func:`frame_velocity` compares sums of this many consecutive windows ...
+GLIDE_GROUP = 2
+#: ... this many windows apart: farther than an integrate-and-fire photosite's period at low light (a dim photosite's
+#: counts in windows a few ticks apart anticorrelate, through its phase, and make a trough at zero shift that hid a
+#: static scene's peak), near enough that a pan of a photosite a window stays within the search
+GLIDE_LAG = 6
+#: ... searching shifts up to this many pixels of the drift view (2 photosites a window at the lag above)
+GLIDE_REACH = 12
+#: ... on the frame's central crop of at most this many pixels a side (the drift of the whole frame is one number)
+GLIDE_CROP = 384
+#: the glide's velocity is measured on the windows within this many of the centre (the velocity there); where the
+#: whole ±:data:`LOW_LIGHT_RADIUS` span gives another, the motion changes speed (the real dark capture's drift grows
+#: from 0.28 to 0.57 photosites a window over its 200 ticks) and the glided support stops where the two would part by
+#: :data:`DRIFT_LIMIT`
+GLIDE_SPAN = 8
+#: a glided photosite's rate is read from the intervals between its own spikes (:func:`interval_rates`) over the
+#: windows in which the scene moved this many photosites at most under it
+GLIDE_HISTORY = 1.0
+#: a dim frame glides when its velocity moves the scene by more than this many photosites over ±radius windows
+#: (pooled at rest, they would smear it by more than a photosite each way)
+GLIDE_REST = 1.5
+#: ... and when the velocity over the whole ±LOW_LIGHT_RADIUS span is within this fraction of the local one
+GLIDE_AGREE = 0.5
+
+
+def frame_velocity(source: Any, a: int, b: int, cache: "WindowCache", cfa: str | None,
+                   span: int = LOW_LIGHT_RADIUS) -> tuple[float, float] | None:
+    """The whole frame's velocity ``(vy, vx)`` in photosites per window around the window ``[a, b)``, or ``None``.
+
+    Measured on the windows within ±``span`` of it that lie in the capture: the cross-correlations of
+    every pair of :data:`GLIDE_GROUP`-window sums :data:`GLIDE_LAG` windows apart are added (one surface from the
+    whole span: a dim frame's single pair is noise), and the peak within ±:data:`GLIDE_REACH` view pixels, divided by
+    the lag, is the velocity. Unlike comparing the two far sides of the span (:func:`_extension_drift`), no sum is
+    blurred by the motion it measures: at a photosite a window, two 13-window sums are each smeared by 13
+    photosites, and the sensor's fixed pattern (which does not move) then made a pan read as static."""
+    window = int(b - a)
+    n = int(source.n_frames)
+    ks = [k for k in range(-int(span), int(span) + 1) if a + k * window >= 0 and b + k * window <= n]
+
+    def pairs(lag: int) -> list[int]:
+        return [k for k in ks if k + GLIDE_GROUP - 1 in ks and k + lag in ks and k + lag + GLIDE_GROUP - 1 in ks]
+
+    starts = pairs(GLIDE_LAG)
+    if not starts:
+        return None
+    view, unit = _drift_view(cfa)
+    ffts: dict[int, np.ndarray] = {}
+
+    def spectrum(k: int) -> np.ndarray:
+        if k not in ffts:
+            x = view(sum(cache.counts(source, a + j * window, b + j * window).astype(np.float64)
+                         for j in range(k, k + GLIDE_GROUP)))
+            h, w = x.shape
+            ch, cw = min(h, GLIDE_CROP), min(w, GLIDE_CROP)
+            ffts[k] = _band_fft(x[(h - ch) // 2:(h - ch) // 2 + ch, (w - cw) // 2:(w - cw) // 2 + cw])
+        return ffts[k]
+
+    first = spectrum(starts[0])
+    if min(first.shape) < 4 * GLIDE_REACH:
+        return None
+    xc = sum(np.fft.ifft2(np.conj(spectrum(k)) * spectrum(k + GLIDE_LAG)).real for k in starts)
+    peak = _correlation_peak(xc, GLIDE_REACH)
+    if peak is None:
+        return None
+    vy, vx = peak[0] / GLIDE_LAG, peak[1] / GLIDE_LAG
+    # refined at twice the lag, around where that puts the peak: a sub-pixel error of the first estimate grows with
+    # the windows a support reaches (1.04 for 1.00 misaligned the farthest windows by a photosite), and the fixed
+    # pattern's peak at zero, which pulls a slow pan's estimate toward rest, lies twice as far from it
+    # and it must be found there, within a pixel of the lag's estimate: a static scene whose photosites fire regularly
+    # (a noise-free simulator) has counts that anticorrelate at some lags, and its surface then peaks off zero by chance
+    far = pairs(2 * GLIDE_LAG)
+    if not far:
+        return None
+    xc = sum(np.fft.ifft2(np.conj(spectrum(k)) * spectrum(k + 2 * GLIDE_LAG)).real for k in far)
+    fine = _correlation_peak(xc, 6, (int(round(2 * GLIDE_LAG * vy)), int(round(2 * GLIDE_LAG * vx))))
+    if fine is None:
+        return None
+    fy, fx = fine[0] / (2 * GLIDE_LAG), fine[1] / (2 * GLIDE_LAG)
+    if max(abs(fy - vy), abs(fx - vx)) > 1.0 / GLIDE_LAG:
+        return None
+    return unit * fy, unit * fx
 
 
 def _drift_view(cfa: str | None) -> tuple[Any, float]:
@@ -955,7 +1123,8 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
                     pooled: np.ndarray, chain: dict[int, np.ndarray], at_rest: np.ndarray,
                     curve: tuple[np.ndarray, np.ndarray], cap: float, tile_g: int, reference: Any, pixel_ok: Any, reached: int,
                     radius: int, accepted: dict[int, np.ndarray], factor: float,
-                    sides: dict[int, np.ndarray] | None = None, drift_out: list | None = None) -> tuple[int, ...]:
+                    sides: dict[int, np.ndarray] | None = None, drift_out: list | None = None,
+                    valid: Any = None, limit: int = LOW_LIGHT_RADIUS) -> tuple[int, ...]:
     """Pool windows ``reached + 1 …`` at zero shift on static tiles whose pooled count is below
     :data:`LOW_LIGHT_COUNT` per photosite (in place on ``total``, ``pooled``, ``chain``), up to
     :data:`LOW_LIGHT_RADIUS` windows a side. A tile takes window ``k`` when it was at rest and matched every
@@ -979,7 +1148,7 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
     core_var = _countvar(core, cap, curve) * 4.0 / np.maximum(core_n, 1.0)
     side_t = {-1: np.zeros_like(total), 1: np.zeros_like(total)}
     side_n = {-1: np.zeros_like(total), 1: np.zeros_like(total)}
-    deepest = LOW_LIGHT_RADIUS
+    deepest = min(LOW_LIGHT_RADIUS, int(limit))  # a glided frame's support ends where its speed is not known (GLIDE_SPAN)
     for d in range(reached + 1, LOW_LIGHT_RADIUS + 1):
         need_tile = _tile_sum(total, TILE) < LOW_LIGHT_COUNT * _tile_sum(np.ones_like(total), TILE)
         need = need_tile[ty_of][:, tx_of] & rest_px
@@ -992,7 +1161,7 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
             # dark capture drifts 0.36 photosites a window: ±9 windows at rest smeared its rotor blades)
             v = _extension_drift(source, a, b, cache, total, reached, cfa)
             if v is not None and float(np.hypot(*v)) * LOW_LIGHT_RADIUS > DRIFT_LIMIT:
-                deepest = int(np.floor(DRIFT_LIMIT / float(np.hypot(*v)) + 1e-9))
+                deepest = min(deepest, int(np.floor(DRIFT_LIMIT / float(np.hypot(*v)) + 1e-9)))
                 if drift_out is not None:
                     drift_out.append(v)
         if d > deepest:
@@ -1024,6 +1193,8 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
             ok_tile = _fit_tiles((chi <= REST_CHI) & (chi_side <= SIDE_CHI), th, tw)[ty_of][:, tx_of]
             ok = pixel_ok(refs, _box_same_colour(nk, cfa), factor)
             weight = cand & ok_tile & ok
+            if valid is not None:  # a glided window (:class:`_Glide`): what it moved in from outside holds no data
+                weight = weight & valid(a + k * window, (h, w))
             missed = cand & ok_tile & ~ok
             if missed.any():
                 weight = weight | _lone(missed, weight, cfa)  # the test's false alarm (pool_counts)
@@ -1151,6 +1322,11 @@ def describe(pool: Pooling) -> tuple[str, str]:
         eff += (f"; the whole frame drifts {v:.2f} photosites a window ({pool.drift[0]:+.2f}, {pool.drift[1]:+.2f}, y, x), "
                 f"so the support stops at ±{depth} windows (beyond, the scene has moved more than {DRIFT_LIMIT:g} photosite)")
     some = "" if full >= 0.995 else f", at least one neighbour on {100 * (1.0 - own):.0f}%"
+    if pool.glide is not None:
+        gy, gx = pool.glide
+        return "aligned", (f"moving: the whole frame glides {float(np.hypot(gy, gx)):.2f} photosites a window ({gy:+.2f}, "
+                           f"{gx:+.2f}, y, x; measured on the whole frame over up to ±{LOW_LIGHT_RADIUS} windows), so every neighbouring window was moved "
+                           f"back by it before pooling; then {span} pooled on {100 * full:.0f}% of photosites{some} ({eff})")
     if full >= 0.9 and moving <= 0.05:
         still = "" if smax == 0 else f"; {100 * moving:.0f}% of the tiles aligned, shifts up to {smax} px"
         return "static", f"static: {span} pooled on {100 * full:.0f}% of photosites{some} ({eff}{still})"
