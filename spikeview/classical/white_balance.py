@@ -267,11 +267,12 @@ def toward_typical(e: np.ndarray, sigma: float) -> tuple[np.ndarray, float]:
     """An illuminant estimate ``e`` (3,) of error σ ``sigma`` (log units) combined with the typical response.
 
     In log chromaticity (log R/G, log B/G) the prior is a mixture: weight :data:`PRIOR_WEIGHT` on a Gaussian of σ
-    :data:`PRIOR_SIGMA` around :data:`~spikeview.cfa.TYPICAL_RESPONSE`, the rest on a broad one (σ
-    :data:`PRIOR_BROAD`). The result is the posterior mean: the precision-weighted mean of ``e`` and the typical
-    response, times the probability that the sensor is a typical one given ``e``, plus ``e`` times the rest. So an
-    estimate near the typical response moves most of the way to it, and one far off it (a sensor unlike the typical
-    one, if the estimator is right) is kept.
+    :data:`PRIOR_SIGMA` around :data:`~spikeview.cfa.TYPICAL_RESPONSE`, :data:`NEUTRAL_WEIGHT` on one of the same σ
+    around a neutral response (R = G = B: files made from display-referred RGB), the rest on a broad one (σ
+    :data:`PRIOR_BROAD`) around the typical response. The result is the posterior mean: for each component, the
+    precision-weighted mean of ``e`` and its centre, times the probability of that component given ``e``. So an
+    estimate near the typical response moves most of the way to it, one near neutral toward neutral, and one far off
+    both (a sensor unlike either, if the estimator is right) is mostly kept.
 
     Returns:
         the illuminant (float64 (3,), G = 1) and the prior's share of it (0–1). ``e`` with a channel that is not
@@ -293,9 +294,11 @@ def toward_typical(e: np.ndarray, sigma: float) -> tuple[np.ndarray, float]:
     far = (1 - PRIOR_WEIGHT - NEUTRAL_WEIGHT) * evidence(p, s2d + PRIOR_BROAD ** 2)
     total = near + flat + far
     if total <= 0:
-        return e, 0.0
-    lam = s2d / (s2d + s2p)  # how much of the way to a component's centre, given that component
-    u = d + lam * (near * (p - d) + flat * (neutral - d)) / total
+        return e / e[1], 0.0
+    # the posterior mean: each component moves d toward its centre by its own precision weight, weighted by how
+    # well it explains d (the broad one too, by little: a sensor unlike either is mostly kept)
+    lam, lam_b = s2d / (s2d + s2p), s2d / (s2d + PRIOR_BROAD ** 2)
+    u = d + (lam * near * (p - d) + lam * flat * (neutral - d) + lam_b * far * (p - d)) / total
     return np.array([np.exp(u[0]), 1.0, np.exp(u[1])]), float(lam * (near + flat) / total)
 
 
@@ -396,10 +399,16 @@ def choose(img: np.ndarray, method: str, halves: tuple[np.ndarray, np.ndarray] |
 
 
 def _pulled(e: np.ndarray, post: np.ndarray, w: float) -> str:
-    """How far :func:`toward_typical` moved estimate ``e`` to ``post``, in words."""
+    """How far :func:`toward_typical` moved estimate ``e`` to ``post``, in words: toward the centre it came nearer to
+    (the typical response or a neutral one), and the prior's share ``w``."""
     typ = np.asarray(TYPICAL_RESPONSE, dtype=np.float64)
-    if angle_deg(post, np.ones(3)) < angle_deg(post, typ):
+    closer_typ = angle_deg(e, typ) - angle_deg(post, typ)
+    closer_neutral = angle_deg(e, np.ones(3)) - angle_deg(post, np.ones(3))
+    moved = angle_deg(e, post)
+    if max(closer_typ, closer_neutral) <= 0:
+        return f"moved {moved:.1f}° by the prior on spike cameras' responses (its share {w:.0%})"
+    if closer_neutral > closer_typ:
         toward = "a neutral response (R = G = B, as files made from display-referred RGB frames have)"
     else:
         toward = f"the typical spike-camera response ({_typical_text()})"
-    return f"pulled {angle_deg(e, post):.1f}° toward {toward}; {w:.0%} of the way"
+    return f"pulled {moved:.1f}° toward {toward} (the prior's share {w:.0%})"

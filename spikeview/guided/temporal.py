@@ -742,9 +742,9 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
                 zero = (best_px[..., 0] == 0) & (best_px[..., 1] == 0)
                 candidate = chain[side] & tile_ok_px & inside & (margin | zero)
                 ok = pixel_ok(refs, boxk, factors[k])
-            weight = candidate & ok
             if glide is not None:  # photosites the glide moved in from outside the frame hold no data
-                weight = weight & xp.put(reads.valid(a + k * window, (h, w)))
+                candidate = candidate & xp.put(reads.valid(a + k * window, (h, w)))
+            weight = candidate & ok
             # a lone photosite (or pair) failing the test among same-colour neighbours that passed it (their 3×3 sums
             # hold its count) is the test's false alarm, not motion, which moves a patch: it pools with them. Without
             # this, a regular (noise-free) integrate-and-fire capture's dark photosites whose ±1 windows swung from
@@ -953,9 +953,10 @@ def _correlation_peak(xc: np.ndarray, r: int, centre: tuple[int, int] = (0, 0)) 
     h, w = xc.shape
     xc = np.fft.fftshift(xc)
     cy, cx = h // 2 + int(centre[0]), w // 2 + int(centre[1])
-    if cy - r < 0 or cx - r < 0 or cy + r >= h or cx + r >= w:
+    if 2 * r + 1 > min(h, w):
         return None
-    sub = xc[cy - r:cy + r + 1, cx - r:cx + r + 1]
+    # the correlation is circular: rows and columns past the surface's edge wrap (a 16-px frame's ±8 search)
+    sub = xc[np.ix_((cy + np.arange(-r, r + 1)) % h, (cx + np.arange(-r, r + 1)) % w)]
     iy, ix = np.unravel_index(int(np.argmax(sub)), sub.shape)
     if iy in (0, 2 * r) or ix in (0, 2 * r):
         return None
@@ -1192,9 +1193,9 @@ def _extend_at_rest(source: Any, a: int, b: int, cfa: str | None, cache: WindowC
             chi_side = _tile_sum(dv * dv, tile_g) / (factor * _tile_sum(vv, tile_g) + 1e-6)
             ok_tile = _fit_tiles((chi <= REST_CHI) & (chi_side <= SIDE_CHI), th, tw)[ty_of][:, tx_of]
             ok = pixel_ok(refs, _box_same_colour(nk, cfa), factor)
-            weight = cand & ok_tile & ok
             if valid is not None:  # a glided window (:class:`_Glide`): what it moved in from outside holds no data
-                weight = weight & valid(a + k * window, (h, w))
+                cand = cand & valid(a + k * window, (h, w))
+            weight = cand & ok_tile & ok
             missed = cand & ok_tile & ~ok
             if missed.any():
                 weight = weight | _lone(missed, weight, cfa)  # the test's false alarm (pool_counts)
@@ -1314,7 +1315,8 @@ def describe(pool: Pooling) -> tuple[str, str]:
         far = max(abs(k) for k in pool.extended)
         more = float((nb > m + 1e-6).mean())
         eff = (f"Δτ_eff {float(pool.dtau.mean()):.0f} ticks on average, up to {float(pool.dtau.max()):.0f}: low light, "
-               f"{100 * more:.0f}% of photosites (static tiles under {LOW_LIGHT_COUNT:g} spikes) went on at rest "
+               f"{100 * more:.0f}% of photosites (static tiles under {LOW_LIGHT_COUNT:g} spikes) went on "
+               f"{'with the glide' if pool.glide is not None else 'at rest'} "
                f"to ±{far} windows, the bound is ±{LOW_LIGHT_RADIUS}")
     if pool.drift is not None:
         v = float(np.hypot(*pool.drift))
