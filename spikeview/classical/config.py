@@ -80,7 +80,8 @@ class ClassicalConfig(Config):
                                help="How the colour-cast gains are estimated once per sequence: auto (the camera profile's "
                                     "colour response when it has one; else gray-world where the scene averages to gray "
                                     "(a dark one once its dark rate is taken off), else combined pulled toward the "
-                                    "typical spike-camera response; the reason is printed), gray-world, gray-edge, gray-edge-2, shades-of-gray, "
+                                    "typical spike-camera response, or toward neutral when it lands near R = G = B; the "
+                                    "reason is printed), gray-world, gray-edge, gray-edge-2, shades-of-gray, "
                                     "white-patch, combined, typical (the typical response R 0.6 / G 1 / B 0.5), "
                                     "profile (the --camera profile's colour response) or fixed gains R,G,B.")
     alpha: list[float] | None = None
