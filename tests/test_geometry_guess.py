@@ -239,3 +239,36 @@ def test_a_monochrome_capture_read_with_a_colour_filter_is_reported(tmp_path, ca
         assert not any("alike" in w for w in src.info.warnings), src.info.warnings
     assert main(["info", str(path), "--width", "128", "--height", "96", "--cfa", "BGGR"]) == 0
     assert "read with a colour filter (--cfa BGGR), but its four 2x2 sites fire alike" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_a_dim_noise_free_pan_along_the_rows_is_not_refused_as_sheared(tmp_path, cfa):
+    """A noise-free integrate-and-fire capture (as the ecosystem's simulators make) of a textured scene at 0.06 spikes
+    per tick panning a photosite a window along its rows, 256x256, no sidecar: its mean rates are smeared along the
+    rows, so they alone "lined up" better at 512x128, and the CLI refused to reconstruct the file at its true size.
+    The whole file's spikes line up best at 256x256 (rank_plain_geometries), and that decides: no warning, no refusal."""
+    import skimage.data
+    from skimage.transform import resize
+
+    n, ticks = 256, 400
+    img = skimage.data.chelsea()[..., :3].astype(np.float64) / 255.0
+    big = resize(img, (n, n + 48), anti_aliasing=True)
+    lum = big.mean(-1)
+    mos = lum.copy()
+    if cfa is not None:
+        mos[0::2, 0::2], mos[0::2, 1::2] = big[0::2, 0::2, 0], big[0::2, 1::2, 1]
+        mos[1::2, 0::2], mos[1::2, 1::2] = big[1::2, 0::2, 1], big[1::2, 1::2, 2]
+    acc = np.random.default_rng(1).random((n, n))
+    spikes = np.empty((ticks, n, n), np.uint8)
+    for t in range(ticks):
+        s = 2 * (t // 20) if cfa is not None else t // 10  # whole photosites (Bayer: cells), a photosite a window
+        acc += 0.06 * mos[:, s:s + n]
+        spikes[t] = acc >= 1.0
+        acc[spikes[t] == 1] -= 1.0
+    path = write_plain(tmp_path / "pan.dat", spikes, cfa=cfa, sidecar=False)
+    src = open_source(path, width=n, height=n, cfa=cfa or "none")
+    assert src.info.likely_size is None and not any("line up" in w for w in src.info.warnings), src.info.warnings
+    out = tmp_path / "f.npy"
+    assert main(["reconstruct", str(path), "--width", str(n), "--height", str(n), "--cfa", cfa or "none",
+                 "--method", "tfp", "--at", "200", "--out", str(out)]) == 0
+    assert out.exists()
