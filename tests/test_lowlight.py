@@ -131,3 +131,29 @@ def test_simulated_low_light_guided_beats_tfi_and_keeps_its_detail(tmp_path, cfa
     assert det["guided"] >= det["tfi32"] - 0.02, det
     assert ps["tfi"] >= ps["tfi32"] + 2.0, ps  # the reach: the darker half no longer sits on the capped level
     assert ps["guided"] >= ps["tfi"] + (2.0 if cfa == "RGGB" else -2.0), ps
+
+
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_the_plan_says_how_to_keep_the_shadows_of_a_noise_free_dark_capture(cfa):
+    """A noise-free integrate-and-fire capture (an ecosystem-style simulation) at 0.06 spikes per tick whose darkest
+    patch holds light: its darkest floor is read as a dark rate, and Q's per-window grid takes it off, though nearly every
+    rate comes from spike intervals (an ecosystem-style dark chelsea: 25.45 dB with Q, 33.24 without). No rule here
+    can tell that floor from a dark current (spikeview's simulator and the real capture need Q there), so the plan's
+    quantise row says it and names --no-quantise."""
+    from spikeview.guided.config import GuidedConfig
+    from spikeview.guided.observation import Observation
+    from spikeview.guided.plan import make_plan
+    from spikeview.io import ArraySource
+
+    n = 96
+    light = 0.25 + 0.75 * _scene(n)
+    acc = np.random.default_rng(2).random((n, n))
+    spikes = np.empty((400, n, n), np.uint8)
+    for t in range(400):
+        acc += 0.06 * light
+        spikes[t] = acc >= 1.0
+        acc[spikes[t] == 1] -= 1.0
+    obs = Observation.from_source(ArraySource(spikes, cfa=cfa), 200, 10, eta=2.0, radius=3)
+    plan = make_plan(obs, GuidedConfig())
+    assert obs.pooling.interval_share >= 0.5, obs.pooling.reason
+    assert plan.quantise and "--no-quantise" in plan.reasons["quantise"], plan.reasons["quantise"]

@@ -210,6 +210,7 @@ class Observation:
                                         min_ticks=(b - a) * (1 + len(pool.offsets)))
                     took = np.isfinite(yi)
                     y = np.where(took, yi, y)
+                    pool.interval_share = float(took.mean())
                     if took.any():  # the plan's temporal row says it
                         pool.reason += (f"; the rate of {100 * float(took.mean()):.0f}% of photosites (pooled at rest) from "
                                         "the intervals between their spikes")

@@ -131,6 +131,8 @@ class Pooling:
     #: a dim frame's velocity (photosites a window, y, x; :func:`frame_velocity`) by which every neighbouring window
     #: was moved back before pooling (:class:`_Glide`); ``None``: read where it lies
     glide: tuple[float, float] | None = None
+    #: the share of photosites whose rate came from the intervals between their spikes (set by the observation)
+    interval_share: float = 0.0
 
     @property
     def active(self) -> bool:
@@ -141,8 +143,10 @@ class Pooling:
         """The same pooling on the photosites ``[y0:y1, x0:x1]`` (tile maps kept whole)."""
         d = None if self.dtau is None else self.dtau[y0:y1, x0:x1]
         sup = None if self.support is None else tuple(x[y0:y1, x0:x1] for x in self.support)
-        return Pooling(self.radius, self.window, self.offsets, d, self.shifts, self.accepted, self.kind, self.reason,
-                       self.extended, sup)
+        out = Pooling(self.radius, self.window, self.offsets, d, self.shifts, self.accepted, self.kind, self.reason,
+                      self.extended, sup)
+        out.drift, out.glide, out.interval_share = self.drift, self.glide, self.interval_share
+        return out
 
 
 #: run the torch alignment (:func:`_align_torch`) on the CPU too (tests hold the GPU path to the numpy one with it)
