@@ -98,3 +98,25 @@ def test_a_dim_capture_whose_darkest_patch_holds_a_little_light_gives_its_dark_r
     lit_floors = wb.channel_floors(wb.cells_rgb(_rggb(lit), "RGGB"))
     assert lit_floors.max() > DARK_AGREE_DIM * lit_floors.min() and lit_floors.min() < DARK_DIM_RATE
     assert dark_rate(_rggb(lit) if cfa else lit.mean(axis=-1), cfa) == 0.0  # its weakest channel's light is not taken
+
+
+def test_a_colour_capture_without_a_cast_has_its_darkest_floor_read_as_light():
+    """The same dim scene (no black: its darkest patch at a quarter of white) through a typical sensor (R 0.6 / G 1 /
+    B 0.5) and through none (R = G = B, as captures made from RGB frames are): the first's floor may be a dark current
+    (the guided Q rule takes it off), the second's is its darkest patch's light (Defects.pedestal 0)."""
+    from spikeview.classical.defects import darkest_floor, without_cast
+
+    import skimage.data
+    from skimage.transform import resize
+
+    img = resize(skimage.data.astronaut()[..., :3].astype(np.float64) / 255.0, (128, 128), anti_aliasing=True)
+    img = 0.25 + 0.75 * img
+    for gains, kept in (((0.6, 1.0, 0.5), True), ((1.0, 1.0, 1.0), False)):
+        lit = img * np.asarray(gains)
+        mos = np.empty((128, 128))
+        mos[0::2, 0::2], mos[0::2, 1::2] = lit[0::2, 0::2, 0], lit[0::2, 1::2, 1]
+        mos[1::2, 0::2], mos[1::2, 1::2] = lit[1::2, 0::2, 1], lit[1::2, 1::2, 2]
+        rates = 0.05 * mos
+        assert darkest_floor(rates, "RGGB") > 0.005  # TFI's reach reads it either way
+        assert without_cast(rates, "RGGB") != kept, gains
+    assert not without_cast(0.05 * img.mean(axis=-1), None)  # monochrome cannot tell: kept

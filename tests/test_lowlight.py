@@ -138,8 +138,9 @@ def test_the_plan_says_how_to_keep_the_shadows_of_a_noise_free_dark_capture(cfa)
     """A noise-free integrate-and-fire capture (an ecosystem-style simulation) at 0.06 spikes per tick whose darkest
     patch holds light: its darkest floor is read as a dark rate, and Q's per-window grid takes it off, though nearly every
     rate comes from spike intervals (an ecosystem-style dark chelsea: 25.45 dB with Q, 33.24 without). No rule here
-    can tell that floor from a dark current (spikeview's simulator and the real capture need Q there), so the plan's
-    quantise row says it and names --no-quantise."""
+    can tell that floor from a dark current in monochrome (spikeview's simulator and the real capture need Q there), so
+    the plan's quantise row says it and names --no-quantise; a colour capture without a cast (made from RGB frames, as
+    this one) has its floor read as light (spikeview.classical.defects.darkest_floor)."""
     from spikeview.guided.config import GuidedConfig
     from spikeview.guided.observation import Observation
     from spikeview.guided.plan import make_plan
@@ -156,4 +157,8 @@ def test_the_plan_says_how_to_keep_the_shadows_of_a_noise_free_dark_capture(cfa)
     obs = Observation.from_source(ArraySource(spikes, cfa=cfa), 200, 10, eta=2.0, radius=3)
     plan = make_plan(obs, GuidedConfig())
     assert obs.pooling.interval_share >= 0.5, obs.pooling.reason
-    assert plan.quantise and "--no-quantise" in plan.reasons["quantise"], plan.reasons["quantise"]
+    if cfa is None:  # a monochrome capture cannot tell: the plan says it
+        assert plan.quantise and "--no-quantise" in plan.reasons["quantise"], plan.reasons["quantise"]
+    else:  # a colour one without a cast was made from RGB frames, without a dark current: no floor taken off
+        assert obs.floor == 0.0 and obs.quantise_window() > obs.window, (obs.floor, plan.reasons["quantise"])
+        assert "--no-quantise" not in plan.reasons["quantise"]

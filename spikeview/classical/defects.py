@@ -65,6 +65,10 @@ class Defects:
         dark: the sensor's dark rate (spikes per tick) measured on a colour capture's darkest patches (:func:`dark_rate`),
             0 where it cannot be told from scene black (a monochrome capture, or channels whose floors differ).
         floor: the capture's lowest floor in spikes per tick (:func:`darkest_floor`; monochrome too).
+        pedestal: that floor where it may be a dark current, which the guided Q rule takes off; 0 on a colour capture
+            without a cast (:func:`without_cast`: made from RGB frames, so its floor is light). An ecosystem-style dark
+            chelsea: its floor read as a dark rate, Q's per-window grid took the light off and rounded the interval
+            rates to its steps, 25.45 dB against TFI's 31.66; 33.24 dB now; panning along y it had lost its blue.
     """
 
     hot: np.ndarray
@@ -73,6 +77,7 @@ class Defects:
     ticks: int
     dark: float = 0.0
     floor: float = 0.0
+    pedestal: float = 0.0
 
     def describe(self) -> str:
         """One line for ``spikeview info``."""
@@ -164,7 +169,8 @@ def find_defects(source: Any) -> Defects:
             left, right, bl, br = _edge_runs(cols, cref)
             border, edges = (t, b, left, right), (bt, bb, bl, br)
     cfa = getattr(source, "cfa", None)
-    d = Defects(hot, border, edges, ticks, dark_rate(r, cfa, hot), darkest_floor(r, cfa, hot))
+    floor = darkest_floor(r, cfa, hot)
+    d = Defects(hot, border, edges, ticks, dark_rate(r, cfa, hot), floor, 0.0 if without_cast(r, cfa, hot) else floor)
     try:
         source._spikeview_defects = d
     except AttributeError:  # a source with __slots__: measured again next time
@@ -216,6 +222,11 @@ def dark_rate(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None)
     return float(floors.min())
 
 
+#: :func:`darkest_floor`: a colour capture whose edges' colour lies within this angle of R = G = B has no cast (the
+#: ecosystem-style captures: 1.5-7.8°; spikeview's simulator and real sensors: 17° and more off)
+NO_CAST_DEG = 8.0
+
+
 def darkest_floor(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None) -> float:
     """A capture's lowest floor in spikes per tick (a colour capture's darkest patches' weakest channel; a monochrome
     one's darkest 8×8 blocks): ~0 where the scene has black and the sensor no dark rate (0.0002–0.0015 on such
@@ -225,6 +236,29 @@ def darkest_floor(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = N
     floor IS a dark rate (a monochrome capture cannot tell)."""
     stats = _floor_stats(rates, cfa, hot)
     return 0.0 if stats is None else float(stats[0].min())
+
+
+def without_cast(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None) -> bool:
+    """Whether a colour capture has no colour cast: its edges' and highlights' colour
+    (:func:`~spikeview.classical.white_balance.illuminant` ``combined``) within :data:`NO_CAST_DEG` of R = G = B and
+    nearer it than the typical response. Such a capture was made from display-referred RGB frames (the ecosystem's
+    simulators, spike streams converted from video; colour spike cameras have a cast), without a dark current: its
+    darkest floor is its darkest patch's light, not a pedestal (:attr:`Defects.pedestal`). ``False`` in monochrome."""
+    from spikeview.cfa import TYPICAL_RESPONSE, parse_cfa
+    from spikeview.classical import white_balance as wb
+
+    if parse_cfa(cfa) is None:
+        return False
+    r = np.array(rates, dtype=np.float64)
+    if min(r.shape) < 2 * wb.DARK_BLOCK:
+        return False
+    if hot is not None and hot.any():
+        r[hot] = np.median(r)  # a hot photosite would be white-patch's brightest
+    e = wb.illuminant(wb.cells_rgb(r, cfa), "combined")
+    if not (e > 0).all():
+        return False
+    off = wb.angle_deg(e, np.ones(3))
+    return off <= NO_CAST_DEG and off < wb.angle_deg(e, np.asarray(TYPICAL_RESPONSE, dtype=np.float64))
 
 
 def _floor_stats(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:

@@ -109,8 +109,9 @@ class Observation:
         own: the centre window alone (a pooled observation's reuse test compares own windows).
         corrected: what moved ``y`` off the TFP's 1/Δτ grid (a camera profile's dark rate and flat field:
             :func:`spikeview.classical.calibration.correct_observation`), or ``None``; the plan's Q rule reads it.
-        floor: the capture's darkest floor in spikes per tick (:func:`spikeview.classical.defects.darkest_floor`: a
-            dark rate left in the rates shows there); :meth:`quantise_window` reads it.
+        floor: the capture's darkest floor in spikes per tick where it may be a dark rate left in the rates
+            (:attr:`spikeview.classical.defects.Defects.pedestal`: 0 on a colour capture without a cast, whose floor
+            is light); :meth:`quantise_window` reads it.
     """
 
     y: np.ndarray
@@ -181,7 +182,7 @@ class Observation:
         a, b = window_range(center, window, source.n_frames)
         from spikeview.classical.defects import find_defects
 
-        floor = find_defects(source).floor  # measured once per capture (cached on it)
+        floor = find_defects(source).pedestal  # measured once per capture (cached on it)
 
         def count(x: int, y: int) -> np.ndarray:  # through the sequence's cache (and its lock) when there is one
             return window_counts(source, x, y) if cache is None else cache.counts(source, x, y)

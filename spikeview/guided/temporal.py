@@ -1000,8 +1000,9 @@ GLIDE_GROUP = 2
 #: counts in windows a few ticks apart anticorrelate, through its phase, and make a trough at zero shift that hid a
 #: static scene's peak), near enough that a pan of a photosite a window stays within the search
 GLIDE_LAG = 6
-#: ... searching shifts up to this many pixels of the drift view (2 photosites a window at the lag above)
-GLIDE_REACH = 12
+#: ... searching shifts up to this many photosites (4 photosites a window at the lag above; the drift view's pixels are
+#: 2×2 cells on a Bayer mosaic, photosites in monochrome: a monochrome pan of 3 photosites a window was missed)
+GLIDE_REACH = 24
 #: ... on the frame's central crop of at most this many pixels a side (the drift of the whole frame is one number)
 GLIDE_CROP = 384
 #: the glide's velocity is measured on the windows within this many of the centre (the velocity there); where the
@@ -1025,7 +1026,7 @@ def frame_velocity(source: Any, a: int, b: int, cache: "WindowCache", cfa: str |
 
     Measured on the windows within ±``span`` of it that lie in the capture: the cross-correlations of
     every pair of :data:`GLIDE_GROUP`-window sums :data:`GLIDE_LAG` windows apart are added (one surface from the
-    whole span: a dim frame's single pair is noise), and the peak within ±:data:`GLIDE_REACH` view pixels, divided by
+    whole span: a dim frame's single pair is noise), and the peak within ±:data:`GLIDE_REACH` photosites, divided by
     the lag, is the velocity. Unlike comparing the two far sides of the span (:func:`_extension_drift`), no sum is
     blurred by the motion it measures: at a photosite a window, two 13-window sums are each smeared by 13
     photosites, and the sensor's fixed pattern (which does not move) then made a pan read as static."""
@@ -1052,10 +1053,11 @@ def frame_velocity(source: Any, a: int, b: int, cache: "WindowCache", cfa: str |
         return ffts[k]
 
     first = spectrum(starts[0])
-    if min(first.shape) < 4 * GLIDE_REACH:
+    reach = int(np.ceil(GLIDE_REACH / unit))  # in the view's pixels
+    if min(first.shape) < 4 * reach:
         return None
     xc = sum(np.fft.ifft2(np.conj(spectrum(k)) * spectrum(k + GLIDE_LAG)).real for k in starts)
-    peak = _correlation_peak(xc, GLIDE_REACH)
+    peak = _correlation_peak(xc, reach)
     if peak is None:
         return None
     vy, vx = peak[0] / GLIDE_LAG, peak[1] / GLIDE_LAG
@@ -1325,8 +1327,10 @@ def describe(pool: Pooling) -> tuple[str, str]:
     if pool.drift is not None:
         v = float(np.hypot(*pool.drift))
         depth = max(pool.radius, int(np.floor(DRIFT_LIMIT / v + 1e-9)) if v > 0 else LOW_LIGHT_RADIUS)
+        why = (f"the ±{pool.radius} windows already span {v * pool.radius:.1f} photosites of it each way"
+               if depth <= pool.radius else f"beyond, the scene has moved more than {DRIFT_LIMIT:g} photosite")
         eff += (f"; the whole frame drifts {v:.2f} photosites a window ({pool.drift[0]:+.2f}, {pool.drift[1]:+.2f}, y, x), "
-                f"so the support stops at ±{depth} windows (beyond, the scene has moved more than {DRIFT_LIMIT:g} photosite)")
+                f"so the support stops at ±{depth} windows ({why})")
     some = "" if full >= 0.995 else f", at least one neighbour on {100 * (1.0 - own):.0f}%"
     if pool.glide is not None:
         gy, gx = pool.glide
