@@ -222,7 +222,7 @@ def dark_rate(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = None)
     return float(floors.min())
 
 
-#: :func:`darkest_floor`: a colour capture whose edges' colour lies within this angle of R = G = B has no cast (the
+#: :func:`without_cast`: a colour capture whose edges' colour lies within this angle of R = G = B has no cast (the
 #: ecosystem-style captures: 1.5-7.8°; spikeview's simulator and real sensors: 17° and more off)
 NO_CAST_DEG = 8.0
 
@@ -249,16 +249,22 @@ def without_cast(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None = No
 
     if parse_cfa(cfa) is None:
         return False
-    r = np.array(rates, dtype=np.float64)
-    if min(r.shape) < 2 * wb.DARK_BLOCK:
+    if min(np.shape(rates)) < 2 * wb.DARK_BLOCK:
         return False
-    if hot is not None and hot.any():
-        r[hot] = np.median(r)  # a hot photosite would be white-patch's brightest
-    e = wb.illuminant(wb.cells_rgb(r, cfa), "combined")
+    e = wb.illuminant(wb.cells_rgb(_filled(rates, hot), cfa), "combined")  # a hot photosite: white-patch's brightest
     if not (e > 0).all():
         return False
     off = wb.angle_deg(e, np.ones(3))
     return off <= NO_CAST_DEG and off < wb.angle_deg(e, np.asarray(TYPICAL_RESPONSE, dtype=np.float64))
+
+
+def _filled(rates: np.ndarray, hot: np.ndarray | None) -> np.ndarray:
+    """The mean rates as float64, hot photosites replaced by the median (a copy where any was replaced)."""
+    r = np.asarray(rates, dtype=np.float64)
+    if hot is not None and hot.any():
+        r = r.copy()
+        r[hot] = np.median(r)
+    return r
 
 
 def _floor_stats(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
@@ -268,10 +274,7 @@ def _floor_stats(rates: np.ndarray, cfa: str | None, hot: np.ndarray | None) -> 
     from spikeview.classical import white_balance as wb
 
     cfa = parse_cfa(cfa)
-    r = np.asarray(rates, dtype=np.float64)
-    if hot is not None and hot.any():
-        r = r.copy()
-        r[hot] = np.median(r)
+    r = _filled(rates, hot)
     img = np.repeat(r[..., None], 3, axis=-1) if cfa is None else wb.cells_rgb(r, cfa)
     if min(img.shape[:2]) < 2 * wb.DARK_BLOCK:
         return None

@@ -620,9 +620,10 @@ def pool_counts(source: Any, a: int, b: int, radius: int, cfa: str | None,
         # (_extend_at_rest): the real dark capture (0.32-0.46 photosites a window, a spinning rotor) lost detail
         # (0.694 -> 0.675 against its long exposure, NIQE 10.0 -> 11.5) when its far windows glided, where simulated
         # slow pans gained 2-3 dB; what no tile sees, a rotor's blades, a far window may hold moved
-        v = frame_velocity(source, a, b, cache, cfa, GLIDE_SPAN)
+        spectra: dict = {}  # the ±8 and ±16 estimates share the group sums they both read
+        v = frame_velocity(source, a, b, cache, cfa, GLIDE_SPAN, spectra)
         speed = 0.0 if v is None else float(np.hypot(*v))
-        whole = frame_velocity(source, a, b, cache, cfa) if speed * radius > GLIDE_REST else None
+        whole = frame_velocity(source, a, b, cache, cfa, spectra=spectra) if speed * radius > GLIDE_REST else None
         # the velocity over the whole span must tell the same motion (a change of speed, not another direction)
         change = np.inf if v is None or whole is None else float(np.hypot(whole[0] - v[0], whole[1] - v[1]))
         if v is not None and change <= GLIDE_AGREE * speed:
@@ -1021,7 +1022,7 @@ GLIDE_AGREE = 0.5
 
 
 def frame_velocity(source: Any, a: int, b: int, cache: "WindowCache", cfa: str | None,
-                   span: int = LOW_LIGHT_RADIUS) -> tuple[float, float] | None:
+                   span: int = LOW_LIGHT_RADIUS, spectra: dict | None = None) -> tuple[float, float] | None:
     """The whole frame's velocity ``(vy, vx)`` in photosites per window around the window ``[a, b)``, or ``None``.
 
     Measured on the windows within ±``span`` of it that lie in the capture: the cross-correlations of
@@ -1041,7 +1042,8 @@ def frame_velocity(source: Any, a: int, b: int, cache: "WindowCache", cfa: str |
     if not starts:
         return None
     view, unit = _drift_view(cfa)
-    ffts: dict[int, np.ndarray] = {}
+    # the group sums' spectra, by the group's first window: ``spectra`` shares them between calls about one window
+    ffts: dict[int, np.ndarray] = spectra if spectra is not None else {}
 
     def spectrum(k: int) -> np.ndarray:
         if k not in ffts:
